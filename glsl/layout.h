@@ -1,0 +1,79 @@
+// Texel layouts, binding slots and limits shared by C++ and GLSL.
+//
+// One source of truth: the kd-tree flattener, the ray generator and the hit decoder (C++) and the
+// traversal and shading shaders (GLSL 450 now, GLSL ES 1.00 later) all include this file. Only
+// #defines, so that the same text is valid C++, GLSL 450 and GLSL ES 1.00.
+//
+// Every integer that reaches a shader through a texture is stored as an exact float value below
+// 2^24, because GLSL ES 1.00 has neither integer textures nor bit operations.
+#ifndef MOBIRT_LAYOUT_H
+#define MOBIRT_LAYOUT_H
+
+// ---- Data textures ---------------------------------------------------------------------------
+// Every data array lives in a 2D RGBA32F texture (prim lists: R32F) of width MOBIRT_DATA_WIDTH:
+// element i sits at texel (i mod W, i div W). 4096 x 4096 texels hold 16.7M elements, enough for
+// the triangles of 5.5M primitives; the layout is exact in float arithmetic because 4096^2 = 2^24.
+#define MOBIRT_DATA_WIDTH_LOG2 12
+#define MOBIRT_DATA_WIDTH 4096
+
+// kd-tree node: one RGBA32F texel.
+//   interior: r = split position, g = index of the "above" child (the "below" child is the next
+//             node), b = split axis (0, 1, 2), a = 0
+//   leaf:     r = first entry in the prim-list texture, or the primitive index itself when the
+//             leaf holds exactly one primitive, g = primitive count, b = MOBIRT_NODE_LEAF, a = 0
+#define MOBIRT_NODE_LEAF 3.0
+
+// Prim-list texture: one R32F texel per entry, a primitive index.
+// Triangle texture: three RGBA32F texels per primitive: v0, v1, v2 (xyz; w unused = 0).
+#define MOBIRT_TEXELS_PER_TRIANGLE 3
+
+// Ray textures (one pair per ray generation, densely packed, ray i at (i mod W, i div W) with W
+// the pass width): origin texture (xyz, tmin), direction texture (xyz, tmax).
+
+// ---- Traversal pass output: one RGBA8 texel per ray ------------------------------------------
+// Variant 24/8: r,g,b = hit primitive index + 1 in 24 bits (r = low byte; 0 = miss),
+//               a = shadow mask, bit i set when light i is visible from the hit point.
+// Variant 16/16: r,g = hit primitive index + 1 in 16 bits, b,a = shadow mask of 16 lights.
+// A texel with index 0 (miss) and a non-zero mask means "traversal stopped at its iteration cap":
+// the CPU traces that ray itself, so a cap can never produce a wrong pixel.
+#define MOBIRT_PACKING_24_8 0
+#define MOBIRT_PACKING_16_16 1
+#define MOBIRT_MAX_PRIMS_24_8 16777215
+#define MOBIRT_MAX_LIGHTS_24_8 8
+#define MOBIRT_MAX_PRIMS_16_16 65535
+#define MOBIRT_MAX_LIGHTS_16_16 16
+
+// ---- Limits mirrored from OpenGL ES 2.0 ------------------------------------------------------
+#define MOBIRT_MAX_SAMPLED_TEXTURES 8  // GL_MAX_TEXTURE_IMAGE_UNITS minimum of ES 2.0
+#define MOBIRT_MAX_LIGHTS 16
+
+// ---- Shading-pass inputs (written by the CPU hit decoder) ------------------------------------
+// hit_position texture: xyz = hit point, w = material index (-1 = miss: background)
+// hit_normal texture:   xyz = shading normal (unit, facing the incoming ray), w = shadow mask
+// Material texture: MOBIRT_TEXELS_PER_MATERIAL RGBA32F texels per material, in one row:
+//   texel 0: diffuse rgb, texture index (-1 = none)
+//   texel 1: specular rgb, shininess
+//   texel 2: reflectance, transmittance, index of refraction, ambient factor
+#define MOBIRT_TEXELS_PER_MATERIAL 3
+
+// ---- Binding slots (Vulkan: set 0; GLES: texture units) --------------------------------------
+// Traversal pass
+#define MOBIRT_BIND_TRACE_PARAMS 0    // uniform block
+#define MOBIRT_BIND_NODES 1
+#define MOBIRT_BIND_PRIM_LIST 2
+#define MOBIRT_BIND_TRIANGLES 3
+#define MOBIRT_BIND_RAY_ORIGIN 4
+#define MOBIRT_BIND_RAY_DIRECTION 5
+// Shading pass
+#define MOBIRT_BIND_SHADE_PARAMS 0    // uniform block
+#define MOBIRT_BIND_HIT_POSITION 1
+#define MOBIRT_BIND_HIT_NORMAL 2
+#define MOBIRT_BIND_MATERIALS 3
+#define MOBIRT_BIND_SHADE_RAY_ORIGIN 4
+
+// Light types as stored in the light uniforms
+#define MOBIRT_LIGHT_POINT 0.0
+#define MOBIRT_LIGHT_SPOT 1.0
+#define MOBIRT_LIGHT_DIRECTIONAL 2.0
+
+#endif  // MOBIRT_LAYOUT_H

@@ -1,0 +1,11 @@
+#include "scene/scene.h"
+
+namespace mobirt {
+
+Aabb Scene::bounds() const {
+  Aabb box;
+  for (const glm::vec3& p : mesh.positions) box.extend(p);
+  return box;
+}
+
+}  // namespace mobirt

@@ -1,0 +1,66 @@
+// The scene as every later stage sees it: world-space triangles with per-vertex attributes,
+// materials for the Whitted/Phong model, punctual lights and a camera.
+#pragma once
+
+#include <glm/glm.hpp>
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/camera.h"
+#include "core/geometry.h"
+
+namespace mobirt {
+
+// Whitted/Phong material. How glTF and OBJ materials map onto it is written down in README.md.
+struct Material {
+  std::string name;
+  glm::vec3 diffuse{0.8f};       // Kd, or glTF baseColorFactor.rgb
+  glm::vec3 specular{0.0f};      // Ks
+  float shininess = 32.0f;       // Phong exponent
+  float reflectance = 0.0f;      // weight of the mirror ray (fixed coefficient)
+  float transmittance = 0.0f;    // weight of the refracted ray
+  float ior = 1.5f;              // index of refraction
+  float ambient = 0.1f;          // share of the diffuse colour lit by the ambient term
+  int texture = -1;              // base-colour texture (issue 3), -1 = none
+};
+
+enum class LightType { Point, Spot, Directional };
+
+// KHR_lights_punctual semantics: intensity in candela (point, spot) or lux (directional),
+// falling off with the inverse square of the distance; range 0 = unlimited.
+struct Light {
+  LightType type = LightType::Point;
+  glm::vec3 position{0.0f};
+  glm::vec3 direction{0.0f, -1.0f, 0.0f};  // where the light points (spot, directional)
+  glm::vec3 color{1.0f};
+  float intensity = 1.0f;
+  float range = 0.0f;
+  float inner_cone = 0.0f;        // radians
+  float outer_cone = 0.7853982f;  // radians
+};
+
+// Triangle soup in world space: triangle i uses entries 3i, 3i+1, 3i+2 of each vertex array.
+struct TriangleMesh {
+  std::vector<glm::vec3> positions;
+  std::vector<glm::vec3> normals;     // per vertex; geometric normal where the file has none
+  std::vector<glm::vec2> texcoords;   // empty when no primitive has texture coordinates
+  std::vector<uint32_t> material_ids; // one per triangle
+
+  size_t triangle_count() const { return material_ids.size(); }
+};
+
+struct Scene {
+  std::string source;                 // the file it came from, for messages
+  TriangleMesh mesh;
+  std::vector<Material> materials;    // at least one: the default material
+  std::vector<Light> lights;
+  std::optional<Camera> camera;       // the file's first camera, if it has one
+  glm::vec3 background{0.0f};
+
+  Aabb bounds() const;
+};
+
+}  // namespace mobirt

@@ -1,0 +1,33 @@
+#include "test_support.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+
+namespace mobirt::test {
+
+std::filesystem::path shared_scenes() {
+  const char* env = std::getenv("MOBIRT_SHARED_SCENES");
+  std::filesystem::path path = env ? env : MOBIRT_SOURCE_DIR "/../shared/scenes";
+  return std::filesystem::is_directory(path) ? path : std::filesystem::path();
+}
+
+std::filesystem::path output_path(const std::string& name) {
+  std::filesystem::path dir(MOBIRT_TEST_OUTPUT_DIR);
+  std::filesystem::create_directories(dir);
+  return dir / name;
+}
+
+std::filesystem::path temp_dir() {
+  const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+  std::string name = info ? std::string(info->test_suite_name()) + "." + info->name() : "mobirt";
+  for (char& c : name) {
+    if (c == '/') c = '_';
+  }
+  std::filesystem::path dir = std::filesystem::temp_directory_path() / ("mobirt-test-" + name);
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+}  // namespace mobirt::test
