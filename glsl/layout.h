@@ -71,6 +71,30 @@
 #define MOBIRT_BIND_MATERIALS 3
 #define MOBIRT_BIND_SHADE_RAY_ORIGIN 4
 
+// ---- Uniforms: one array of vec4 at binding 0 (Vulkan: a std140 uniform block; GLES: a uniform
+// vec4 array), at most MOBIRT_MAX_PARAM_VEC4S entries. Index of each entry:
+#define MOBIRT_MAX_PARAM_VEC4S 96
+// Traversal pass
+#define MOBIRT_TP_BOUNDS_LO 0      // xyz = scene box min, w = ray epsilon (shadow-ray offset)
+#define MOBIRT_TP_BOUNDS_HI 1      // xyz = scene box max, w = unused
+#define MOBIRT_TP_LIGHTS 2         // one vec4 per light: xyz = position (point, spot) or the
+                                   // direction towards the light (directional), w = light type
+// Shading pass
+#define MOBIRT_SP_BACKGROUND 0     // rgb = background colour, a = unused
+#define MOBIRT_SP_LIGHTS 1         // MOBIRT_SP_VEC4S_PER_LIGHT vec4 per light:
+                                   //   [0] xyz = position or direction to the light, w = type
+                                   //   [1] rgb = colour * intensity, w = range (0 = unlimited)
+                                   //   [2] xyz = spot direction (where it points), w = cos(inner)
+                                   //   [3] x = cos(outer), yzw = unused
+#define MOBIRT_SP_VEC4S_PER_LIGHT 4
+
+// ---- Specialization constants (Vulkan constant_id; #defines on GLES) -------------------------
+#define MOBIRT_SPEC_LIGHT_COUNT 0  // lights in the scene, 0..MOBIRT_MAX_LIGHTS
+#define MOBIRT_SPEC_STACK_DEPTH 1  // short-stack entries, 0 = pure kd-restart
+#define MOBIRT_SPEC_MAX_STEPS 2    // loop cap of the traversal (nodes visited + triangles tested)
+#define MOBIRT_SPEC_PACKING 3      // MOBIRT_PACKING_24_8 or MOBIRT_PACKING_16_16
+#define MOBIRT_MAX_STACK_DEPTH 32  // the short stack's array size; depth beyond it is refused
+
 // Light types as stored in the light uniforms
 #define MOBIRT_LIGHT_POINT 0.0
 #define MOBIRT_LIGHT_SPOT 1.0

@@ -1,0 +1,127 @@
+#include "backend/shader_constraints.h"
+
+#include <unordered_map>
+#include <unordered_set>
+
+#include "core/error.h"
+#include "layout.h"
+
+namespace mobirt {
+
+namespace {
+
+// The few SPIR-V opcodes, storage classes and decorations the check needs (SPIR-V 1.0 spec).
+enum Op : uint32_t {
+  OpTypeImage = 25, OpTypeSampledImage = 27, OpTypeArray = 28, OpTypeStruct = 30,
+  OpTypePointer = 32, OpConstant = 43, OpVariable = 59, OpStore = 62, OpAccessChain = 65,
+  OpDecorate = 71, OpImageWrite = 99,
+  OpAtomicFirst = 227, OpAtomicLast = 242,  // OpAtomicLoad .. OpAtomicXor
+};
+enum StorageClass : uint32_t { UniformConstant = 0, Input = 1, Uniform = 2, Output = 3, StorageBuffer = 12 };
+enum Decoration : uint32_t { BufferBlock = 3, BuiltIn = 11, Location = 30 };
+
+}  // namespace
+
+ShaderInterface reflect_spirv(std::span<const uint32_t> words) {
+  ShaderInterface result;
+  if (words.size() < 5 || words[0] != 0x07230203u) return result;
+
+  std::unordered_map<uint32_t, std::pair<uint32_t, uint32_t>> pointers;  // id -> (class, type)
+  std::unordered_map<uint32_t, uint32_t> image_sampled;                   // image type -> Sampled
+  std::unordered_set<uint32_t> sampled_image_types;
+  std::unordered_map<uint32_t, std::pair<uint32_t, uint32_t>> arrays;     // id -> (element, length id)
+  std::unordered_map<uint32_t, uint32_t> constants;
+  std::unordered_set<uint32_t> buffer_blocks, located, builtins;
+  struct Variable { uint32_t id, pointer_type, storage; };
+  std::vector<Variable> variables;
+  std::unordered_set<uint32_t> storage_pointers;  // ids of pointers into storage buffers
+
+  for (size_t i = 5; i < words.size();) {
+    const uint32_t count = words[i] >> 16;
+    const uint32_t op = words[i] & 0xffffu;
+    if (count == 0 || i + count > words.size()) return result;
+    const uint32_t* w = &words[i];
+    switch (op) {
+      case OpTypeImage: image_sampled[w[1]] = w[7]; break;
+      case OpTypeSampledImage: sampled_image_types.insert(w[1]); break;
+      case OpTypeArray: arrays[w[1]] = {w[2], w[3]}; break;
+      case OpTypePointer: pointers[w[1]] = {w[2], w[3]}; break;
+      case OpConstant: if (count >= 4) constants[w[2]] = w[3]; break;
+      case OpDecorate:
+        if (w[2] == BufferBlock) buffer_blocks.insert(w[1]);
+        if (w[2] == Location) located.insert(w[1]);
+        if (w[2] == BuiltIn) builtins.insert(w[1]);
+        break;
+      case OpVariable: variables.push_back({w[2], w[1], w[3]}); break;
+      case OpAccessChain:
+        if (storage_pointers.count(w[3])) storage_pointers.insert(w[2]);
+        break;
+      case OpStore:
+        if (storage_pointers.count(w[1])) ++result.storage_writes;
+        break;
+      case OpImageWrite: ++result.storage_writes; break;
+      default:
+        if (op >= OpAtomicFirst && op <= OpAtomicLast) ++result.storage_writes;
+        break;
+    }
+    // Variables are declared before function bodies, so storage pointers are known by then.
+    if (op == OpVariable) {
+      const auto pointer = pointers.find(w[1]);
+      if (pointer != pointers.end()) {
+        const uint32_t storage = pointer->second.first;
+        const uint32_t pointee = pointer->second.second;
+        if (storage == StorageBuffer || (storage == Uniform && buffer_blocks.count(pointee))) {
+          storage_pointers.insert(w[2]);
+        }
+      }
+    }
+    i += count;
+  }
+
+  for (const Variable& v : variables) {
+    const auto pointer = pointers.find(v.pointer_type);
+    if (pointer == pointers.end()) continue;
+    uint32_t type = pointer->second.second;
+    uint32_t multiplicity = 1;
+    while (arrays.count(type)) {
+      const auto [element, length_id] = arrays[type];
+      multiplicity *= constants.count(length_id) ? constants[length_id] : 1;
+      type = element;
+    }
+    if (v.storage == Output && located.count(v.id)) ++result.color_outputs;
+    if (v.storage == StorageBuffer || (v.storage == Uniform && buffer_blocks.count(type))) {
+      ++result.storage_resources;
+    }
+    if (v.storage == UniformConstant) {
+      if (sampled_image_types.count(type)) result.sampled_textures += int(multiplicity);
+      const auto image = image_sampled.find(type);
+      if (image != image_sampled.end()) {
+        if (image->second == 2) ++result.storage_resources;
+        else result.sampled_textures += int(multiplicity);
+      }
+    }
+  }
+  result.valid = true;
+  return result;
+}
+
+void check_es2_constraints(const std::string& shader, std::span<const uint32_t> words) {
+  const ShaderInterface s = reflect_spirv(words);
+  auto refuse = [&](const std::string& why) {
+    throw Error(ErrorKind::Constraint, "shader " + shader + ": " + why +
+                                           " (OpenGL ES 2.0 constraint mirrored by mobirt)");
+  };
+  if (!s.valid) refuse("is not a valid SPIR-V module");
+  if (s.color_outputs != 1) {
+    refuse("writes " + std::to_string(s.color_outputs) + " colour attachments; a pass writes exactly one RGBA8 texel");
+  }
+  if (s.storage_resources > 0 || s.storage_writes > 0) {
+    refuse("uses storage buffers, storage images or atomics; passes may only write their colour attachment");
+  }
+  if (s.sampled_textures > MOBIRT_MAX_SAMPLED_TEXTURES) {
+    refuse("samples " + std::to_string(s.sampled_textures) + " textures; at most " +
+           std::to_string(MOBIRT_MAX_SAMPLED_TEXTURES) + " are allowed (GL_MAX_TEXTURE_IMAGE_UNITS)");
+  }
+}
+
+}  // namespace mobirt
