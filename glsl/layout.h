@@ -69,7 +69,7 @@
 #define MOBIRT_BIND_HIT_POSITION 1
 #define MOBIRT_BIND_HIT_NORMAL 2
 #define MOBIRT_BIND_MATERIALS 3
-#define MOBIRT_BIND_SHADE_RAY_ORIGIN 4
+#define MOBIRT_BIND_SHADE_RAY_DIRECTION 4
 
 // ---- Uniforms: one array of vec4 at binding 0 (Vulkan: a std140 uniform block; GLES: a uniform
 // vec4 array), at most MOBIRT_MAX_PARAM_VEC4S entries. Index of each entry:
@@ -77,8 +77,11 @@
 // Traversal pass
 #define MOBIRT_TP_BOUNDS_LO 0      // xyz = scene box min, w = ray epsilon (shadow-ray offset)
 #define MOBIRT_TP_BOUNDS_HI 1      // xyz = scene box max, w = unused
-#define MOBIRT_TP_LIGHTS 2         // one vec4 per light: xyz = position (point, spot) or the
-                                   // direction towards the light (directional), w = light type
+#define MOBIRT_TP_LIGHTS 2         // MOBIRT_TP_VEC4S_PER_LIGHT vec4 per light:
+                                   //   [0] xyz = position (point, spot) or the direction towards
+                                   //       the light (directional), w = light type
+                                   //   [1] xyz = spot direction (where it points), w = cos(outer)
+#define MOBIRT_TP_VEC4S_PER_LIGHT 2
 // Shading pass
 #define MOBIRT_SP_BACKGROUND 0     // rgb = background colour, a = unused
 #define MOBIRT_SP_LIGHTS 1         // MOBIRT_SP_VEC4S_PER_LIGHT vec4 per light:

@@ -1,8 +1,15 @@
 // Helpers shared by the tests: where the real data lives, where outputs go.
 #pragma once
 
+#include <glm/glm.hpp>
+#include <gtest/gtest.h>
+
 #include <filesystem>
+#include <random>
 #include <string>
+#include <vector>
+
+#include "core/error.h"
 
 namespace mobirt::test {
 
@@ -14,6 +21,37 @@ std::filesystem::path output_path(const std::string& name);
 
 // A fresh empty temporary folder for this test.
 std::filesystem::path temp_dir();
+
+// Runs `action`, expects a BadInput error whose message contains every string of `parts`.
+template <class F>
+void expect_bad_input(F&& action, const std::vector<std::string>& parts) {
+  try {
+    action();
+    ADD_FAILURE() << "no error thrown";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::BadInput) << e.what();
+    for (const std::string& part : parts) {
+      EXPECT_NE(std::string(e.what()).find(part), std::string::npos)
+          << "message '" << e.what() << "' lacks '" << part << "'";
+    }
+  }
+}
+
+inline void expect_vec3(const glm::vec3& got, const glm::vec3& want, float eps = 1e-5f) {
+  EXPECT_NEAR(got.x, want.x, eps) << "x";
+  EXPECT_NEAR(got.y, want.y, eps) << "y";
+  EXPECT_NEAR(got.z, want.z, eps) << "z";
+}
+
+// A uniformly distributed unit vector.
+inline glm::vec3 random_direction(std::mt19937& rng) {
+  std::normal_distribution<float> n(0.0f, 1.0f);
+  for (;;) {
+    const glm::vec3 d(n(rng), n(rng), n(rng));
+    const float l = glm::length(d);
+    if (l > 1e-3f) return d / l;
+  }
+}
 
 }  // namespace mobirt::test
 

@@ -1,6 +1,7 @@
 #include "backend/shader_constraints.h"
 
 #include <unordered_map>
+#include <vector>
 #include <unordered_set>
 
 #include "core/error.h"

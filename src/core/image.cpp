@@ -23,6 +23,17 @@ bool is_float_format(const std::string& path) {
 
 }  // namespace
 
+void check_image_output(const std::string& path) {
+  auto out = OIIO::ImageOutput::create(path);
+  if (!out) {
+    throw input_error(path, "cannot write this image format; use .png, .jpg, .exr or .hdr");
+  }
+  const std::filesystem::path folder = std::filesystem::path(path).parent_path();
+  if (!folder.empty() && !std::filesystem::is_directory(folder)) {
+    throw input_error(path, "the folder '" + folder.string() + "' does not exist; create it first");
+  }
+}
+
 void write_image(const std::string& path, const Image& image) {
   auto out = OIIO::ImageOutput::create(path);
   if (!out) {
@@ -32,8 +43,10 @@ void write_image(const std::string& path, const Image& image) {
   const std::filesystem::path target(path);
   // Temporary name in the same folder keeps the rename atomic; the extension stays so that the
   // writer picks the right format.
-  const std::filesystem::path temp = target.parent_path() /
-      ("." + target.stem().string() + ".tmp" + std::to_string(::getpid()) + target.extension().string());
+  std::string temp_name(".");  // built by appends: GCC 12 warns falsely (-Wrestrict) on "." + s
+  temp_name.append(target.stem().string()).append(".tmp").append(std::to_string(::getpid()));
+  temp_name.append(target.extension().string());
+  const std::filesystem::path temp = target.parent_path() / temp_name;
   const bool is_float = is_float_format(path);
   OIIO::ImageSpec spec(image.width, image.height, 3, is_float ? OIIO::TypeDesc::FLOAT : OIIO::TypeDesc::UINT8);
   bool ok = out->open(temp.string(), spec);

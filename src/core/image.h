@@ -24,6 +24,10 @@ struct Image {
 // written to a temporary name beside the target and renamed. Throws mobirt::Error on failure.
 void write_image(const std::string& path, const Image& image);
 
+// Fails early, before any rendering, when `path` cannot be written: an extension OpenImageIO
+// cannot write, or a folder that does not exist. Throws Error(BadInput) naming the path.
+void check_image_output(const std::string& path);
+
 // Reads any format OpenImageIO knows into linear float RGB (8-bit values divided by 255).
 Image read_image(const std::string& path);
 

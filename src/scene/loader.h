@@ -9,11 +9,33 @@
 
 namespace mobirt {
 
-// Picks the loader by extension (case-insensitive). The result is validated: finite positions,
-// in-range indices, at least one material, unit normals.
+// Picks the loader by extension (case-insensitive): .gltf and .glb -> load_gltf, .obj -> load_obj;
+// anything else: "unsupported scene format '.xyz': mobirt reads .gltf, .glb and .obj". A missing
+// file: "FILE: file not found". The result is validated (scene/validate.h): finite positions and
+// normals, at least one triangle, in-range indices, at least one material, unit normals;
+// degenerate triangles are kept and counted in Scene::degenerate_triangles.
 Scene load_scene(const std::string& path);
 
+// glTF 2.0, text (.gltf, external or data-URI buffers) or binary (.glb).
+// - Geometry: the default scene (else scene 0, else every root node), node matrices or TRS
+//   applied; primitives of mode TRIANGLES, TRIANGLE_STRIP or TRIANGLE_FAN (others are an error
+//   naming "meshes[m].primitives[p]"); indexed or not; sparse accessors supported; every accessor
+//   read is bounds-checked. Normals by the inverse transpose; a primitive without normals gets
+//   flat (geometric) normals; a mirroring transform (negative determinant) flips the winding.
+//   Skins and morph targets are ignored: meshes load in their bind pose.
+// - Camera: the first perspective camera of the node traversal (looks down -Z, up +Y of its node;
+//   znear kept). Orthographic cameras are skipped with a warning (no orthographic projection).
+// - Lights: KHR_lights_punctual point, spot and directional lights in world space.
+// - Materials: pbrMetallicRoughness (+ KHR_materials_transmission, KHR_materials_ior) mapped to
+//   the Phong material as docs/materials.md tells; baseColorTexture -> Scene::textures.
 Scene load_gltf(const std::string& path);
+
+// Wavefront OBJ + MTL (searched in the OBJ's folder). Polygons are triangulated; a missing .mtl
+// is a warning (default material). Normals from the file, flat where a face has none; texture
+// coordinates with v flipped to the glTF convention. MTL mapping: docs/materials.md.
 Scene load_obj(const std::string& path);
+
+// Throws Error(BadInput) "FILE: file not found" unless `path` names an existing file.
+void check_scene_file(const std::string& path);
 
 }  // namespace mobirt

@@ -24,7 +24,20 @@ struct Material {
   float transmittance = 0.0f;    // weight of the refracted ray
   float ior = 1.5f;              // index of refraction
   float ambient = 0.1f;          // share of the diffuse colour lit by the ambient term
-  int texture = -1;              // base-colour texture (issue 3), -1 = none
+  int texture = -1;              // base-colour texture: index into Scene::textures, -1 = none
+};
+
+enum class TextureWrap { Repeat, ClampToEdge, MirroredRepeat };
+
+// A base-colour texture as the file names it; decoding and atlas packing come later (issue 3).
+// Exactly one of `path` and `data` is set.
+struct TextureRef {
+  std::string name;
+  std::string path;                 // an external image file, resolved against the scene's folder
+  std::vector<uint8_t> data;        // or the encoded image bytes (PNG, JPEG) embedded in the file
+  std::string mime_type;            // "image/png", "image/jpeg", or empty when unknown
+  TextureWrap wrap_s = TextureWrap::Repeat;
+  TextureWrap wrap_t = TextureWrap::Repeat;
 };
 
 enum class LightType { Point, Spot, Directional };
@@ -46,7 +59,9 @@ struct Light {
 struct TriangleMesh {
   std::vector<glm::vec3> positions;
   std::vector<glm::vec3> normals;     // per vertex; geometric normal where the file has none
-  std::vector<glm::vec2> texcoords;   // empty when no primitive has texture coordinates
+  std::vector<glm::vec2> texcoords;   // empty when no primitive has texture coordinates; glTF
+                                      // convention: (0, 0) is the top-left corner of the image
+                                      // (OBJ's v is flipped on load)
   std::vector<uint32_t> material_ids; // one per triangle
 
   size_t triangle_count() const { return material_ids.size(); }
@@ -56,9 +71,11 @@ struct Scene {
   std::string source;                 // the file it came from, for messages
   TriangleMesh mesh;
   std::vector<Material> materials;    // at least one: the default material
+  std::vector<TextureRef> textures;   // referenced by Material::texture
   std::vector<Light> lights;
   std::optional<Camera> camera;       // the file's first camera, if it has one
   glm::vec3 background{0.0f};
+  size_t degenerate_triangles = 0;    // zero-area triangles, kept (the tracer skips them), counted
 
   Aabb bounds() const;
 };

@@ -1,0 +1,30 @@
+// GLSL 450 (Vulkan, SPIR-V) dialect of mobirt's shaders. Every .frag for Vulkan is
+//   #version 450
+//   #extension GL_GOOGLE_include_directive : require
+//   #include "prelude_vk.glsl"
+// followed by the shared bodies. The GLSL ES 1.00 prelude provides the same names.
+#include "layout.h"
+
+// Scene specialisation: specialization constants, so that one SPIR-V module serves every scene
+// and the driver folds the constants when it builds the pipeline.
+layout(constant_id = MOBIRT_SPEC_LIGHT_COUNT) const int LIGHT_COUNT = 0;
+layout(constant_id = MOBIRT_SPEC_STACK_DEPTH) const int STACK_DEPTH = 4;
+layout(constant_id = MOBIRT_SPEC_MAX_STEPS) const int MAX_STEPS = 4096;
+layout(constant_id = MOBIRT_SPEC_PACKING) const int PACKING = MOBIRT_PACKING_24_8;
+
+// The pass's uniforms: one vec4 array (indices in layout.h).
+layout(set = 0, binding = 0, std140) uniform Params {
+  vec4 u_params[MOBIRT_MAX_PARAM_VEC4S];
+};
+#define PARAM(i) u_params[i]
+
+// Data textures: element i at texel (i mod W, i div W). Indices arrive as exact floats.
+#define DATA_TEXEL(tex, index) \
+  texelFetch(tex, ivec2(int(index) & (MOBIRT_DATA_WIDTH - 1), int(index) >> MOBIRT_DATA_WIDTH_LOG2), 0)
+// Per-ray textures share the pass's layout: this fragment's own ray.
+#define RAY_TEXEL(tex) texelFetch(tex, ivec2(gl_FragCoord.xy), 0)
+
+#define SAMPLER(slot, name) layout(set = 0, binding = slot) uniform sampler2D name
+
+layout(location = 0) out vec4 o_color;
+#define OUTPUT(value) o_color = (value)

@@ -1,0 +1,205 @@
+// kd-tree traversal with a short stack (Horn et al. 2007) that falls back to kd-restart (Foley and
+// Sugerman 2005) when the stack runs dry, Möller-Trumbore intersection, shadow rays.
+//
+// The same algorithm as src/accel/kdtree_traverse.cpp, step for step, so that the CPU traversal
+// is an oracle for this shader. Written in the common subset of GLSL 450 and GLSL ES 1.00: no
+// integer bit operations, no `%`, loops with constant bounds (the cap MAX_STEPS).
+//
+// Needs from the prelude: DATA_TEXEL, PARAM, STACK_DEPTH, MAX_STEPS, LIGHT_COUNT.
+
+SAMPLER(MOBIRT_BIND_NODES, u_nodes);
+SAMPLER(MOBIRT_BIND_PRIM_LIST, u_prim_list);
+SAMPLER(MOBIRT_BIND_TRIANGLES, u_triangles);
+
+// Möller-Trumbore. Returns t of a hit in [tmin, tmax], else -1. Comparisons are written so that
+// NaN rejects, as on the CPU.
+float intersect_triangle(float prim, vec3 o, vec3 d, float tmin, float tmax) {
+  float base = prim * float(MOBIRT_TEXELS_PER_TRIANGLE);
+  vec3 v0 = DATA_TEXEL(u_triangles, base).xyz;
+  vec3 e1 = DATA_TEXEL(u_triangles, base + 1.0).xyz - v0;
+  vec3 e2 = DATA_TEXEL(u_triangles, base + 2.0).xyz - v0;
+  vec3 p = cross(d, e2);
+  float det = dot(e1, p);
+  if (!(det != 0.0)) return -1.0;
+  float inv_det = 1.0 / det;
+  vec3 s = o - v0;
+  float u = dot(s, p) * inv_det;
+  if (!(u >= 0.0 && u <= 1.0)) return -1.0;
+  vec3 q = cross(s, e1);
+  float v = dot(d, q) * inv_det;
+  if (!(v >= 0.0 && u + v <= 1.0)) return -1.0;
+  float t = dot(e2, q) * inv_det;
+  return (t >= tmin && t <= tmax) ? t : -1.0;
+}
+
+// Slab test against the scene box; returns (t0, t1), empty when t0 > t1.
+vec2 intersect_scene_box(vec3 o, vec3 inv_d, float tmin, float tmax) {
+  vec3 lo = PARAM(MOBIRT_TP_BOUNDS_LO).xyz;
+  vec3 hi = PARAM(MOBIRT_TP_BOUNDS_HI).xyz;
+  vec3 ta = (lo - o) * inv_d;
+  vec3 tb = (hi - o) * inv_d;
+  vec3 tn = min(ta, tb);
+  vec3 tf = max(ta, tb);
+  // A NaN (origin on a slab with a zero direction component) must not shrink the interval:
+  // comparisons with NaN are false, so it keeps the previous bound, as on the CPU.
+  float t0 = tmin;
+  float t1 = tmax;
+  if (tn.x > t0) t0 = tn.x;
+  if (tn.y > t0) t0 = tn.y;
+  if (tn.z > t0) t0 = tn.z;
+  if (tf.x < t1) t1 = tf.x;
+  if (tf.y < t1) t1 = tf.y;
+  if (tf.z < t1) t1 = tf.z;
+  return vec2(t0, t1);
+}
+
+float component(vec3 v, float axis) {
+  return axis < 0.5 ? v.x : (axis < 1.5 ? v.y : v.z);
+}
+
+// Result of one traversal: x = primitive index (-1 = miss), y = t, z = 1 when the loop cap stopped
+// it before it could decide (the CPU then traces the ray itself).
+// any_hit: stop at the first hit in [tmin, tmax] (shadow rays).
+vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
+  vec3 inv_d = 1.0 / d;
+  vec2 box = intersect_scene_box(o, inv_d, ray_tmin, ray_tmax);
+  if (!(box.x <= box.y)) return vec3(-1.0, ray_tmax, 0.0);
+  float scene_tmax = box.y;
+  float tmin = box.x;
+  float tmax = box.y;
+
+  vec3 stack[MOBIRT_MAX_STACK_DEPTH];  // (node, tmin, tmax), a ring of STACK_DEPTH entries
+  int top = 0;                         // slot of the newest entry
+  int size = 0;
+
+  float node = 0.0;
+  float best_t = 3.4e38;  // hits are accepted anywhere in [ray_tmin, ray_tmax]
+  // kd-restart progress: a restart at the same point as the previous one sends ties to the far
+  // side, so that restarts always move forward (see src/accel/kdtree_traverse.cpp).
+  float restart_t = box.x;
+  bool strict = false;
+  float best_prim = -1.0;
+  // Leaf cursor: the remaining primitives of the leaf being tested.
+  float leaf_first = 0.0;
+  float leaf_next = 0.0;
+  float leaf_end = 0.0;
+  bool in_leaf = false;
+  bool single = false;
+
+  for (int step = 0; step < MAX_STEPS; ++step) {
+    if (!in_leaf) {
+      vec4 n = DATA_TEXEL(u_nodes, node);
+      if (n.b != MOBIRT_NODE_LEAF) {
+        // Interior node: one step.
+        float split = n.r;
+        float oa = component(o, n.b);
+        float da = component(d, n.b);
+        float tsplit = (split - oa) * component(inv_d, n.b);
+        bool below_first = oa < split || (oa == split && da <= 0.0);
+        float near_child = below_first ? node + 1.0 : n.g;
+        float far_child = below_first ? n.g : node + 1.0;
+        if (tsplit > tmax || tsplit <= 0.0 || tsplit != tsplit) {
+          node = near_child;
+        } else if (tsplit < tmin || (strict && tsplit == tmin)) {
+          node = far_child;
+        } else {
+          if (STACK_DEPTH > 0) {
+            top = top + 1;
+            if (top >= STACK_DEPTH) top = 0;
+            stack[top] = vec3(far_child, tsplit, tmax);
+            if (size < STACK_DEPTH) size = size + 1;  // a full ring overwrote its oldest entry
+          }
+          node = near_child;
+          tmax = tsplit;
+        }
+        continue;
+      }
+      // Leaf: its node fetch shares a step with its first triangle test.
+      in_leaf = true;
+      single = n.g == 1.0;
+      leaf_first = n.r;
+      leaf_next = 0.0;
+      leaf_end = n.g;
+    }
+
+    if (leaf_next < leaf_end) {
+      float prim = single ? leaf_first : DATA_TEXEL(u_prim_list, leaf_first + leaf_next).r;
+      float t = intersect_triangle(prim, o, d, ray_tmin, ray_tmax);
+      // Ties in t go to the lower primitive index, so they do not depend on the test order.
+      if (t >= 0.0 && (t < best_t || (t == best_t && prim < best_prim))) {
+        best_t = t;
+        best_prim = prim;
+        if (any_hit) return vec3(best_prim, best_t, 0.0);
+      }
+      leaf_next = leaf_next + 1.0;
+      if (leaf_next < leaf_end) continue;
+    }
+
+    // Leaf done.
+    in_leaf = false;
+    if (best_t <= tmax) return vec3(best_prim, best_t, 0.0);
+    if (size > 0) {
+      vec3 entry = stack[top];
+      top = top - 1;
+      if (top < 0) top = STACK_DEPTH - 1;
+      size = size - 1;
+      node = entry.x;
+      tmin = entry.y;
+      tmax = entry.z;
+      strict = false;
+    } else if (tmax >= scene_tmax) {
+      return vec3(best_prim, best_t, 0.0);
+    } else {
+      // kd-restart: everything before tmax is done; walk down again from the root.
+      strict = tmax == restart_t;
+      restart_t = tmax;
+      tmin = tmax;
+      tmax = scene_tmax;
+      node = 0.0;
+    }
+  }
+  // The cap, or the driver's own loop limit, ended the walk before it could decide.
+  return vec3(best_prim, best_t, 1.0);
+}
+
+// The shadow mask of a hit: bit i set when light i is visible. Lights behind the surface as seen
+// from the ray and points outside a spot's outer cone get no shadow ray: they cannot light it.
+// Returns -1.0 when a shadow ray hit the loop cap.
+float shadow_mask(float prim, vec3 o, vec3 d, float t) {
+  float mask = 0.0;
+  if (LIGHT_COUNT == 0) return mask;
+  float base = prim * float(MOBIRT_TEXELS_PER_TRIANGLE);
+  vec3 v0 = DATA_TEXEL(u_triangles, base).xyz;
+  vec3 ng = cross(DATA_TEXEL(u_triangles, base + 1.0).xyz - v0,
+                  DATA_TEXEL(u_triangles, base + 2.0).xyz - v0);
+  vec3 p = o + t * d;
+  float view_side = dot(ng, d) < 0.0 ? 1.0 : -1.0;
+  // Offset the origin off the surface, on the viewer's side, scaled to the magnitude of p.
+  vec3 ap = abs(p);
+  float offset = PARAM(MOBIRT_TP_BOUNDS_LO).w * (1.0 + max(ap.x, max(ap.y, ap.z)));
+  vec3 origin = p + (view_side * offset / max(length(ng), 1e-30)) * ng;
+  float bit = 1.0;
+  // lavapipe ends a shader's loops silently once they ran 65,535 iterations in all (llvmpipe's
+  // LP_MAX_TGSI_LOOP_ITERATIONS), so completion is counted rather than assumed: a light loop that
+  // was cut short reports the ray as capped, and the CPU traces it.
+  int lights_done = 0;
+  for (int l = 0; l < LIGHT_COUNT; ++l) {
+    vec4 light = PARAM(MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * l);
+    vec4 spot = PARAM(MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * l + 1);
+    bool directional = light.w == MOBIRT_LIGHT_DIRECTIONAL;
+    vec3 to_light = directional ? light.xyz : light.xyz - origin;
+    float tmax = directional ? 3.0e38 : 1.0;
+    bool lit = dot(ng, to_light) * view_side > 0.0;
+    if (lit && light.w == MOBIRT_LIGHT_SPOT) {
+      lit = dot(normalize(-to_light), spot.xyz) > spot.w;
+    }
+    if (lit) {
+      vec3 r = traverse(origin, to_light, 0.0, tmax, true);
+      if (r.z > 0.5) return -1.0;
+      if (r.x < 0.0) mask = mask + bit;
+    }
+    bit = bit * 2.0;
+    lights_done = lights_done + 1;
+  }
+  return lights_done == LIGHT_COUNT ? mask : -1.0;
+}

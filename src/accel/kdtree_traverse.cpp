@@ -1,0 +1,257 @@
+// CPU traversal of the flattened kd-tree: the oracle for glsl/traverse.glsl, which follows it step
+// for step.
+//
+// Algorithm (Horn et al. 2007 short stack, falling back to Foley and Sugerman 2005 kd-restart):
+//   [t0, t1] = slab test of the root box (intersect_aabb) clipped to [ray.tmin, ray.tmax];
+//   miss if empty (or if the tree's box is empty).
+//   scene_tmax = t1, tmin = t0, tmax = t1, node = root, inv = 1 / dir,
+//   restart_t = t0, strict = false.
+//   interior node (split s, axis a):
+//     tsplit = (s - o[a]) * inv[a]
+//     below_first = o[a] < s || (o[a] == s && d[a] <= 0)   (near = below_first ? below : above)
+//     if (tsplit > tmax || tsplit <= 0 || isnan(tsplit))      node = near
+//     else if (tsplit < tmin || (strict && tsplit == tmin))  node = far
+//     else { push(far, tsplit, tmax); node = near; tmax = tsplit; }
+//   leaf: test its triangles (hits anywhere in [ray.tmin, ray.tmax], not only inside the leaf);
+//     if (best_t <= tmax) done
+//     else if (stack not empty) { (node, tmin, tmax) = pop newest; strict = false; }
+//     else if (tmax >= scene_tmax) done
+//     else { strict = (tmax == restart_t); restart_t = tmax;       // kd-restart
+//            tmin = tmax; tmax = scene_tmax; node = root; }
+//   The stack is a ring of stack_depth entries that overwrites its oldest entry when full; the
+//   restart covers whatever was dropped, because dropped entries are always the farthest.
+//
+// Equality cases, and why:
+// - tsplit == tmin visits both children (the near one with [tmin, tmin]). Equal t values do not
+//   mean the ray meets the plane where the interval starts: two planes one float ulp apart (the
+//   SAH likes cutting thin empty slabs off flat walls) round to the same t, and the thin slab
+//   between them can hold the wall the ray hits. Sending such rays to the far side only missed
+//   real hits on the Utah toasters.
+// - That tie rule alone can loop forever under kd-restart: restarting at tmin = t_b (the plane
+//   that ended the last leaf) descends again to the near side with [t_b, t_b], reaches a leaf
+//   already tested and restarts at t_b again. So a restart that makes no progress (tmax equal to
+//   the previous restart point) sets `strict`: ties go to the far side until the next pop, which
+//   reaches a leaf that ends beyond t_b. Restart points therefore increase at least every second
+//   restart and traversal always terminates (without a step cap). The only cost: with tiny stacks,
+//   a second degenerate [t_b, t_b] leaf may be skipped in this tie-of-ties case.
+// - tsplit == tmax visits both (the far side with [tmax, tmax]): conservative, rare.
+// - A ray lying in a split plane (o[a] == s, d[a] == 0) gives tsplit = 0 * inf = NaN: near only,
+//   and below_first picks the below side; the builder references every triangle that touches a
+//   split plane on both sides, so the below side has everything in the plane.
+// - A ray starting on a split plane (o[a] == s, d[a] != 0) gives tsplit = 0: near only, the side
+//   the ray goes into (below when d[a] < 0, above when d[a] > 0).
+// - Hits: t in [ray.tmin, ray.tmax]; ties in t go to the lower primitive index (closer_hit), the
+//   same rule as brute_force(), so ties do not depend on the order of the tests.
+#include <glm/glm.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <vector>
+
+#include "accel/kdtree.h"
+#include "layout.h"
+
+namespace mobirt {
+
+bool intersect_triangle(const FlatKdTree& tree, int32_t prim, const Ray& ray, Hit& hit) {
+  const size_t base = static_cast<size_t>(prim) * MOBIRT_TEXELS_PER_TRIANGLE;
+  const glm::vec3 v0(tree.triangles[base]);
+  const glm::vec3 e1 = glm::vec3(tree.triangles[base + 1]) - v0;
+  const glm::vec3 e2 = glm::vec3(tree.triangles[base + 2]) - v0;
+  const glm::vec3 p = glm::cross(ray.direction, e2);
+  const float det = glm::dot(e1, p);
+  if (det == 0.0f || std::isnan(det)) return false;
+  const float inv_det = 1.0f / det;
+  const glm::vec3 s = ray.origin - v0;
+  const float u = glm::dot(s, p) * inv_det;
+  if (!(u >= 0.0f && u <= 1.0f)) return false;
+  const glm::vec3 q = glm::cross(s, e1);
+  const float v = glm::dot(ray.direction, q) * inv_det;
+  if (!(v >= 0.0f && u + v <= 1.0f)) return false;
+  const float t = glm::dot(e2, q) * inv_det;
+  if (!(t >= ray.tmin && t <= ray.tmax)) return false;
+  if (!closer_hit(t, prim, hit)) return false;
+  hit.prim = prim;
+  hit.t = t;
+  hit.u = u;
+  hit.v = v;
+  return true;
+}
+
+namespace {
+
+struct Entry {
+  int32_t node;
+  float tmin;
+  float tmax;
+};
+
+// A ring of `capacity` entries that overwrites its oldest entry when full.
+class ShortStack {
+ public:
+  explicit ShortStack(int capacity) : capacity_(capacity) {
+    if (capacity_ > static_cast<int>(local_.size())) {
+      heap_.resize(static_cast<size_t>(capacity_));
+      data_ = heap_.data();
+    } else {
+      data_ = local_.data();
+    }
+  }
+  bool empty() const { return size_ == 0; }
+  // Returns true when the push overwrote (dropped) the oldest entry.
+  bool push(const Entry& e) {
+    if (capacity_ <= 0) return true;
+    top_ = top_ + 1 == capacity_ ? 0 : top_ + 1;
+    data_[top_] = e;
+    if (size_ < capacity_) {
+      ++size_;
+      return false;
+    }
+    return true;
+  }
+  Entry pop() {
+    const Entry e = data_[top_];
+    top_ = top_ == 0 ? capacity_ - 1 : top_ - 1;
+    --size_;
+    return e;
+  }
+
+ private:
+  std::array<Entry, 64> local_;
+  std::vector<Entry> heap_;
+  Entry* data_;
+  int capacity_;
+  int top_ = 0;
+  int size_ = 0;
+};
+
+template <bool kAnyHit>
+Hit traverse_impl(const FlatKdTree& tree, const Ray& ray, int stack_depth, TraversalStats& stats,
+                  int64_t max_steps) {
+  stats = TraversalStats{};
+  Hit best;
+  float t0 = 0.0f;
+  float t1 = 0.0f;
+  if (tree.nodes.empty() || tree.bounds.empty() || !intersect_aabb(tree.bounds, ray, t0, t1)) {
+    return best;
+  }
+  const float scene_tmax = t1;
+  float tmin = t0;
+  float tmax = t1;
+  const glm::vec3 o = ray.origin;
+  const glm::vec3 d = ray.direction;
+  const glm::vec3 inv = 1.0f / d;
+  // A full stack never holds more entries than the tree is deep.
+  const int capacity =
+      stack_depth >= 0 ? stack_depth : std::max(tree.stats.max_depth_reached, tree.max_depth) + 1;
+  ShortStack stack(capacity);
+  const uint64_t cap = max_steps < 0 ? ~uint64_t(0) : static_cast<uint64_t>(max_steps);
+  const glm::vec4* nodes = tree.nodes.data();
+  const float* prim_list = tree.prim_list.data();
+
+  int32_t node = 0;
+  float restart_t = t0;
+  bool strict = false;
+  for (;;) {
+    const glm::vec4 n = nodes[node];
+    if (n.z != static_cast<float>(MOBIRT_NODE_LEAF)) {
+      if (stats.steps >= cap) {
+        stats.capped = 1;
+        return Hit{};
+      }
+      ++stats.steps;
+      ++stats.nodes_visited;
+      const int a = static_cast<int>(n.z);
+      const float s = n.x;
+      const float tsplit = (s - o[a]) * inv[a];
+      const bool below_first = o[a] < s || (o[a] == s && d[a] <= 0.0f);
+      const int32_t below = node + 1;
+      const int32_t above = static_cast<int32_t>(n.y);
+      const int32_t near_child = below_first ? below : above;
+      const int32_t far_child = below_first ? above : below;
+      if (tsplit > tmax || tsplit <= 0.0f || std::isnan(tsplit)) {
+        node = near_child;
+      } else if (tsplit < tmin || (strict && tsplit == tmin)) {
+        node = far_child;
+      } else {
+        if (stack.push(Entry{far_child, tsplit, tmax})) ++stats.dropped;
+        node = near_child;
+        tmax = tsplit;
+      }
+      continue;
+    }
+
+    // Leaf: the node fetch shares a step with the first triangle test (an empty leaf: one step).
+    ++stats.nodes_visited;
+    ++stats.leaves_visited;
+    const int count = static_cast<int>(n.y);
+    if (count == 0) {
+      if (stats.steps >= cap) {
+        stats.capped = 1;
+        return Hit{};
+      }
+      ++stats.steps;
+    }
+    for (int i = 0; i < count; ++i) {
+      if (stats.steps >= cap) {
+        stats.capped = 1;
+        return Hit{};
+      }
+      ++stats.steps;
+      ++stats.triangles_tested;
+      const int32_t prim = count == 1 ? static_cast<int32_t>(n.x)
+                                      : static_cast<int32_t>(prim_list[static_cast<size_t>(n.x) + i]);
+      if (intersect_triangle(tree, prim, ray, best) && kAnyHit) return best;
+    }
+    if (best.t <= tmax) return best;
+    if (!stack.empty()) {
+      const Entry e = stack.pop();
+      ++stats.pops;
+      node = e.node;
+      tmin = e.tmin;
+      tmax = e.tmax;
+      strict = false;
+    } else if (tmax >= scene_tmax) {
+      return best;
+    } else {
+      ++stats.restarts;
+      strict = tmax == restart_t;
+      restart_t = tmax;
+      tmin = tmax;
+      tmax = scene_tmax;
+      node = 0;
+    }
+  }
+}
+
+}  // namespace
+
+Hit traverse(const FlatKdTree& tree, const Ray& ray, int stack_depth, TraversalStats& stats,
+             int64_t max_steps) {
+  return traverse_impl<false>(tree, ray, stack_depth, stats, max_steps);
+}
+
+Hit traverse(const FlatKdTree& tree, const Ray& ray, int stack_depth) {
+  TraversalStats stats;
+  return traverse_impl<false>(tree, ray, stack_depth, stats, -1);
+}
+
+bool occluded(const FlatKdTree& tree, const Ray& ray, int stack_depth, TraversalStats& stats,
+              int64_t max_steps) {
+  return traverse_impl<true>(tree, ray, stack_depth, stats, max_steps).valid();
+}
+
+bool occluded(const FlatKdTree& tree, const Ray& ray, int stack_depth) {
+  TraversalStats stats;
+  return traverse_impl<true>(tree, ray, stack_depth, stats, -1).valid();
+}
+
+Hit brute_force(const FlatKdTree& tree, const Ray& ray) {
+  Hit best;
+  const int32_t n = static_cast<int32_t>(tree.triangles.size() / MOBIRT_TEXELS_PER_TRIANGLE);
+  for (int32_t prim = 0; prim < n; ++prim) intersect_triangle(tree, prim, ray, best);
+  return best;
+}
+
+}  // namespace mobirt

@@ -1,0 +1,268 @@
+// The mobirt command line: render, info.
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <exception>
+#include <filesystem>
+#include <iostream>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "backend/backend.h"
+#include "core/error.h"
+#include "core/image.h"
+#include "render/renderer.h"
+#include "scene/loader.h"
+#include "scene/overrides.h"
+
+namespace mobirt {
+namespace {
+
+constexpr const char* kUsage = R"(mobirt: a headless CPU-GPU hybrid Whitted ray tracer (MobiRT on Vulkan)
+
+Usage:
+  mobirt render SCENE -o OUT [options]   render a .gltf, .glb or .obj scene to OUT (.png, .exr, ...)
+  mobirt info [--device D]               print the Vulkan device and the limits that matter here
+  mobirt COMMAND --help                  help on one command
+)";
+
+constexpr const char* kRenderUsage = R"(Usage: mobirt render SCENE -o OUT [options]
+
+Renders SCENE (.gltf, .glb or .obj) with the paper's passes: CPU kd-tree and primary rays, GPU
+traversal with shadow rays, CPU hit decoding, GPU Phong shading. OUT's extension picks the format
+(.png, .jpg: 8 bits; .exr, .hdr: float). The file is written whole or not at all.
+
+Options:
+  -o, --output FILE       output image (required)
+  --size WxH              image size in pixels (default 400x240)
+  --stack N               short-stack entries of the traversal shader, 0 = pure kd-restart
+                          (default 4, at most 32)
+  --max-steps N           loop cap of one traversal in the shader; rays that reach it are traced
+                          on the CPU instead, so the cap costs time, never pixels (default 2048)
+  --bins N                SAH bins per axis of the kd-tree build (default 32)
+  --leaf-size N           largest leaf the build may make without trying to split (default 1)
+  --max-depth N           kd-tree depth limit, -1 = 8 + 1.3 log2(triangles) (default -1)
+  --epsilon E             shadow-ray origin offset, relative to the hit point's magnitude
+                          (default 1e-4)
+  --light SPEC            replaces the scene's lights (repeat for several):
+                            "point pos=X,Y,Z [color=R,G,B] [intensity=I] [range=R]"
+                            "spot pos=X,Y,Z dir=X,Y,Z [inner=DEG] [outer=DEG] [color=..] [intensity=..] [range=..]"
+                            "directional dir=X,Y,Z [color=R,G,B] [intensity=I]"
+  --camera SPEC           replaces the scene's camera: "EX,EY,EZ:TX,TY,TZ:UX,UY,UZ:FOVDEG"
+                          (look-from, look-at, up, vertical field of view in degrees)
+  --background R,G,B      colour of rays that miss (default 0,0,0)
+  --device D              Vulkan device: index or part of its name (default: lavapipe)
+  --validation            enable the Khronos validation layer; any message is an error
+  --timings               print the time of each stage of the frame
+)";
+
+constexpr const char* kInfoUsage = R"(Usage: mobirt info [--device D] [--validation]
+
+Prints the Vulkan device mobirt would use and the limits that matter to it.
+)";
+
+[[noreturn]] void usage_error(const std::string& message) {
+  throw Error(ErrorKind::BadInput, message + " (see mobirt --help)");
+}
+
+int parse_int(const std::string& option, const std::string& value, int lo, int hi) {
+  char* end = nullptr;
+  errno = 0;
+  const long v = std::strtol(value.c_str(), &end, 10);
+  if (value.empty() || *end != '\0' || errno != 0 || v < lo || v > hi) {
+    usage_error(option + " " + value + ": expected an integer in [" + std::to_string(lo) + ", " +
+                std::to_string(hi) + "]");
+  }
+  return int(v);
+}
+
+float parse_float(const std::string& option, const std::string& value, float lo, float hi) {
+  char* end = nullptr;
+  const float v = std::strtof(value.c_str(), &end);
+  if (value.empty() || *end != '\0' || !(v >= lo && v <= hi)) {
+    usage_error(option + " " + value + ": expected a number in [" + std::to_string(lo) + ", " +
+                std::to_string(hi) + "]");
+  }
+  return v;
+}
+
+glm::vec3 parse_color(const std::string& option, const std::string& value) {
+  glm::vec3 c;
+  char extra = 0;
+  if (std::sscanf(value.c_str(), "%f,%f,%f%c", &c.x, &c.y, &c.z, &extra) != 3 ||
+      !(c.x >= 0 && c.y >= 0 && c.z >= 0 && c.x < 1e30f && c.y < 1e30f && c.z < 1e30f)) {
+    usage_error(option + " " + value + ": expected three non-negative numbers R,G,B");
+  }
+  return c;
+}
+
+// Command-line arguments as a queue with "option needs a value" errors.
+class Args {
+ public:
+  Args(int argc, char** argv, int first) : args_(argv + first, argv + argc) {}
+  bool empty() const { return next_ >= args_.size(); }
+  std::string take() { return args_[next_++]; }
+  std::string value(const std::string& option) {
+    if (empty()) usage_error(option + " needs a value");
+    return take();
+  }
+
+ private:
+  std::vector<std::string> args_;
+  size_t next_ = 0;
+};
+
+bool is_help(const std::string& a) { return a == "-h" || a == "--help"; }
+
+int cmd_info(Args args) {
+  BackendOptions options;
+  while (!args.empty()) {
+    const std::string a = args.take();
+    if (is_help(a)) {
+      std::cout << kInfoUsage;
+      return 0;
+    } else if (a == "--device") {
+      options.device = args.value(a);
+    } else if (a == "--validation") {
+      options.validation = true;
+    } else {
+      usage_error("info: unknown option " + a);
+    }
+  }
+  auto backend = create_vulkan_backend(options);
+  const DeviceInfo info = backend->device_info();
+  std::cout << "api:     " << info.api << "\n"
+            << "device:  " << info.device << (info.is_software ? " (software)" : "") << "\n"
+            << "driver:  " << info.driver << "\n"
+            << "limits:\n";
+  for (const std::string& line : info.limits) std::cout << "  " << line << "\n";
+  return 0;
+}
+
+void print_timings(const FrameTimings& t) {
+  std::printf("stage                ms\n");
+  std::printf("kd-tree build   %9.2f\n", t.build_ms);
+  std::printf("primary rays    %9.2f\n", t.rays_ms);
+  std::printf("upload          %9.2f\n", t.upload_ms);
+  std::printf("traversal pass  %9.2f   %.2f Mrays/s (%u rays, shadow rays included)\n", t.trace_ms,
+              t.trace_mrays_per_s(), t.rays);
+  std::printf("read-back       %9.2f\n", t.trace_readback_ms);
+  std::printf("hit decoding    %9.2f   (%u hits, %u capped rays traced on the CPU)\n", t.decode_ms,
+              t.hits, t.capped);
+  std::printf("shading pass    %9.2f\n", t.shade_ms);
+  std::printf("shade read-back %9.2f\n", t.shade_readback_ms);
+  std::printf("accumulate      %9.2f\n", t.accumulate_ms);
+  std::printf("frame           %9.2f\n", t.total_ms);
+}
+
+int cmd_render(Args args) {
+  std::string scene_path, output;
+  RenderSettings settings;
+  BackendOptions backend_options;
+  std::vector<Light> lights;
+  std::optional<Camera> camera;
+  std::optional<glm::vec3> background;
+  bool timings = false;
+  while (!args.empty()) {
+    const std::string a = args.take();
+    if (is_help(a)) {
+      std::cout << kRenderUsage;
+      return 0;
+    } else if (a == "-o" || a == "--output") {
+      output = args.value(a);
+    } else if (a == "--size") {
+      const std::string v = args.value(a);
+      int w = 0, h = 0;
+      char extra = 0;
+      if (std::sscanf(v.c_str(), "%dx%d%c", &w, &h, &extra) != 2 || w < 1 || h < 1 || w > 16384 ||
+          h > 16384) {
+        usage_error("--size " + v + ": expected WxH with 1 <= W, H <= 16384, e.g. 400x240");
+      }
+      settings.width = w;
+      settings.height = h;
+    } else if (a == "--stack") {
+      settings.stack_depth = parse_int(a, args.value(a), 0, MOBIRT_MAX_STACK_DEPTH);
+    } else if (a == "--max-steps") {
+      settings.max_steps = parse_int(a, args.value(a), 1, 1 << 24);
+    } else if (a == "--bins") {
+      settings.kd.bins = parse_int(a, args.value(a), 2, 1024);
+    } else if (a == "--leaf-size") {
+      settings.kd.max_leaf_prims = parse_int(a, args.value(a), 1, 1 << 20);
+    } else if (a == "--max-depth") {
+      settings.kd.max_depth = parse_int(a, args.value(a), -1, 128);
+    } else if (a == "--epsilon") {
+      settings.shadows.epsilon = parse_float(a, args.value(a), 0.0f, 1.0f);
+    } else if (a == "--light") {
+      lights.push_back(parse_light(args.value(a)));
+    } else if (a == "--camera") {
+      camera = parse_camera(args.value(a));
+    } else if (a == "--background") {
+      background = parse_color(a, args.value(a));
+    } else if (a == "--device") {
+      backend_options.device = args.value(a);
+    } else if (a == "--validation") {
+      backend_options.validation = true;
+    } else if (a == "--timings") {
+      timings = true;
+    } else if (!a.empty() && a[0] == '-') {
+      usage_error("render: unknown option " + a);
+    } else if (scene_path.empty()) {
+      scene_path = a;
+    } else {
+      usage_error("render: more than one scene given ('" + scene_path + "' and '" + a + "')");
+    }
+  }
+  if (scene_path.empty()) usage_error("render: no scene given");
+  if (output.empty()) usage_error("render: no output given: add -o OUT.png");
+  check_image_output(output);
+
+  Scene scene = load_scene(scene_path);
+  apply_overrides(scene, lights, camera);
+  if (background) scene.background = *background;
+  const Camera view = scene.camera ? *scene.camera
+                                   : frame_box(scene.bounds(), 0.7854f,
+                                               float(settings.width) / float(settings.height));
+
+  auto backend = create_vulkan_backend(backend_options);
+  Renderer renderer(*backend, settings);
+  FrameTimings t;
+  const Image image = renderer.render(scene, view, &t);
+  for (const std::string& message : backend->take_debug_messages()) {
+    throw Error(ErrorKind::Internal, "validation: " + message);
+  }
+  write_image(output, image);
+  if (timings) {
+    std::printf("%s: %zu triangles, %zu lights, %dx%d on %s\n", scene_path.c_str(),
+                scene.mesh.triangle_count(), scene.lights.size(), settings.width, settings.height,
+                backend->device_info().device.c_str());
+    print_timings(t);
+  }
+  return 0;
+}
+
+int run(int argc, char** argv) {
+  if (argc < 2 || is_help(argv[1])) {
+    std::cout << kUsage;
+    return argc < 2 ? 2 : 0;
+  }
+  const std::string command = argv[1];
+  if (command == "render") return cmd_render(Args(argc, argv, 2));
+  if (command == "info") return cmd_info(Args(argc, argv, 2));
+  usage_error("unknown command '" + command + "'");
+}
+
+}  // namespace
+}  // namespace mobirt
+
+int main(int argc, char** argv) {
+  try {
+    return mobirt::run(argc, argv);
+  } catch (const mobirt::Error& e) {
+    std::fprintf(stderr, "mobirt: error: %s\n", e.what());
+    return e.exit_code();
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "mobirt: internal error: %s\n", e.what());
+    return 1;
+  }
+}

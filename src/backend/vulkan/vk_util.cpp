@@ -1,0 +1,53 @@
+#include "backend/vulkan/vk_util.h"
+
+#include "core/error.h"
+
+namespace mobirt::vk {
+
+std::string result_name(VkResult result) {
+  switch (result) {
+#define MOBIRT_VK_RESULT(name) \
+  case name: return #name;
+    MOBIRT_VK_RESULT(VK_SUCCESS)
+    MOBIRT_VK_RESULT(VK_NOT_READY)
+    MOBIRT_VK_RESULT(VK_TIMEOUT)
+    MOBIRT_VK_RESULT(VK_EVENT_SET)
+    MOBIRT_VK_RESULT(VK_EVENT_RESET)
+    MOBIRT_VK_RESULT(VK_INCOMPLETE)
+    MOBIRT_VK_RESULT(VK_ERROR_OUT_OF_HOST_MEMORY)
+    MOBIRT_VK_RESULT(VK_ERROR_OUT_OF_DEVICE_MEMORY)
+    MOBIRT_VK_RESULT(VK_ERROR_INITIALIZATION_FAILED)
+    MOBIRT_VK_RESULT(VK_ERROR_DEVICE_LOST)
+    MOBIRT_VK_RESULT(VK_ERROR_MEMORY_MAP_FAILED)
+    MOBIRT_VK_RESULT(VK_ERROR_LAYER_NOT_PRESENT)
+    MOBIRT_VK_RESULT(VK_ERROR_EXTENSION_NOT_PRESENT)
+    MOBIRT_VK_RESULT(VK_ERROR_FEATURE_NOT_PRESENT)
+    MOBIRT_VK_RESULT(VK_ERROR_INCOMPATIBLE_DRIVER)
+    MOBIRT_VK_RESULT(VK_ERROR_TOO_MANY_OBJECTS)
+    MOBIRT_VK_RESULT(VK_ERROR_FORMAT_NOT_SUPPORTED)
+    MOBIRT_VK_RESULT(VK_ERROR_FRAGMENTED_POOL)
+    MOBIRT_VK_RESULT(VK_ERROR_UNKNOWN)
+    MOBIRT_VK_RESULT(VK_ERROR_OUT_OF_POOL_MEMORY)
+    MOBIRT_VK_RESULT(VK_ERROR_INVALID_EXTERNAL_HANDLE)
+    MOBIRT_VK_RESULT(VK_ERROR_FRAGMENTATION)
+    MOBIRT_VK_RESULT(VK_ERROR_INVALID_OPAQUE_CAPTURE_ADDRESS)
+    MOBIRT_VK_RESULT(VK_PIPELINE_COMPILE_REQUIRED)
+    MOBIRT_VK_RESULT(VK_ERROR_VALIDATION_FAILED_EXT)
+    MOBIRT_VK_RESULT(VK_ERROR_INVALID_SHADER_NV)
+#undef MOBIRT_VK_RESULT
+    default: return "VkResult(" + std::to_string(int(result)) + ")";
+  }
+}
+
+void check(VkResult result, const char* call) {
+  if (result != VK_SUCCESS) {
+    throw Error(ErrorKind::Internal, std::string(call) + " failed: " + result_name(result));
+  }
+}
+
+std::atomic<long>& live_object_counter() {
+  static std::atomic<long> counter{0};
+  return counter;
+}
+
+}  // namespace mobirt::vk

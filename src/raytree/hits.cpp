@@ -1,0 +1,125 @@
+#include "raytree/hits.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/error.h"
+
+namespace mobirt {
+
+uint32_t shadow_mask(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
+                     const Ray& ray, float t, const ShadowSettings& settings, int stack_depth) {
+  if (lights.empty() || prim < 0) return 0;
+  const size_t base = size_t(prim) * MOBIRT_TEXELS_PER_TRIANGLE;
+  const glm::vec3 v0(tree.triangles[base]);
+  const glm::vec3 ng = glm::cross(glm::vec3(tree.triangles[base + 1]) - v0,
+                                  glm::vec3(tree.triangles[base + 2]) - v0);
+  const glm::vec3 p = ray.origin + t * ray.direction;
+  const float view_side = glm::dot(ng, ray.direction) < 0.0f ? 1.0f : -1.0f;
+  const glm::vec3 ap = glm::abs(p);
+  const float offset = settings.epsilon * (1.0f + std::max(ap.x, std::max(ap.y, ap.z)));
+  const glm::vec3 origin = p + (view_side * offset / std::max(glm::length(ng), 1e-30f)) * ng;
+  uint32_t mask = 0;
+  for (size_t l = 0; l < lights.size(); ++l) {
+    const Light& light = lights[l];
+    const bool directional = light.type == LightType::Directional;
+    const glm::vec3 to_light = directional ? -light.direction : light.position - origin;
+    bool lit = glm::dot(ng, to_light) * view_side > 0.0f;
+    if (lit && light.type == LightType::Spot) {
+      lit = glm::dot(glm::normalize(-to_light), light.direction) > std::cos(light.outer_cone);
+    }
+    if (!lit) continue;
+    Ray shadow{origin, to_light, 0.0f, directional ? 3.0e38f : 1.0f};
+    if (!occluded(tree, shadow, stack_depth)) mask |= 1u << l;
+  }
+  return mask;
+}
+
+SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ray, int32_t prim) {
+  SurfaceHit hit;
+  Hit h;
+  h.t = kInfinity;
+  // Recompute on this one triangle; the range is opened so that a hit the GPU accepted at the edge
+  // of [tmin, tmax] is still found (float rounding may differ slightly between the two).
+  Ray open = ray;
+  open.tmin = -kInfinity;
+  open.tmax = kInfinity;
+  if (!intersect_triangle(tree, prim, open, h)) {
+    // The GPU's Möller-Trumbore accepted it and ours does not (an edge hit, rounding): use the
+    // closest point the barycentric clamp gives; t from the plane.
+    const size_t base = size_t(prim) * MOBIRT_TEXELS_PER_TRIANGLE;
+    const glm::vec3 v0(tree.triangles[base]), v1(tree.triangles[base + 1]), v2(tree.triangles[base + 2]);
+    const glm::vec3 n = glm::cross(v1 - v0, v2 - v0);
+    const float denom = glm::dot(n, ray.direction);
+    h.t = denom != 0.0f ? glm::dot(n, v0 - ray.origin) / denom : ray.tmin;
+    h.u = h.v = 1.0f / 3.0f;
+    h.prim = prim;
+  }
+  hit.prim = prim;
+  hit.t = h.t;
+  hit.u = h.u;
+  hit.v = h.v;
+  hit.position = ray.origin + h.t * ray.direction;
+
+  const TriangleMesh& mesh = scene.mesh;
+  const size_t i0 = size_t(prim) * 3;
+  const float w = 1.0f - h.u - h.v;
+  const glm::vec3 e1 = mesh.positions[i0 + 1] - mesh.positions[i0];
+  const glm::vec3 e2 = mesh.positions[i0 + 2] - mesh.positions[i0];
+  glm::vec3 ng = glm::cross(e1, e2);
+  const float len = glm::length(ng);
+  ng = len > 0.0f ? ng / len : -glm::normalize(ray.direction);
+  hit.entering = glm::dot(ng, ray.direction) < 0.0f;
+  hit.geometric = hit.entering ? ng : -ng;
+
+  glm::vec3 n = ng;
+  if (!mesh.normals.empty()) {
+    n = w * mesh.normals[i0] + h.u * mesh.normals[i0 + 1] + h.v * mesh.normals[i0 + 2];
+    const float nl = glm::length(n);
+    n = nl > 1e-20f && std::isfinite(nl) ? n / nl : ng;
+  }
+  // The shading normal faces the same side as the geometric one seen from the ray.
+  hit.normal = glm::dot(n, hit.geometric) < 0.0f ? -n : n;
+  if (!mesh.texcoords.empty()) {
+    hit.texcoord = w * mesh.texcoords[i0] + h.u * mesh.texcoords[i0 + 1] + h.v * mesh.texcoords[i0 + 2];
+  }
+  hit.material = mesh.material_ids[size_t(prim)];
+  return hit;
+}
+
+std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays,
+                                    std::span<const uint32_t> texels, Packing packing,
+                                    const ShadowSettings& shadows, DecodeStats* stats) {
+  const uint32_t n = rays.count();
+  if (texels.size() < n) throw Error(ErrorKind::Internal, "decode_hits: fewer texels than rays");
+  const uint32_t prims = uint32_t(scene.mesh.triangle_count());
+  std::vector<SurfaceHit> hits(n);
+  DecodeStats local;
+  for (uint32_t i = 0; i < n; ++i) {
+    const TraceTexel texel = unpack_trace(packing, texels[i]);
+    const Ray ray = rays.ray(i);
+    int32_t prim = -1;
+    uint32_t mask = 0;
+    if (texel.capped) {
+      ++local.capped;
+      const Hit h = traverse(tree, ray, -1);
+      prim = h.prim;
+      if (h.valid()) mask = shadow_mask(tree, scene.lights, prim, ray, h.t, shadows, -1);
+    } else if (texel.hit()) {
+      prim = texel.prim();
+      mask = texel.mask;
+      if (uint32_t(prim) >= prims) {
+        throw Error(ErrorKind::Internal, "traversal pass returned primitive " + std::to_string(prim) +
+                                             " of a scene with " + std::to_string(prims));
+      }
+    }
+    if (prim < 0) continue;
+    ++local.hits;
+    hits[i] = surface_hit(scene, tree, ray, prim);
+    hits[i].mask = mask;
+  }
+  if (stats) *stats = local;
+  return hits;
+}
+
+}  // namespace mobirt

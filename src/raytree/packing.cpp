@@ -1,0 +1,54 @@
+#include "raytree/packing.h"
+
+#include "core/error.h"
+
+namespace mobirt {
+
+Packing choose_packing(uint64_t prims, int lights, const std::string& scene) {
+  if (lights > MOBIRT_MAX_LIGHTS) {
+    throw input_error(scene, std::to_string(lights) + " lights, but a pass packs at most " +
+                                 std::to_string(MOBIRT_MAX_LIGHTS) +
+                                 " shadow bits: remove lights or pass at most 16 with --light");
+  }
+  if (lights <= MOBIRT_MAX_LIGHTS_24_8) {
+    if (prims > MOBIRT_MAX_PRIMS_24_8) {
+      throw input_error(scene, std::to_string(prims) + " triangles, over the 24-bit hit index limit of " +
+                                   std::to_string(MOBIRT_MAX_PRIMS_24_8) + ": simplify the scene");
+    }
+    return Packing::Bits24_8;
+  }
+  if (prims > MOBIRT_MAX_PRIMS_16_16) {
+    throw input_error(scene, std::to_string(lights) + " lights need the 16/16 packing, which holds at most " +
+                                 std::to_string(MOBIRT_MAX_PRIMS_16_16) + " triangles, but the scene has " +
+                                 std::to_string(prims) + ": use at most 8 lights or fewer triangles");
+  }
+  return Packing::Bits16_16;
+}
+
+uint32_t pack_trace(Packing packing, uint32_t prim_plus_one, uint32_t mask) {
+  if (packing == Packing::Bits24_8) return (prim_plus_one & 0xFFFFFFu) | ((mask & 0xFFu) << 24);
+  return (prim_plus_one & 0xFFFFu) | ((mask & 0xFFFFu) << 16);
+}
+
+uint32_t pack_capped(Packing packing) {
+  return packing == Packing::Bits24_8 ? 0xFF000000u : 0xFFFF0000u;
+}
+
+TraceTexel unpack_trace(Packing packing, uint32_t texel) {
+  TraceTexel result;
+  if (packing == Packing::Bits24_8) {
+    result.prim_plus_one = texel & 0xFFFFFFu;
+    result.mask = texel >> 24;
+  } else {
+    result.prim_plus_one = texel & 0xFFFFu;
+    result.mask = texel >> 16;
+  }
+  // A miss never carries shadow bits: index 0 with a mask is the "capped" signal.
+  if (result.prim_plus_one == 0 && result.mask != 0) {
+    result.capped = true;
+    result.mask = 0;
+  }
+  return result;
+}
+
+}  // namespace mobirt

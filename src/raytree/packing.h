@@ -1,0 +1,38 @@
+// The traversal pass's output texel (glsl/packing.glsl) on the CPU side: one RGBA8 texel per ray,
+// read back as a little-endian uint32 (r = lowest byte).
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "layout.h"
+
+namespace mobirt {
+
+enum class Packing { Bits24_8 = MOBIRT_PACKING_24_8, Bits16_16 = MOBIRT_PACKING_16_16 };
+
+struct TraceTexel {
+  uint32_t prim_plus_one = 0;  // 0 = miss
+  uint32_t mask = 0;           // shadow bits, bit i = light i visible
+  bool capped = false;         // the loop cap stopped the ray: the CPU traces it
+
+  bool hit() const { return prim_plus_one != 0; }
+  int32_t prim() const { return int32_t(prim_plus_one) - 1; }
+};
+
+constexpr uint32_t max_prims(Packing p) {
+  return p == Packing::Bits24_8 ? MOBIRT_MAX_PRIMS_24_8 : MOBIRT_MAX_PRIMS_16_16;
+}
+constexpr int max_lights(Packing p) {
+  return p == Packing::Bits24_8 ? MOBIRT_MAX_LIGHTS_24_8 : MOBIRT_MAX_LIGHTS_16_16;
+}
+
+// The smallest packing that holds the scene: 24/8 unless more than 8 lights need 16/16.
+// Throws Error(BadInput) naming the limit when neither holds it.
+Packing choose_packing(uint64_t prims, int lights, const std::string& scene);
+
+uint32_t pack_trace(Packing packing, uint32_t prim_plus_one, uint32_t mask);
+uint32_t pack_capped(Packing packing);
+TraceTexel unpack_trace(Packing packing, uint32_t texel);
+
+}  // namespace mobirt

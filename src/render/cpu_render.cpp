@@ -1,0 +1,83 @@
+#include "render/cpu_render.h"
+
+#include <algorithm>
+#include <cmath>
+#include <thread>
+
+#include "accel/kdtree.h"
+#include "layout.h"
+
+namespace mobirt {
+
+namespace {
+
+float light_attenuation(float distance2, float range) {
+  float window = 1.0f;
+  if (range > 0.0f) {
+    const float r = distance2 / (range * range);
+    window = std::clamp(1.0f - r * r, 0.0f, 1.0f);
+    window *= window;
+  }
+  return window / std::max(distance2, 1e-8f);
+}
+
+}  // namespace
+
+glm::vec3 shade_phong(const Scene& scene, const SurfaceHit& hit, const glm::vec3& view) {
+  const Material& m = scene.materials[hit.material];
+  glm::vec3 color = m.ambient * m.diffuse;
+  for (size_t l = 0; l < scene.lights.size(); ++l) {
+    if (!(hit.mask & (1u << l))) continue;
+    const Light& light = scene.lights[l];
+    glm::vec3 to_light = -light.direction;
+    float falloff = 1.0f;
+    if (light.type != LightType::Directional) {
+      to_light = light.position - hit.position;
+      falloff = light_attenuation(glm::dot(to_light, to_light), light.range);
+    }
+    const glm::vec3 l_dir = glm::normalize(to_light);
+    if (light.type == LightType::Spot) {
+      const float cos_outer = std::cos(light.outer_cone);
+      const float cos_inner = std::cos(light.inner_cone);
+      const float cone = std::clamp((glm::dot(-l_dir, light.direction) - cos_outer) /
+                                        std::max(cos_inner - cos_outer, 1e-4f),
+                                    0.0f, 1.0f);
+      falloff *= cone * cone;
+    }
+    const float n_dot_l = glm::dot(hit.normal, l_dir);
+    if (n_dot_l <= 0.0f) continue;
+    const glm::vec3 r = 2.0f * n_dot_l * hit.normal - l_dir;
+    const float spec = m.shininess > 0.0f ? std::pow(std::max(glm::dot(r, view), 0.0f), m.shininess) : 0.0f;
+    color += falloff * light.color * light.intensity * (m.diffuse * n_dot_l + m.specular * spec);
+  }
+  return color;
+}
+
+Image render_on_cpu(const Scene& scene, const Camera& camera, const RenderSettings& settings, bool quantize) {
+  const FlatKdTree tree = build_kdtree(scene.mesh.positions, settings.kd);
+  const RayBatch rays = primary_rays(camera, settings.width, settings.height);
+  Image image(settings.width, settings.height);
+  const uint32_t n = rays.count();
+  const unsigned threads = std::max(1u, std::thread::hardware_concurrency());
+  std::vector<std::thread> pool;
+  for (unsigned w = 0; w < threads; ++w) {
+    pool.emplace_back([&, w] {
+      for (uint32_t i = w; i < n; i += threads) {
+        const Ray ray = rays.ray(i);
+        const Hit h = traverse(tree, ray, -1);
+        glm::vec3 c = scene.background;
+        if (h.valid()) {
+          SurfaceHit s = surface_hit(scene, tree, ray, h.prim);
+          s.mask = shadow_mask(tree, scene.lights, h.prim, ray, h.t, settings.shadows, -1);
+          c = glm::clamp(shade_phong(scene, s, -glm::normalize(ray.direction)), 0.0f, 1.0f);
+        }
+        if (quantize) c = glm::round(glm::clamp(c, 0.0f, 1.0f) * 255.0f) / 255.0f;
+        image.pixels[rays.pixel[i]] += rays.weight[i] * c;
+      }
+    });
+  }
+  for (std::thread& t : pool) t.join();
+  return image;
+}
+
+}  // namespace mobirt

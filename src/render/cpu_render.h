@@ -1,0 +1,23 @@
+// The same frame as Renderer, computed entirely on the CPU in single precision: the kd-tree
+// traversal of src/accel, the shadow rays of src/raytree/hits.h, and a C++ transcription of
+// glsl/shade.glsl. It is the expectation the GPU image is tested against (it shares the tree and
+// the ray tree but none of the shaders), and the CPU column of the benchmarks.
+#pragma once
+
+#include "core/camera.h"
+#include "core/image.h"
+#include "raytree/hits.h"
+#include "render/renderer.h"
+#include "scene/scene.h"
+
+namespace mobirt {
+
+// Phong with the shadow mask, as glsl/shade.glsl computes it. `view` points towards the viewer.
+glm::vec3 shade_phong(const Scene& scene, const SurfaceHit& hit, const glm::vec3& view);
+
+// Ray casting with shadows on the CPU (no quantisation to 8 bits unless quantize is set, which
+// mimics the RGBA8 shading pass).
+Image render_on_cpu(const Scene& scene, const Camera& camera, const RenderSettings& settings,
+                    bool quantize = true);
+
+}  // namespace mobirt

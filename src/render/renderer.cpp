@@ -1,0 +1,286 @@
+#include "render/renderer.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <map>
+
+#include "core/error.h"
+#include "layout.h"
+
+namespace mobirt {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+constexpr uint32_t kDataWidth = MOBIRT_DATA_WIDTH;
+
+uint32_t data_rows(size_t elements) {
+  return std::max<uint32_t>(1, uint32_t((elements + kDataWidth - 1) / kDataWidth));
+}
+
+void put(std::vector<float>& u, size_t index, const glm::vec4& v) {
+  if (u.size() < 4 * (index + 1)) u.resize(4 * (index + 1), 0.0f);
+  u[4 * index + 0] = v.x;
+  u[4 * index + 1] = v.y;
+  u[4 * index + 2] = v.z;
+  u[4 * index + 3] = v.w;
+}
+
+float light_type(LightType type) {
+  switch (type) {
+    case LightType::Point: return float(MOBIRT_LIGHT_POINT);
+    case LightType::Spot: return float(MOBIRT_LIGHT_SPOT);
+    case LightType::Directional: return float(MOBIRT_LIGHT_DIRECTIONAL);
+  }
+  return 0.0f;
+}
+
+// Where a light is, as both passes see it: a position, or the direction towards the light.
+glm::vec3 light_where(const Light& light) {
+  return light.type == LightType::Directional ? -light.direction : light.position;
+}
+
+}  // namespace
+
+std::vector<float> trace_uniforms(const FlatKdTree& tree, const Scene& scene, const ShadowSettings& s) {
+  std::vector<float> u;
+  put(u, MOBIRT_TP_BOUNDS_LO, glm::vec4(tree.bounds.lo, s.epsilon));
+  put(u, MOBIRT_TP_BOUNDS_HI, glm::vec4(tree.bounds.hi, 0.0f));
+  for (size_t l = 0; l < scene.lights.size(); ++l) {
+    const Light& light = scene.lights[l];
+    const size_t at = MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * l;
+    put(u, at, glm::vec4(light_where(light), light_type(light.type)));
+    put(u, at + 1, glm::vec4(light.direction, std::cos(light.outer_cone)));
+  }
+  return u;
+}
+
+std::vector<float> shade_uniforms(const Scene& scene) {
+  std::vector<float> u;
+  put(u, MOBIRT_SP_BACKGROUND, glm::vec4(scene.background, 0.0f));
+  for (size_t l = 0; l < scene.lights.size(); ++l) {
+    const Light& light = scene.lights[l];
+    const size_t at = MOBIRT_SP_LIGHTS + MOBIRT_SP_VEC4S_PER_LIGHT * l;
+    put(u, at, glm::vec4(light_where(light), light_type(light.type)));
+    put(u, at + 1, glm::vec4(light.color * light.intensity, light.range));
+    put(u, at + 2, glm::vec4(light.direction, std::cos(light.inner_cone)));
+    put(u, at + 3, glm::vec4(std::cos(light.outer_cone), 0.0f, 0.0f, 0.0f));
+  }
+  return u;
+}
+
+struct Renderer::Data {
+  struct Texture {
+    TextureHandle handle;
+    uint32_t rows = 0;
+  };
+  Texture nodes, prim_list, triangles, materials;
+  Texture ray_origin, ray_direction, hit_position, hit_normal;
+  uint32_t ray_width = 0;  // the ray textures' row width; a change recreates them
+  std::map<std::pair<int, int>, PassHandle> trace_passes;  // (lights, packing)
+  std::map<int, PassHandle> shade_passes;                  // lights
+};
+
+Renderer::Renderer(Backend& backend, const RenderSettings& settings)
+    : backend_(backend), settings_(settings), data_(std::make_unique<Data>()) {
+  if (settings_.stack_depth < 0 || settings_.stack_depth > MOBIRT_MAX_STACK_DEPTH) {
+    throw Error(ErrorKind::BadInput, "--stack " + std::to_string(settings_.stack_depth) +
+                                         ": the short stack holds 0 to " +
+                                         std::to_string(MOBIRT_MAX_STACK_DEPTH) + " entries");
+  }
+  if (settings_.max_steps < 1) {
+    throw Error(ErrorKind::BadInput, "--max-steps must be at least 1");
+  }
+  if (settings_.width < 1 || settings_.height < 1) {
+    throw Error(ErrorKind::BadInput, "--size: width and height must be at least 1");
+  }
+}
+
+Renderer::~Renderer() {
+  Data& d = *data_;
+  for (Data::Texture* t : {&d.nodes, &d.prim_list, &d.triangles, &d.materials, &d.ray_origin,
+                           &d.ray_direction, &d.hit_position, &d.hit_normal}) {
+    if (t->handle) backend_.destroy(t->handle);
+  }
+  for (auto& [key, pass] : d.trace_passes) backend_.destroy(pass);
+  for (auto& [key, pass] : d.shade_passes) backend_.destroy(pass);
+}
+
+TextureHandle Renderer::ensure_texture(TextureHandle& handle, uint32_t& capacity_rows, uint32_t width,
+                                       uint32_t rows, TexelFormat format) {
+  if (handle && capacity_rows >= rows) return handle;
+  if (handle) backend_.destroy(handle);
+  // Grow with headroom so that an animation whose tree changes size does not reallocate often.
+  const uint32_t grown = std::max(rows, capacity_rows + capacity_rows / 2);
+  handle = backend_.create_texture(width, grown, format);
+  capacity_rows = grown;
+  return handle;
+}
+
+PassHandle Renderer::trace_pass(int lights, Packing packing) {
+  auto key = std::make_pair(lights, int(packing));
+  auto it = data_->trace_passes.find(key);
+  if (it != data_->trace_passes.end()) return it->second;
+  PassDesc desc;
+  desc.shader = ShaderId::Traverse;
+  desc.specialization = {{MOBIRT_SPEC_LIGHT_COUNT, lights},
+                         {MOBIRT_SPEC_STACK_DEPTH, settings_.stack_depth},
+                         {MOBIRT_SPEC_MAX_STEPS, settings_.max_steps},
+                         {MOBIRT_SPEC_PACKING, int(packing)}};
+  desc.uniform_vec4s = MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * uint32_t(lights);
+  desc.texture_bindings = {MOBIRT_BIND_NODES, MOBIRT_BIND_PRIM_LIST, MOBIRT_BIND_TRIANGLES,
+                           MOBIRT_BIND_RAY_ORIGIN, MOBIRT_BIND_RAY_DIRECTION};
+  PassHandle pass = backend_.create_pass(desc);
+  data_->trace_passes.emplace(key, pass);
+  return pass;
+}
+
+PassHandle Renderer::shade_pass(int lights) {
+  auto it = data_->shade_passes.find(lights);
+  if (it != data_->shade_passes.end()) return it->second;
+  PassDesc desc;
+  desc.shader = ShaderId::Shade;
+  desc.specialization = {{MOBIRT_SPEC_LIGHT_COUNT, lights}};
+  desc.uniform_vec4s = MOBIRT_SP_LIGHTS + MOBIRT_SP_VEC4S_PER_LIGHT * uint32_t(lights);
+  desc.texture_bindings = {MOBIRT_BIND_HIT_POSITION, MOBIRT_BIND_HIT_NORMAL, MOBIRT_BIND_MATERIALS,
+                           MOBIRT_BIND_SHADE_RAY_DIRECTION};
+  PassHandle pass = backend_.create_pass(desc);
+  data_->shade_passes.emplace(lights, pass);
+  return pass;
+}
+
+void Renderer::upload_tree(const FlatKdTree& tree) {
+  Data& d = *data_;
+  // Texture rows are uploaded whole: pad each array to full rows.
+  auto upload_padded = [&](Data::Texture& t, const void* src, size_t elements, size_t element_bytes,
+                           TexelFormat format) {
+    const uint32_t rows = data_rows(elements);
+    ensure_texture(t.handle, t.rows, kDataWidth, rows, format);
+    const size_t bytes = elements * element_bytes;
+    if (elements == 0) {
+      const std::vector<float> zero(4, 0.0f);
+      backend_.upload(t.handle, zero.data(), element_bytes);
+    } else {
+      backend_.upload(t.handle, src, bytes);
+    }
+  };
+  upload_padded(d.nodes, tree.nodes.data(), tree.nodes.size(), sizeof(glm::vec4), TexelFormat::RGBA32F);
+  upload_padded(d.prim_list, tree.prim_list.data(), tree.prim_list.size(), sizeof(float), TexelFormat::R32F);
+  upload_padded(d.triangles, tree.triangles.data(), tree.triangles.size(), sizeof(glm::vec4),
+                TexelFormat::RGBA32F);
+}
+
+void Renderer::upload_rays(const RayBatch& rays) {
+  Data& d = *data_;
+  if (d.ray_width != rays.width) {
+    for (Data::Texture* t : {&d.ray_origin, &d.ray_direction, &d.hit_position, &d.hit_normal}) {
+      if (t->handle) backend_.destroy(t->handle);
+      *t = {};
+    }
+    d.ray_width = rays.width;
+  }
+  ensure_texture(d.ray_origin.handle, d.ray_origin.rows, rays.width, rays.rows(), TexelFormat::RGBA32F);
+  ensure_texture(d.ray_direction.handle, d.ray_direction.rows, rays.width, rays.rows(), TexelFormat::RGBA32F);
+  backend_.upload(d.ray_origin.handle, rays.origin.data(), rays.origin.size() * sizeof(glm::vec4));
+  backend_.upload(d.ray_direction.handle, rays.direction.data(), rays.direction.size() * sizeof(glm::vec4));
+}
+
+TraceResult Renderer::trace(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays) {
+  TraceResult result;
+  const int lights = int(scene.lights.size());
+  result.packing = choose_packing(scene.mesh.triangle_count(), lights, scene.source);
+  upload_tree(tree);
+  upload_rays(rays);
+  const PassHandle pass = trace_pass(lights, result.packing);
+  const std::vector<float> uniforms = trace_uniforms(tree, scene, settings_.shadows);
+  const Data& d = *data_;
+  const TextureHandle textures[] = {d.nodes.handle, d.prim_list.handle, d.triangles.handle,
+                                    d.ray_origin.handle, d.ray_direction.handle};
+  result.texels.resize(rays.count());
+  result.timing = backend_.run_pass(pass, textures, uniforms, rays.width, rays.count(), result.texels);
+  return result;
+}
+
+Image Renderer::render(const Scene& scene, const Camera& camera, FrameTimings* timings) {
+  FrameTimings t;
+  const auto frame_start = Clock::now();
+  const int lights = int(scene.lights.size());
+  // Refuse a scene over a limit before any work.
+  choose_packing(scene.mesh.triangle_count(), lights, scene.source);
+
+  auto stage = Clock::now();
+  const FlatKdTree tree = build_kdtree(scene.mesh.positions, settings_.kd);
+  t.build_ms = elapsed_ms(stage);
+
+  stage = Clock::now();
+  const RayBatch rays = primary_rays(camera, settings_.width, settings_.height);
+  t.rays_ms = elapsed_ms(stage);
+  t.rays = rays.count();
+
+  const TraceResult traced = trace(scene, tree, rays);
+  t.upload_ms += traced.timing.upload_ms;
+  t.trace_ms = traced.timing.gpu_ms;
+  t.trace_readback_ms = traced.timing.readback_ms;
+
+  stage = Clock::now();
+  DecodeStats stats;
+  const std::vector<SurfaceHit> hits = decode_hits(scene, tree, rays, traced.texels, traced.packing,
+                                                   settings_.shadows, &stats);
+  t.hits = stats.hits;
+  t.capped = stats.capped;
+  // The shading pass's inputs, one texel per ray in the ray layout.
+  std::vector<glm::vec4> position(rays.count()), normal(rays.count());
+  for (uint32_t i = 0; i < rays.count(); ++i) {
+    const SurfaceHit& h = hits[i];
+    if (!h.valid()) {
+      position[i] = glm::vec4(0.0f, 0.0f, 0.0f, -1.0f);
+      normal[i] = glm::vec4(0.0f);
+      continue;
+    }
+    position[i] = glm::vec4(h.position, float(h.material));
+    normal[i] = glm::vec4(h.normal, float(h.mask));
+  }
+  t.decode_ms = elapsed_ms(stage);
+
+  Data& d = *data_;
+  ensure_texture(d.hit_position.handle, d.hit_position.rows, rays.width, rays.rows(), TexelFormat::RGBA32F);
+  ensure_texture(d.hit_normal.handle, d.hit_normal.rows, rays.width, rays.rows(), TexelFormat::RGBA32F);
+  backend_.upload(d.hit_position.handle, position.data(), position.size() * sizeof(glm::vec4));
+  backend_.upload(d.hit_normal.handle, normal.data(), normal.size() * sizeof(glm::vec4));
+  std::vector<glm::vec4> materials;
+  materials.reserve(scene.materials.size() * MOBIRT_TEXELS_PER_MATERIAL);
+  for (const Material& m : scene.materials) {
+    materials.emplace_back(m.diffuse, float(m.texture));
+    materials.emplace_back(m.specular, m.shininess);
+    materials.emplace_back(m.reflectance, m.transmittance, m.ior, m.ambient);
+  }
+  ensure_texture(d.materials.handle, d.materials.rows, kDataWidth, data_rows(materials.size()),
+                 TexelFormat::RGBA32F);
+  backend_.upload(d.materials.handle, materials.data(), materials.size() * sizeof(glm::vec4));
+
+  const PassHandle shade = shade_pass(lights);
+  const std::vector<float> uniforms = shade_uniforms(scene);
+  const TextureHandle textures[] = {d.hit_position.handle, d.hit_normal.handle, d.materials.handle,
+                                    d.ray_direction.handle};
+  std::vector<uint32_t> colors(rays.count());
+  const PassTiming shaded = backend_.run_pass(shade, textures, uniforms, rays.width, rays.count(), colors);
+  t.upload_ms += shaded.upload_ms;
+  t.shade_ms = shaded.gpu_ms;
+  t.shade_readback_ms = shaded.readback_ms;
+
+  stage = Clock::now();
+  Image image(settings_.width, settings_.height);
+  for (uint32_t i = 0; i < rays.count(); ++i) {
+    const uint32_t c = colors[i];
+    const glm::vec3 rgb(float(c & 0xFFu), float((c >> 8) & 0xFFu), float((c >> 16) & 0xFFu));
+    image.pixels[rays.pixel[i]] += rays.weight[i] * (rgb / 255.0f);
+  }
+  t.accumulate_ms = elapsed_ms(stage);
+  t.total_ms = elapsed_ms(frame_start);
+  if (timings) *timings = t;
+  return image;
+}
+
+}  // namespace mobirt

@@ -1,0 +1,136 @@
+#include "scene/validate.h"
+
+#include <algorithm>
+#include <cmath>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "core/error.h"
+
+namespace mobirt {
+
+namespace {
+
+bool finite3(const glm::vec3& v) {
+  return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+}
+
+}  // namespace
+
+std::string library_message(const std::string& text) {
+  std::vector<std::string> lines;
+  std::vector<std::string> dropped_lines;
+  size_t start = 0;
+  while (start < text.size()) {
+    size_t end = text.find('\n', start);
+    if (end == std::string::npos) end = text.size();
+    std::string line = text.substr(start, end - start);
+    start = end + 1;
+    while (!line.empty() && (line.back() == '\r' || line.back() == ' ')) line.pop_back();
+    if (line.size() > 200) line = line.substr(0, 160) + "...";  // data URIs can be megabytes
+    if (line.empty() || std::find(lines.begin(), lines.end(), line) != lines.end()) continue;
+    if (lines.size() < 6) {
+      lines.push_back(line);
+    } else if (std::find(dropped_lines.begin(), dropped_lines.end(), line) ==
+               dropped_lines.end()) {
+      dropped_lines.push_back(line);
+    }
+  }
+  std::string out;
+  for (const std::string& line : lines) out += (out.empty() ? "" : "; ") + line;
+  if (!dropped_lines.empty()) out += "; ... (" + std::to_string(dropped_lines.size()) + " more)";
+  return out;
+}
+
+void scene_warning(const std::string& file, const std::string& message) {
+  std::cerr << "mobirt: warning: " << (file.empty() ? "" : file + ": ") << message << '\n';
+}
+
+glm::vec3 geometric_normal(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c) {
+  const glm::vec3 n = glm::cross(b - a, c - a);
+  const float len = glm::length(n);
+  if (!(len > 0.0f) || !std::isfinite(len)) return glm::vec3(0.0f, 0.0f, 1.0f);
+  return n / len;
+}
+
+void validate_scene(Scene& scene) {
+  TriangleMesh& mesh = scene.mesh;
+  const size_t tris = mesh.triangle_count();
+  if (mesh.positions.size() != 3 * tris || mesh.normals.size() != 3 * tris ||
+      (!mesh.texcoords.empty() && mesh.texcoords.size() != 3 * tris)) {
+    throw Error(ErrorKind::Internal,
+                scene.source + ": inconsistent mesh arrays (" + std::to_string(tris) +
+                    " triangles, " + std::to_string(mesh.positions.size()) + " positions, " +
+                    std::to_string(mesh.normals.size()) + " normals, " +
+                    std::to_string(mesh.texcoords.size()) + " texture coordinates)");
+  }
+  if (tris == 0) {
+    throw input_error(scene.source,
+                      "no triangles: the file has no triangle mesh in its scene (points and "
+                      "lines are not rendered)");
+  }
+  if (scene.materials.empty()) {
+    Material fallback;
+    fallback.name = "default";
+    scene.materials.push_back(fallback);
+  }
+  for (size_t t = 0; t < tris; ++t) {
+    if (mesh.material_ids[t] >= scene.materials.size()) {
+      throw Error(ErrorKind::Internal, scene.source + ": triangle " + std::to_string(t) +
+                                           " has material " +
+                                           std::to_string(mesh.material_ids[t]) + " of " +
+                                           std::to_string(scene.materials.size()));
+    }
+  }
+  for (const Material& m : scene.materials) {
+    if (m.texture >= static_cast<int>(scene.textures.size())) {
+      throw Error(ErrorKind::Internal,
+                  scene.source + ": material '" + m.name + "' has an out-of-range texture");
+    }
+  }
+
+  size_t degenerate = 0;
+  for (size_t t = 0; t < tris; ++t) {
+    for (size_t k = 0; k < 3; ++k) {
+      const size_t i = 3 * t + k;
+      if (!finite3(mesh.positions[i])) {
+        throw input_error(scene.source, "triangle " + std::to_string(t) + ": vertex " +
+                                            std::to_string(k) +
+                                            " has a non-finite position (NaN or infinity)");
+      }
+    }
+    const glm::vec3& a = mesh.positions[3 * t];
+    const glm::vec3& b = mesh.positions[3 * t + 1];
+    const glm::vec3& c = mesh.positions[3 * t + 2];
+    const glm::vec3 cross = glm::cross(b - a, c - a);
+    const bool has_area = glm::dot(cross, cross) > 0.0f;
+    if (!has_area) ++degenerate;
+    for (size_t k = 0; k < 3; ++k) {
+      const size_t i = 3 * t + k;
+      glm::vec3& n = mesh.normals[i];
+      if (!finite3(n)) {
+        throw input_error(scene.source, "triangle " + std::to_string(t) + ": vertex " +
+                                            std::to_string(k) +
+                                            " has a non-finite normal (NaN or infinity)");
+      }
+      const float len = glm::length(n);
+      if (!(len > 0.0f) || !std::isfinite(len)) {
+        n = geometric_normal(a, b, c);
+      } else if (std::abs(len - 1.0f) > 1e-5f) {
+        n /= len;
+      }
+      if (!mesh.texcoords.empty()) {
+        const glm::vec2& uv = mesh.texcoords[i];
+        if (!std::isfinite(uv.x) || !std::isfinite(uv.y)) {
+          throw input_error(scene.source,
+                            "triangle " + std::to_string(t) + ": vertex " + std::to_string(k) +
+                                " has non-finite texture coordinates (NaN or infinity)");
+        }
+      }
+    }
+  }
+  scene.degenerate_triangles = degenerate;
+}
+
+}  // namespace mobirt

@@ -1,0 +1,690 @@
+// kd-tree build, flattening and CPU traversal on generated scenes: every traversal variant
+// (full stack, kd-restart, short stacks) must agree with brute force, for every build option.
+#include <gtest/gtest.h>
+
+#include <glm/glm.hpp>
+
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "accel/kdtree.h"
+#include "test_support.h"
+#include "core/error.h"
+#include "layout.h"
+
+namespace mobirt {
+namespace {
+
+using test::random_direction;
+
+using Positions = std::vector<glm::vec3>;
+
+// ---- Scenes ------------------------------------------------------------------------------------
+
+void add_triangle(Positions& p, glm::vec3 a, glm::vec3 b, glm::vec3 c) {
+  p.push_back(a);
+  p.push_back(b);
+  p.push_back(c);
+}
+
+void add_quad(Positions& p, glm::vec3 a, glm::vec3 b, glm::vec3 c, glm::vec3 d) {
+  add_triangle(p, a, b, c);
+  add_triangle(p, a, c, d);
+}
+
+void add_box(Positions& p, glm::vec3 lo, glm::vec3 hi) {
+  const glm::vec3 v[8] = {{lo.x, lo.y, lo.z}, {hi.x, lo.y, lo.z}, {hi.x, hi.y, lo.z},
+                          {lo.x, hi.y, lo.z}, {lo.x, lo.y, hi.z}, {hi.x, lo.y, hi.z},
+                          {hi.x, hi.y, hi.z}, {lo.x, hi.y, hi.z}};
+  add_quad(p, v[0], v[1], v[2], v[3]);
+  add_quad(p, v[4], v[5], v[6], v[7]);
+  add_quad(p, v[0], v[1], v[5], v[4]);
+  add_quad(p, v[3], v[2], v[6], v[7]);
+  add_quad(p, v[0], v[3], v[7], v[4]);
+  add_quad(p, v[1], v[2], v[6], v[5]);
+}
+
+Positions random_soup(int n, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  Positions p;
+  for (int i = 0; i < n; ++i) {
+    const glm::vec3 c(u(rng) * 10.0f, u(rng) * 10.0f, u(rng) * 10.0f);
+    const float size = 0.1f + 1.5f * u(rng) * u(rng);
+    for (int k = 0; k < 3; ++k) {
+      p.push_back(c + size * glm::vec3(u(rng) - 0.5f, u(rng) - 0.5f, u(rng) - 0.5f));
+    }
+  }
+  return p;
+}
+
+// A floor of unit quads at integer coordinates with axis-aligned boxes on it (integer corners):
+// split planes land exactly on the geometry, and axis-aligned rays run along faces.
+Positions grid_with_boxes() {
+  Positions p;
+  for (int x = 0; x < 16; ++x) {
+    for (int z = 0; z < 16; ++z) {
+      const float fx = float(x), fz = float(z);
+      add_quad(p, {fx, 0, fz}, {fx + 1, 0, fz}, {fx + 1, 0, fz + 1}, {fx, 0, fz + 1});
+    }
+  }
+  for (int i = 0; i < 12; ++i) {
+    const float x = float((i * 5) % 14), z = float((i * 7) % 13);
+    add_box(p, {x, 0, z}, {x + 1 + float(i % 3), 1 + float(i % 4), z + 1 + float(i % 2)});
+  }
+  add_box(p, {4, 2, 4}, {8, 3, 8});  // floating box
+  return p;
+}
+
+Positions long_thin(unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  Positions p;
+  for (int i = 0; i < 600; ++i) {
+    const int axis = i % 3;
+    glm::vec3 a(u(rng) * 10.0f, u(rng) * 10.0f, u(rng) * 10.0f);
+    glm::vec3 b = a;
+    a[axis] = 0.0f;
+    b[axis] = 10.0f;
+    const glm::vec3 c = a + 0.02f * glm::vec3(u(rng), u(rng), u(rng));
+    add_triangle(p, a, b, c);
+  }
+  return p;
+}
+
+// Everything in the plane z = 1 (the scene box is flat).
+Positions planar(unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  Positions p;
+  for (int i = 0; i < 800; ++i) {
+    const glm::vec3 c(u(rng) * 10.0f, u(rng) * 10.0f, 1.0f);
+    add_triangle(p, c, c + glm::vec3(u(rng), u(rng) * 0.5f, 0.0f),
+                 c + glm::vec3(-0.5f * u(rng), u(rng), 0.0f));
+  }
+  return p;
+}
+
+// Many coincident triangles (the same triangle 200 times, a quad 50 times), overlapping coplanar
+// ones and some degenerate (zero-area) ones.
+Positions duplicates(unsigned seed) {
+  Positions p;
+  for (int i = 0; i < 200; ++i) add_triangle(p, {0, 0, 0}, {2, 0, 0}, {0, 2, 1});
+  for (int i = 0; i < 50; ++i) add_quad(p, {-1, -1, 3}, {3, -1, 3}, {3, 3, 3}, {-1, 3, 3});
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  for (int i = 0; i < 100; ++i) {
+    const glm::vec3 c(u(rng) * 3.0f, u(rng) * 3.0f, 2.0f);
+    add_triangle(p, c, c + glm::vec3(1, 0, 0), c + glm::vec3(0, 1, 0));
+  }
+  for (int i = 0; i < 20; ++i) {
+    const glm::vec3 c(u(rng) * 3.0f, u(rng) * 3.0f, u(rng) * 3.0f);
+    add_triangle(p, c, c, c + glm::vec3(1, 1, 1));           // a segment
+    add_triangle(p, c, c + glm::vec3(1, 0, 0), c + glm::vec3(2, 0, 0));  // collinear
+  }
+  return p;
+}
+
+Positions one_triangle() { return {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}; }
+
+struct NamedScene {
+  std::string name;
+  Positions positions;
+};
+
+std::vector<NamedScene> all_scenes() {
+  return {{"soup", random_soup(2000, 1)},   {"grid_boxes", grid_with_boxes()},
+          {"long_thin", long_thin(2)},      {"planar", planar(3)},
+          {"duplicates", duplicates(4)},    {"one_triangle", one_triangle()},
+          {"empty", {}}};
+}
+
+// ---- Rays --------------------------------------------------------------------------------------
+
+// Split planes of the tree, to start rays on them.
+struct Plane {
+  int axis;
+  float s;
+};
+std::vector<Plane> split_planes(const FlatKdTree& tree) {
+  std::vector<Plane> planes;
+  for (const glm::vec4& n : tree.nodes) {
+    if (n.z != float(MOBIRT_NODE_LEAF)) planes.push_back({int(n.z), n.x});
+  }
+  return planes;
+}
+
+// A mix: random rays from around and inside the scene, rays aimed at triangles, axis-aligned
+// rays (also from integer coordinates), rays starting on split planes, rays lying in split
+// planes, directions with zero (and negative-zero) components, finite [tmin, tmax] intervals.
+std::vector<Ray> make_rays(const FlatKdTree& tree, const Positions& positions, int count,
+                           unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  Aabb box = tree.bounds;
+  if (box.empty()) box = Aabb{glm::vec3(-1.0f), glm::vec3(1.0f)};
+  const glm::vec3 lo = box.lo - 0.1f * (box.extent() + glm::vec3(1.0f));
+  const glm::vec3 hi = box.hi + 0.1f * (box.extent() + glm::vec3(1.0f));
+  const float radius = glm::length(box.extent()) + 1.0f;
+  const auto inside = [&] { return lo + (hi - lo) * glm::vec3(u(rng), u(rng), u(rng)); };
+  const auto target = [&]() -> glm::vec3 {
+    if (!positions.empty() && u(rng) < 0.7f) {
+      const size_t tri = size_t(u(rng) * float(positions.size() / 3)) % (positions.size() / 3);
+      float a = u(rng), b = u(rng);
+      if (a + b > 1.0f) {
+        a = 1.0f - a;
+        b = 1.0f - b;
+      }
+      const glm::vec3* v = &positions[3 * tri];
+      return v[0] + a * (v[1] - v[0]) + b * (v[2] - v[0]);
+    }
+    return inside();
+  };
+  const std::vector<Plane> planes = split_planes(tree);
+  std::vector<Ray> rays;
+  rays.reserve(size_t(count));
+  for (int i = 0; i < count; ++i) {
+    Ray ray;
+    const int kind = i % 10;
+    if (kind <= 2) {  // from outside, aimed at the scene
+      ray.origin = box.center() + radius * random_direction(rng);
+      ray.direction = glm::normalize(target() - ray.origin);
+    } else if (kind == 3) {  // from inside, any direction
+      ray.origin = inside();
+      ray.direction = random_direction(rng);
+    } else if (kind == 4) {  // axis-aligned, origin on integers half of the time
+      ray.origin = inside();
+      if (i % 20 == 4) ray.origin = glm::floor(ray.origin);
+      ray.direction = glm::vec3(0.0f);
+      ray.direction[int(u(rng) * 3.0f) % 3] = u(rng) < 0.5f ? 1.0f : -1.0f;
+    } else if (kind == 5) {  // zero components (one or two), signed zeros
+      ray.origin = inside();
+      ray.direction = glm::normalize(target() - ray.origin);
+      const int a = int(u(rng) * 3.0f) % 3;
+      ray.direction[a] = u(rng) < 0.5f ? 0.0f : -0.0f;
+      if (u(rng) < 0.3f) ray.direction[(a + 1) % 3] = -0.0f;
+      if (glm::length(ray.direction) == 0.0f) ray.direction[(a + 2) % 3] = 1.0f;
+    } else if (kind == 6 && !planes.empty()) {  // starting on a split plane
+      const Plane pl = planes[size_t(u(rng) * float(planes.size())) % planes.size()];
+      ray.origin = target();
+      ray.origin[pl.axis] = pl.s;
+      ray.direction = random_direction(rng);
+    } else if (kind == 7 && !planes.empty()) {  // lying in a split plane
+      const Plane pl = planes[size_t(u(rng) * float(planes.size())) % planes.size()];
+      ray.origin = inside();
+      ray.origin[pl.axis] = pl.s;
+      ray.direction = random_direction(rng);
+      ray.direction[pl.axis] = u(rng) < 0.5f ? 0.0f : -0.0f;
+      if (u(rng) < 0.3f) {  // and axis-aligned
+        ray.direction = glm::vec3(0.0f);
+        ray.direction[(pl.axis + 1) % 3] = u(rng) < 0.5f ? 1.0f : -1.0f;
+      }
+    } else if (kind == 8) {  // a finite interval, possibly starting inside the scene
+      ray.origin = box.center() + radius * random_direction(rng);
+      ray.direction = target() - ray.origin;  // not normalised: t in [0, 1] reaches the target
+      ray.tmin = 0.5f * u(rng);
+      ray.tmax = ray.tmin + 1.5f * u(rng);
+    } else {  // from a triangle's surface outwards (secondary rays)
+      ray.origin = target();
+      ray.direction = random_direction(rng);
+      ray.tmin = 1e-4f;
+    }
+    rays.push_back(ray);
+  }
+  return rays;
+}
+
+// ---- Comparison --------------------------------------------------------------------------------
+
+bool same_hit(const Hit& a, const Hit& b) {
+  if (a.prim == b.prim) return !a.valid() || a.t == b.t;
+  if (!a.valid() || !b.valid()) return false;
+  return std::abs(a.t - b.t) <= 1e-4f * std::max(1.0f, std::abs(a.t));  // a near-tie
+}
+
+std::string describe(const Ray& r) {
+  std::ostringstream s;
+  s.precision(9);
+  s << "o=(" << r.origin.x << "," << r.origin.y << "," << r.origin.z << ") d=(" << r.direction.x
+    << "," << r.direction.y << "," << r.direction.z << ") t=[" << r.tmin << "," << r.tmax << "]";
+  return s.str();
+}
+
+constexpr int kStackDepths[] = {-1, 0, 1, 2, 4, 8};
+
+// Traversal with every stack depth against brute force; occlusion on segments.
+// Returns the number of disagreements (and reports the first few).
+int check_rays(const FlatKdTree& tree, const std::vector<Ray>& rays, const std::string& what) {
+  int failures = 0;
+  for (const Ray& ray : rays) {
+    const Hit expected = brute_force(tree, ray);
+    for (int depth : kStackDepths) {
+      TraversalStats stats;
+      const Hit got = traverse(tree, ray, depth, stats);
+      EXPECT_EQ(stats.capped, 0u);
+      if (!same_hit(got, expected)) {
+        if (++failures <= 5) {
+          ADD_FAILURE() << what << " stack " << depth << ": " << describe(ray) << " kd prim "
+                        << got.prim << " t " << got.t << ", brute force prim " << expected.prim
+                        << " t " << expected.t;
+        }
+      }
+    }
+    // Shadow segments: the same ray, cut short before, across or after the closest hit.
+    Ray segment = ray;
+    if (expected.valid()) {
+      const float span = expected.t - ray.tmin;
+      static const float kFractions[] = {0.5f, 0.999f, 1.001f, 2.0f};
+      segment.tmax = ray.tmin + span * kFractions[size_t(std::abs(expected.prim)) % 4];
+    }
+    const bool blocked = brute_force(tree, segment).valid();
+    for (int depth : {-1, 0, 2}) {
+      if (occluded(tree, segment, depth) != blocked) {
+        if (++failures <= 5) {
+          ADD_FAILURE() << what << " occluded, stack " << depth << ": " << describe(segment)
+                        << " expected " << blocked;
+        }
+      }
+    }
+  }
+  return failures;
+}
+
+// ---- Layout checks -----------------------------------------------------------------------------
+
+bool boxes_touch(const Aabb& a, const Aabb& b) {
+  return a.lo.x <= b.hi.x && b.lo.x <= a.hi.x && a.lo.y <= b.hi.y && b.lo.y <= a.hi.y &&
+         a.lo.z <= b.hi.z && b.lo.z <= a.hi.z;
+}
+
+// Walks the flattened tree from the root box and checks every texel.
+void check_layout(const FlatKdTree& tree, const Positions& positions,
+                  const KdBuildOptions& options = {}) {
+  const size_t prims = positions.size() / 3;
+  ASSERT_EQ(tree.triangles.size(), prims * MOBIRT_TEXELS_PER_TRIANGLE);
+  for (size_t i = 0; i < positions.size(); ++i) {
+    ASSERT_EQ(glm::vec3(tree.triangles[i]), positions[i]);
+    ASSERT_EQ(tree.triangles[i].w, 0.0f);
+  }
+  ASSERT_FALSE(tree.nodes.empty());
+  ASSERT_LE(tree.nodes.size(), kKdIndexLimit);
+  ASSERT_LE(tree.prim_list.size(), kKdIndexLimit);
+  std::vector<int> visits(tree.nodes.size(), 0);
+  std::vector<int> referenced(prims, 0);
+  size_t leaves = 0, empty_leaves = 0, references = 0, max_leaf = 0, list_entries = 0;
+  int max_depth = 0;
+  double cost = 0.0;
+  struct Item {
+    size_t node;
+    Aabb box;
+    int depth;
+  };
+  std::vector<Item> todo = {{0, tree.bounds, 0}};
+  while (!todo.empty()) {
+    const Item item = todo.back();
+    todo.pop_back();
+    ASSERT_LT(item.node, tree.nodes.size());
+    ++visits[item.node];
+    const glm::vec4 n = tree.nodes[item.node];
+    EXPECT_EQ(n.w, 0.0f);
+    max_depth = std::max(max_depth, item.depth);
+    const double area = item.box.surface_area();
+    if (n.z == float(MOBIRT_NODE_LEAF)) {
+      ++leaves;
+      const size_t count = size_t(n.y);
+      ASSERT_EQ(float(count), n.y);
+      references += count;
+      max_leaf = std::max(max_leaf, count);
+      cost += options.intersection_cost * double(count) * area;
+      if (count == 0) {
+        ++empty_leaves;
+        EXPECT_EQ(n.x, 0.0f);
+      }
+      std::vector<size_t> leaf;
+      if (count == 1) {
+        leaf.push_back(size_t(n.x));
+      } else if (count > 1) {
+        ASSERT_EQ(float(size_t(n.x)), n.x);
+        ASSERT_LE(size_t(n.x) + count, tree.prim_list.size());
+        list_entries += count;
+        for (size_t i = 0; i < count; ++i) leaf.push_back(size_t(tree.prim_list[size_t(n.x) + i]));
+      }
+      for (size_t i = 0; i < leaf.size(); ++i) {
+        ASSERT_LT(leaf[i], prims);
+        if (i > 0) {
+          EXPECT_LT(leaf[i - 1], leaf[i]) << "leaf lists are sorted and unique";
+        }
+        ++referenced[leaf[i]];
+        Aabb tri;
+        for (int k = 0; k < 3; ++k) tri.extend(positions[3 * leaf[i] + k]);
+        EXPECT_TRUE(boxes_touch(tri, item.box)) << "prim " << leaf[i] << " in a leaf it misses";
+      }
+      continue;
+    }
+    cost += options.traversal_cost * area;
+    const int axis = int(n.z);
+    ASSERT_TRUE(axis >= 0 && axis <= 2);
+    const size_t above = size_t(n.y);
+    ASSERT_EQ(float(above), n.y);
+    ASSERT_GT(above, item.node + 1);
+    ASSERT_LT(above, tree.nodes.size());
+    EXPECT_GT(n.x, item.box.lo[axis]);
+    EXPECT_LT(n.x, item.box.hi[axis]);
+    Aabb below_box = item.box, above_box = item.box;
+    below_box.hi[axis] = n.x;
+    above_box.lo[axis] = n.x;
+    todo.push_back({above, above_box, item.depth + 1});
+    todo.push_back({item.node + 1, below_box, item.depth + 1});
+  }
+  for (size_t i = 0; i < visits.size(); ++i) ASSERT_EQ(visits[i], 1) << "node " << i;
+  const KdBuildStats& s = tree.stats;
+  EXPECT_EQ(s.nodes, tree.nodes.size());
+  EXPECT_EQ(s.leaves, leaves);
+  EXPECT_EQ(s.empty_leaves, empty_leaves);
+  EXPECT_EQ(s.prim_references, references);
+  EXPECT_EQ(s.max_leaf_size, max_leaf);
+  EXPECT_EQ(s.max_depth_reached, max_depth);
+  EXPECT_LE(max_depth, tree.max_depth);
+  EXPECT_EQ(tree.prim_list.size(), list_entries);
+  const double root_area = tree.bounds.surface_area();
+  if (root_area > 0.0) {
+    EXPECT_NEAR(s.sah_cost, cost / root_area, 1e-3 * (1.0 + s.sah_cost));
+  }
+  // Every triangle with an area is referenced somewhere.
+  for (size_t i = 0; i < prims; ++i) {
+    const glm::vec3* v = &positions[3 * i];
+    if (glm::length(glm::cross(v[1] - v[0], v[2] - v[0])) > 0.0f) {
+      EXPECT_GT(referenced[i], 0) << "prim " << i << " is in no leaf";
+    }
+  }
+}
+
+// ---- Tests -------------------------------------------------------------------------------------
+
+TEST(KdTree, TraversalMatchesBruteForceOnGeneratedScenes) {
+  unsigned seed = 100;
+  for (const NamedScene& scene : all_scenes()) {
+    SCOPED_TRACE(scene.name);
+    const FlatKdTree tree = build_kdtree(scene.positions);
+    check_layout(tree, scene.positions);
+    const std::vector<Ray> rays = make_rays(tree, scene.positions, 10000, seed++);
+    EXPECT_EQ(check_rays(tree, rays, scene.name), 0);
+  }
+}
+
+TEST(KdTree, EveryBuildOptionTraversesCorrectly) {
+  const std::vector<NamedScene> scenes = {{"soup", random_soup(600, 7)},
+                                          {"grid_boxes", grid_with_boxes()},
+                                          {"planar", planar(8)},
+                                          {"duplicates", duplicates(9)}};
+  unsigned seed = 200;
+  for (const NamedScene& scene : scenes) {
+    const FlatKdTree reference = build_kdtree(scene.positions);
+    const std::vector<Ray> rays = make_rays(reference, scene.positions, 600, seed++);
+    for (int bins : {4, 8, 32, 128}) {
+      for (int leaf : {1, 4, 16}) {
+        for (int depth : {0, 3, -1}) {
+          for (bool clip : {false, true}) {
+            KdBuildOptions o;
+            o.bins = bins;
+            o.max_leaf_prims = leaf;
+            o.max_depth = depth;
+            o.split_clipping = clip;
+            const std::string what = scene.name + " bins " + std::to_string(bins) + " leaf " +
+                                     std::to_string(leaf) + " depth " + std::to_string(depth) +
+                                     (clip ? " clip" : " noclip");
+            SCOPED_TRACE(what);
+            const FlatKdTree tree = build_kdtree(scene.positions, o);
+            check_layout(tree, scene.positions, o);
+            if (depth == 0) {
+              EXPECT_EQ(tree.nodes.size(), 1u);
+            }
+            if (depth >= 0) {
+              EXPECT_LE(tree.stats.max_depth_reached, depth);
+            }
+            ASSERT_EQ(check_rays(tree, rays, what), 0);
+          }
+        }
+      }
+    }
+  }
+}
+
+TEST(KdTree, CostOptionsStillTraverseCorrectly) {
+  const Positions soup = random_soup(800, 11);
+  const FlatKdTree reference = build_kdtree(soup);
+  const std::vector<Ray> rays = make_rays(reference, soup, 1000, 12);
+  for (float isect : {1.0f, 5.0f, 80.0f, 1000.0f}) {
+    for (float bonus : {0.0f, 0.5f, 0.9f}) {
+      KdBuildOptions o;
+      o.intersection_cost = isect;
+      o.empty_bonus = bonus;
+      o.empty_bonus_min_width = bonus > 0.6f ? 0.1f : 0.0f;
+      const FlatKdTree tree = build_kdtree(soup, o);
+      check_layout(tree, soup, o);
+      EXPECT_EQ(check_rays(tree, rays, "isect " + std::to_string(isect)), 0);
+    }
+  }
+}
+
+TEST(KdTree, EmptySceneIsOneEmptyLeaf) {
+  const FlatKdTree tree = build_kdtree({});
+  EXPECT_TRUE(tree.bounds.empty());
+  ASSERT_EQ(tree.nodes.size(), 1u);
+  EXPECT_EQ(tree.nodes[0], glm::vec4(0.0f, 0.0f, float(MOBIRT_NODE_LEAF), 0.0f));
+  EXPECT_TRUE(tree.prim_list.empty());
+  EXPECT_TRUE(tree.triangles.empty());
+  EXPECT_EQ(tree.stats.leaves, 1u);
+  EXPECT_EQ(tree.stats.empty_leaves, 1u);
+  Ray ray;
+  ray.origin = glm::vec3(0.0f, 0.0f, 5.0f);
+  for (int depth : kStackDepths) {
+    EXPECT_FALSE(traverse(tree, ray, depth).valid());
+    EXPECT_FALSE(occluded(tree, ray, depth));
+  }
+  EXPECT_FALSE(brute_force(tree, ray).valid());
+}
+
+TEST(KdTree, OneTriangleIsASingleLeafWithThePrimIndex) {
+  const FlatKdTree tree = build_kdtree(one_triangle());
+  ASSERT_EQ(tree.nodes.size(), 1u);
+  EXPECT_EQ(tree.nodes[0], glm::vec4(0.0f, 1.0f, float(MOBIRT_NODE_LEAF), 0.0f));
+  EXPECT_TRUE(tree.prim_list.empty());
+  Ray ray;
+  ray.origin = glm::vec3(0.25f, 0.25f, 1.0f);
+  const Hit hit = traverse(tree, ray);
+  ASSERT_TRUE(hit.valid());
+  EXPECT_EQ(hit.prim, 0);
+  EXPECT_FLOAT_EQ(hit.t, 1.0f);
+  EXPECT_FLOAT_EQ(hit.u, 0.25f);
+  EXPECT_FLOAT_EQ(hit.v, 0.25f);
+}
+
+TEST(KdTree, FlattenIsDepthFirstWithBelowChildNext) {
+  // Two clusters far apart on x: the root splits on x.
+  Positions p;
+  for (int i = 0; i < 8; ++i) {
+    const float y = float(i);
+    add_triangle(p, {0, y, 0}, {1, y, 0}, {0, y + 0.5f, 1});
+    add_triangle(p, {100, y, 0}, {101, y, 0}, {100, y + 0.5f, 1});
+  }
+  const FlatKdTree tree = build_kdtree(p);
+  check_layout(tree, p);
+  const glm::vec4 root = tree.nodes[0];
+  ASSERT_NE(root.z, float(MOBIRT_NODE_LEAF));
+  EXPECT_EQ(root.z, 0.0f);
+  EXPECT_GT(root.x, 1.0f);
+  EXPECT_LT(root.x, 100.0f);
+  // Rays down each cluster hit its own triangles.
+  for (float x : {0.2f, 100.2f}) {
+    Ray ray;
+    ray.origin = glm::vec3(x, 3.2f, -1.0f);
+    ray.direction = glm::vec3(0, 0, 1);
+    const Hit hit = traverse(tree, ray);
+    ASSERT_TRUE(hit.valid());
+    EXPECT_EQ(hit.prim % 2, x < 50.0f ? 0 : 1);
+  }
+}
+
+TEST(KdTree, NonFiniteAndMalformedInputIsBadInput) {
+  Positions p = random_soup(10, 3);
+  p[7].y = std::numeric_limits<float>::quiet_NaN();
+  try {
+    build_kdtree(p);
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::BadInput);
+    EXPECT_NE(std::string(e.what()).find("triangle 2"), std::string::npos) << e.what();
+  }
+  p[7].y = kInfinity;
+  EXPECT_THROW(build_kdtree(p), Error);
+  p[7].y = 0.0f;
+  p.pop_back();
+  EXPECT_THROW(build_kdtree(p), Error);  // not whole triangles
+  KdBuildOptions o;
+  o.bins = 1;
+  EXPECT_THROW(build_kdtree(random_soup(10, 3), o), Error);
+}
+
+TEST(KdTree, TooManyTrianglesForExactFloatIndicesIsBadInput) {
+  const Positions p((kKdMaxTriangles + 1) * 3, glm::vec3(0.0f));
+  try {
+    build_kdtree(p);
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::BadInput);
+    EXPECT_NE(std::string(e.what()).find("5,592,406 triangles"), std::string::npos) << e.what();
+  }
+}
+
+TEST(KdTree, DepthLimitFollowsPbrt) {
+  EXPECT_EQ(kdtree_depth_limit(0, -1), 8);
+  EXPECT_EQ(kdtree_depth_limit(1, -1), 8);
+  EXPECT_EQ(kdtree_depth_limit(1024, -1), 21);       // 8 + 1.3 * 10
+  EXPECT_EQ(kdtree_depth_limit(11141, -1), 25);      // 8 + 1.3 * 13 = 24.9
+  EXPECT_EQ(kdtree_depth_limit(1000000, -1), 33);    // 8 + 1.3 * 19 = 32.7
+  EXPECT_EQ(kdtree_depth_limit(1000, 5), 5);
+  const FlatKdTree tree = build_kdtree(random_soup(1024, 5));
+  EXPECT_EQ(tree.max_depth, 21);
+  EXPECT_LE(tree.stats.max_depth_reached, 21);
+}
+
+TEST(KdTree, StepCapStopsAndReportsCapped) {
+  const Positions soup = random_soup(1500, 21);
+  const FlatKdTree tree = build_kdtree(soup);
+  const std::vector<Ray> rays = make_rays(tree, soup, 300, 22);
+  int checked = 0;
+  for (const Ray& ray : rays) {
+    for (int depth : {-1, 0, 2}) {
+      TraversalStats full;
+      const Hit expected = traverse(tree, ray, depth, full);
+      ASSERT_EQ(full.capped, 0u);
+      // One step per interior node and per triangle test, one per empty leaf.
+      EXPECT_GE(full.steps, full.nodes_visited - full.leaves_visited + full.triangles_tested);
+      EXPECT_LE(full.steps, full.nodes_visited + full.triangles_tested);
+      if (full.steps == 0) continue;
+      TraversalStats exact;
+      const Hit same = traverse(tree, ray, depth, exact, int64_t(full.steps));
+      EXPECT_EQ(exact.capped, 0u);
+      EXPECT_EQ(same.prim, expected.prim);
+      EXPECT_EQ(exact.steps, full.steps);
+      TraversalStats cut;
+      const Hit none = traverse(tree, ray, depth, cut, int64_t(full.steps) - 1);
+      EXPECT_EQ(cut.capped, 1u);
+      EXPECT_FALSE(none.valid());
+      EXPECT_EQ(cut.steps, full.steps - 1);
+      TraversalStats shadow;
+      occluded(tree, ray, depth, shadow, 0);
+      EXPECT_EQ(shadow.capped, 1u);
+      ++checked;
+    }
+  }
+  EXPECT_GT(checked, 100);
+}
+
+TEST(KdTree, ShortStacksDropAndRestartButStayExact) {
+  const Positions soup = random_soup(3000, 31);
+  const FlatKdTree tree = build_kdtree(soup);
+  ASSERT_GT(tree.stats.max_depth_reached, 10);
+  const std::vector<Ray> rays = make_rays(tree, soup, 2000, 32);
+  TraversalStats full, restart, short1;
+  for (const Ray& ray : rays) {
+    TraversalStats s;
+    const Hit a = traverse(tree, ray, -1, s);
+    full += s;
+    const Hit b = traverse(tree, ray, 0, s);
+    restart += s;
+    const Hit c = traverse(tree, ray, 1, s);
+    short1 += s;
+    EXPECT_TRUE(same_hit(a, b));
+    EXPECT_TRUE(same_hit(a, c));
+  }
+  EXPECT_EQ(full.restarts, 0u);
+  EXPECT_EQ(full.dropped, 0u);
+  EXPECT_GT(restart.restarts, 0u);
+  EXPECT_EQ(restart.pops, 0u);
+  EXPECT_GT(short1.dropped, 0u);
+  EXPECT_GT(short1.pops, 0u);
+  // kd-restart pays for the missing stack with node visits.
+  EXPECT_GT(restart.nodes_visited, full.nodes_visited);
+}
+
+TEST(KdTree, TiesGoToTheLowerPrimitiveIndex) {
+  // The same triangle three times and a coplanar overlapping one: every path picks prim 0... and
+  // the lowest index among the coincident ones wherever the ray hits.
+  Positions p;
+  for (int i = 0; i < 3; ++i) add_triangle(p, {0, 0, 0}, {4, 0, 0}, {0, 4, 0});
+  add_triangle(p, {-1, -1, 0}, {5, -1, 0}, {-1, 5, 0});
+  for (int i = 0; i < 40; ++i) add_triangle(p, {10.0f + float(i), 0, 0}, {11.0f + float(i), 0, 0}, {10.0f + float(i), 1, 0});
+  const FlatKdTree tree = build_kdtree(p);
+  Ray ray;
+  ray.origin = glm::vec3(1.0f, 1.0f, 2.0f);
+  ray.direction = glm::vec3(0.0f, 0.0f, -1.0f);
+  EXPECT_EQ(brute_force(tree, ray).prim, 0);
+  for (int depth : kStackDepths) EXPECT_EQ(traverse(tree, ray, depth).prim, 0);
+  ray.origin = glm::vec3(4.5f, -0.5f, 2.0f);  // only the big one
+  for (int depth : kStackDepths) EXPECT_EQ(traverse(tree, ray, depth).prim, 3);
+}
+
+TEST(KdTree, IntersectTriangleRejectsDegenerateAndNaN) {
+  Positions p = {{0, 0, 0}, {1, 1, 1}, {2, 2, 2},   // collinear
+                 {0, 0, 0}, {0, 0, 0}, {0, 0, 0},   // a point
+                 {0, 0, 0}, {1, 0, 0}, {0, 1, 0}};  // fine
+  const FlatKdTree tree = build_kdtree(p);
+  Ray ray;
+  ray.origin = glm::vec3(0.1f, 0.1f, 1.0f);
+  Hit hit;
+  EXPECT_FALSE(intersect_triangle(tree, 0, ray, hit));
+  EXPECT_FALSE(intersect_triangle(tree, 1, ray, hit));
+  EXPECT_TRUE(intersect_triangle(tree, 2, ray, hit));
+  EXPECT_FALSE(std::isnan(hit.t));
+  // A ray in the triangle's plane: det == 0, no hit.
+  Ray grazing;
+  grazing.origin = glm::vec3(-1.0f, 0.1f, 0.0f);
+  grazing.direction = glm::vec3(1.0f, 0.0f, 0.0f);
+  Hit none;
+  EXPECT_FALSE(intersect_triangle(tree, 2, grazing, none));
+  // NaN rays and zero directions never hit and never hang.
+  Ray nan_ray;
+  nan_ray.origin = glm::vec3(std::numeric_limits<float>::quiet_NaN());
+  EXPECT_FALSE(traverse(tree, nan_ray, 0).valid());
+  Ray zero;
+  zero.origin = glm::vec3(0.1f, 0.1f, 0.0f);
+  zero.direction = glm::vec3(0.0f);
+  for (int depth : kStackDepths) EXPECT_FALSE(traverse(tree, zero, depth).valid());
+  // t exactly at tmin and tmax is accepted (closed interval).
+  Ray exact;
+  exact.origin = glm::vec3(0.25f, 0.25f, 1.0f);
+  exact.tmin = 1.0f;
+  exact.tmax = 1.0f;
+  EXPECT_EQ(traverse(tree, exact).prim, 2);
+  EXPECT_TRUE(occluded(tree, exact));
+}
+
+}  // namespace
+}  // namespace mobirt
