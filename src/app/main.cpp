@@ -1,4 +1,5 @@
 // The mobirt command line: render, info.
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -54,7 +55,10 @@ Options:
   --background R,G,B      colour of rays that miss (default 0,0,0)
   --device D              Vulkan device: index or part of its name (default: lavapipe)
   --validation            enable the Khronos validation layer; any message is an error
-  --timings               print the time of each stage of the frame
+  --timings               print the time of each stage of the frame: one warm-up frame (the
+                          driver compiles shaders at first use), then the median of --repeat
+                          frames
+  --repeat N              frames to time with --timings (default 5)
 )";
 
 constexpr const char* kInfoUsage = R"(Usage: mobirt info [--device D] [--validation]
@@ -140,13 +144,32 @@ int cmd_info(Args args) {
   return 0;
 }
 
+// Stage by stage median over frames (each stage's own median).
+FrameTimings median_timings(std::vector<FrameTimings> frames) {
+  auto median = [&](double FrameTimings::*field) {
+    std::vector<double> v;
+    for (const FrameTimings& f : frames) v.push_back(f.*field);
+    std::nth_element(v.begin(), v.begin() + long(v.size() / 2), v.end());
+    return v[v.size() / 2];
+  };
+  FrameTimings m = frames.back();
+  for (double FrameTimings::*field :
+       {&FrameTimings::build_ms, &FrameTimings::rays_ms, &FrameTimings::upload_ms, &FrameTimings::trace_ms,
+        &FrameTimings::trace_readback_ms, &FrameTimings::decode_ms, &FrameTimings::shade_ms,
+        &FrameTimings::shade_readback_ms, &FrameTimings::accumulate_ms, &FrameTimings::total_ms}) {
+    m.*field = median(field);
+  }
+  return m;
+}
+
 void print_timings(const FrameTimings& t) {
   std::printf("stage                ms\n");
   std::printf("kd-tree build   %9.2f\n", t.build_ms);
   std::printf("primary rays    %9.2f\n", t.rays_ms);
   std::printf("upload          %9.2f\n", t.upload_ms);
-  std::printf("traversal pass  %9.2f   %.2f Mrays/s (%u rays, shadow rays included)\n", t.trace_ms,
-              t.trace_mrays_per_s(), t.rays);
+  std::printf("traversal pass  %9.2f   %.2f Mrays/s primary (%u rays); %.2f Mrays/s with the %llu shadow rays\n",
+              t.trace_ms, t.trace_mrays_per_s(), t.rays, t.trace_all_mrays_per_s(),
+              static_cast<unsigned long long>(t.shadow_rays));
   std::printf("read-back       %9.2f\n", t.trace_readback_ms);
   std::printf("hit decoding    %9.2f   (%u hits, %u capped rays traced on the CPU)\n", t.decode_ms,
               t.hits, t.capped);
@@ -164,6 +187,7 @@ int cmd_render(Args args) {
   std::optional<Camera> camera;
   std::optional<glm::vec3> background;
   bool timings = false;
+  int repeat = 5;
   while (!args.empty()) {
     const std::string a = args.take();
     if (is_help(a)) {
@@ -205,6 +229,8 @@ int cmd_render(Args args) {
       backend_options.validation = true;
     } else if (a == "--timings") {
       timings = true;
+    } else if (a == "--repeat") {
+      repeat = parse_int(a, args.value(a), 1, 1000);
     } else if (!a.empty() && a[0] == '-') {
       usage_error("render: unknown option " + a);
     } else if (scene_path.empty()) {
@@ -227,7 +253,15 @@ int cmd_render(Args args) {
   auto backend = create_vulkan_backend(backend_options);
   Renderer renderer(*backend, settings);
   FrameTimings t;
-  const Image image = renderer.render(scene, view, &t);
+  Image image = renderer.render(scene, view, &t);
+  if (timings) {
+    std::vector<FrameTimings> frames;
+    for (int i = 0; i < repeat; ++i) {
+      image = renderer.render(scene, view, &t);
+      frames.push_back(t);
+    }
+    t = median_timings(frames);
+  }
   for (const std::string& message : backend->take_debug_messages()) {
     throw Error(ErrorKind::Internal, "validation: " + message);
   }
@@ -236,6 +270,7 @@ int cmd_render(Args args) {
     std::printf("%s: %zu triangles, %zu lights, %dx%d on %s\n", scene_path.c_str(),
                 scene.mesh.triangle_count(), scene.lights.size(), settings.width, settings.height,
                 backend->device_info().device.c_str());
+    std::printf("median of %d frames after one warm-up frame\n", repeat);
     print_timings(t);
   }
   return 0;

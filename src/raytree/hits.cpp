@@ -7,9 +7,14 @@
 
 namespace mobirt {
 
-uint32_t shadow_mask(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
-                     const Ray& ray, float t, const ShadowSettings& settings, int stack_depth) {
-  if (lights.empty() || prim < 0) return 0;
+namespace {
+
+// Calls f(light index, shadow ray) for every light that can light the hit, exactly as
+// glsl/traverse.glsl's shadow_mask() casts them: lights behind the surface (as seen from the ray)
+// and points outside a spot's outer cone get no ray.
+template <class F>
+void for_each_shadow_ray(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
+                         const Ray& ray, float t, const ShadowSettings& settings, F&& f) {
   const size_t base = size_t(prim) * MOBIRT_TEXELS_PER_TRIANGLE;
   const glm::vec3 v0(tree.triangles[base]);
   const glm::vec3 ng = glm::cross(glm::vec3(tree.triangles[base + 1]) - v0,
@@ -19,7 +24,6 @@ uint32_t shadow_mask(const FlatKdTree& tree, std::span<const Light> lights, int3
   const glm::vec3 ap = glm::abs(p);
   const float offset = settings.epsilon * (1.0f + std::max(ap.x, std::max(ap.y, ap.z)));
   const glm::vec3 origin = p + (view_side * offset / std::max(glm::length(ng), 1e-30f)) * ng;
-  uint32_t mask = 0;
   for (size_t l = 0; l < lights.size(); ++l) {
     const Light& light = lights[l];
     const bool directional = light.type == LightType::Directional;
@@ -28,11 +32,28 @@ uint32_t shadow_mask(const FlatKdTree& tree, std::span<const Light> lights, int3
     if (lit && light.type == LightType::Spot) {
       lit = glm::dot(glm::normalize(-to_light), light.direction) > std::cos(light.outer_cone);
     }
-    if (!lit) continue;
-    Ray shadow{origin, to_light, 0.0f, directional ? 3.0e38f : 1.0f};
-    if (!occluded(tree, shadow, stack_depth)) mask |= 1u << l;
+    if (lit) f(l, Ray{origin, to_light, 0.0f, directional ? 3.0e38f : 1.0f});
   }
+}
+
+}  // namespace
+
+uint32_t shadow_mask(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
+                     const Ray& ray, float t, const ShadowSettings& settings, int stack_depth) {
+  uint32_t mask = 0;
+  if (prim < 0) return mask;
+  for_each_shadow_ray(tree, lights, prim, ray, t, settings, [&](size_t l, const Ray& shadow) {
+    if (!occluded(tree, shadow, stack_depth)) mask |= 1u << l;
+  });
   return mask;
+}
+
+uint32_t shadow_ray_count(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
+                          const Ray& ray, float t, const ShadowSettings& settings) {
+  uint32_t count = 0;
+  if (prim < 0) return count;
+  for_each_shadow_ray(tree, lights, prim, ray, t, settings, [&](size_t, const Ray&) { ++count; });
+  return count;
 }
 
 SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ray, int32_t prim) {
@@ -117,6 +138,9 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
     ++local.hits;
     hits[i] = surface_hit(scene, tree, ray, prim);
     hits[i].mask = mask;
+    if (!texel.capped) {
+      local.shadow_rays += shadow_ray_count(tree, scene.lights, prim, ray, hits[i].t, shadows);
+    }
   }
   if (stats) *stats = local;
   return hits;

@@ -40,8 +40,13 @@ struct ShadowSettings {
 uint32_t shadow_mask(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
                      const Ray& ray, float t, const ShadowSettings& settings, int stack_depth);
 
+// How many shadow rays the traversal pass cast for this hit (for rays-per-second figures).
+uint32_t shadow_ray_count(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
+                          const Ray& ray, float t, const ShadowSettings& settings);
+
 struct DecodeStats {
   uint32_t hits = 0;
+  uint64_t shadow_rays = 0;  // shadow rays the GPU cast for the hits it decided
   uint32_t capped = 0;   // rays the GPU loop cap stopped, traced on the CPU instead
 };
 

@@ -230,6 +230,7 @@ Image Renderer::render(const Scene& scene, const Camera& camera, FrameTimings* t
                                                    settings_.shadows, &stats);
   t.hits = stats.hits;
   t.capped = stats.capped;
+  t.shadow_rays = stats.shadow_rays;
   // The shading pass's inputs, one texel per ray in the ray layout.
   std::vector<glm::vec4> position(rays.count()), normal(rays.count());
   for (uint32_t i = 0; i < rays.count(); ++i) {

@@ -43,8 +43,13 @@ struct FrameTimings {
   uint32_t rays = 0;
   uint32_t hits = 0;
   uint32_t capped = 0;          // rays the loop cap handed back to the CPU
+  uint64_t shadow_rays = 0;     // shadow rays the traversal pass cast
 
+  // Rays per second of the traversal pass: primary rays only, and all rays it traced.
   double trace_mrays_per_s() const { return trace_ms > 0 ? rays / (trace_ms * 1e3) : 0.0; }
+  double trace_all_mrays_per_s() const {
+    return trace_ms > 0 ? double(rays + shadow_rays) / (trace_ms * 1e3) : 0.0;
+  }
 };
 
 // The read-back result of one traversal pass.
