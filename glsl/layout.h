@@ -70,10 +70,12 @@
 #define MOBIRT_BIND_HIT_NORMAL 2
 #define MOBIRT_BIND_MATERIALS 3
 #define MOBIRT_BIND_SHADE_RAY_DIRECTION 4
+#define MOBIRT_BIND_HIT_TEXCOORD 5    // xy = texture coordinate of the hit, zw = unused
+#define MOBIRT_BIND_ATLAS 6           // RGBA8 texture atlas (only in scenes with textures)
 
 // ---- Uniforms: one array of vec4 at binding 0 (Vulkan: a std140 uniform block; GLES: a uniform
 // vec4 array), at most MOBIRT_MAX_PARAM_VEC4S entries. Index of each entry:
-#define MOBIRT_MAX_PARAM_VEC4S 96
+#define MOBIRT_MAX_PARAM_VEC4S 112  // 1 + 4 x 16 lights + 2 x 16 textures = 97
 // Traversal pass
 #define MOBIRT_TP_BOUNDS_LO 0      // xyz = scene box min, w = ray epsilon (shadow-ray offset)
 #define MOBIRT_TP_BOUNDS_HI 1      // xyz = scene box max, w = unused
@@ -90,12 +92,24 @@
                                    //   [2] xyz = spot direction (where it points), w = cos(inner)
                                    //   [3] x = cos(outer), yzw = unused
 #define MOBIRT_SP_VEC4S_PER_LIGHT 4
+// Texture atlas: after the lights, MOBIRT_SP_VEC4S_PER_TEXTURE vec4 per texture (see atlas.glsl):
+//   [0] xy = tile origin in atlas texels, zw = tile size in texels
+//   [1] x = wrap s, y = wrap t (MOBIRT_WRAP_*), zw = unused
+#define MOBIRT_SP_TEXTURES(light_count) (MOBIRT_SP_LIGHTS + MOBIRT_SP_VEC4S_PER_LIGHT * (light_count))
+#define MOBIRT_SP_VEC4S_PER_TEXTURE 2
+#define MOBIRT_WRAP_REPEAT 0.0
+#define MOBIRT_WRAP_MIRRORED_REPEAT 1.0
+#define MOBIRT_WRAP_CLAMP 2.0
+#define MOBIRT_ATLAS_SIZE 2048
+#define MOBIRT_ATLAS_MAX_TEXTURES 16
+#define MOBIRT_ATLAS_MAX_TILE 512
 
 // ---- Specialization constants (Vulkan constant_id; #defines on GLES) -------------------------
 #define MOBIRT_SPEC_LIGHT_COUNT 0  // lights in the scene, 0..MOBIRT_MAX_LIGHTS
 #define MOBIRT_SPEC_STACK_DEPTH 1  // short-stack entries, 0 = pure kd-restart
 #define MOBIRT_SPEC_MAX_STEPS 2    // loop cap of the traversal (nodes visited + triangles tested)
 #define MOBIRT_SPEC_PACKING 3      // MOBIRT_PACKING_24_8 or MOBIRT_PACKING_16_16
+#define MOBIRT_SPEC_TEXTURE_COUNT 4  // shade: textures in the atlas, 0 = no atlas code at all
 #define MOBIRT_MAX_STACK_DEPTH 32  // the short stack's array size; depth beyond it is refused
 
 // Light types as stored in the light uniforms
