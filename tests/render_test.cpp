@@ -182,8 +182,8 @@ TEST_F(VulkanRender, CappedRaysAreTracedOnTheCpu) {
   const Image a = r_tight.render(scene, *scene.camera, &t_tight);
   Renderer r_loose(*backend_, loose);
   const Image b = r_loose.render(scene, *scene.camera, &t_loose);
-  EXPECT_GT(t_tight.capped, 0u);
-  EXPECT_EQ(t_loose.capped, 0u);
+  EXPECT_GT(t_tight.sum.capped, 0u);
+  EXPECT_EQ(t_loose.sum.capped, 0u);
   const ImageDiff d = compare_images(a, b, 0.5f / 255.0f);
   EXPECT_EQ(d.max_error, 0.0) << "capped rays changed the image";
 }

@@ -37,6 +37,10 @@ traversal with shadow rays, CPU hit decoding, GPU Phong shading. OUT's extension
 Options:
   -o, --output FILE       output image (required)
   --size WxH              image size in pixels (default 400x240)
+  --depth N               bounces of the ray tree: 0 = ray casting; reflection and refraction
+                          rays are made only for materials that reflect or refract (default 2)
+  --no-shadows            no shadow rays: every light lights every surface that faces it
+  --min-weight W          secondary rays whose weight is below W are not traced (default 1/512)
   --stack N               short-stack entries of the traversal shader, 0 = pure kd-restart
                           (default 4, at most 32)
   --max-steps N           loop cap of one traversal in the shader; rays that reach it are traced
@@ -145,38 +149,58 @@ int cmd_info(Args args) {
 }
 
 // Stage by stage median over frames (each stage's own median).
-FrameTimings median_timings(std::vector<FrameTimings> frames) {
-  auto median = [&](double FrameTimings::*field) {
+FrameTimings median_timings(const std::vector<FrameTimings>& frames) {
+  auto median = [&](auto get) {
     std::vector<double> v;
-    for (const FrameTimings& f : frames) v.push_back(f.*field);
+    for (const FrameTimings& f : frames) v.push_back(get(f));
     std::nth_element(v.begin(), v.begin() + long(v.size() / 2), v.end());
     return v[v.size() / 2];
   };
   FrameTimings m = frames.back();
-  for (double FrameTimings::*field :
-       {&FrameTimings::build_ms, &FrameTimings::rays_ms, &FrameTimings::upload_ms, &FrameTimings::trace_ms,
-        &FrameTimings::trace_readback_ms, &FrameTimings::decode_ms, &FrameTimings::shade_ms,
-        &FrameTimings::shade_readback_ms, &FrameTimings::accumulate_ms, &FrameTimings::total_ms}) {
-    m.*field = median(field);
+  m.build_ms = median([](const FrameTimings& f) { return f.build_ms; });
+  m.rays_ms = median([](const FrameTimings& f) { return f.rays_ms; });
+  m.total_ms = median([](const FrameTimings& f) { return f.total_ms; });
+  for (double GenerationTimings::*field :
+       {&GenerationTimings::upload_ms, &GenerationTimings::trace_ms, &GenerationTimings::trace_readback_ms,
+        &GenerationTimings::decode_ms, &GenerationTimings::shade_ms, &GenerationTimings::shade_readback_ms,
+        &GenerationTimings::accumulate_ms, &GenerationTimings::secondary_ms}) {
+    m.sum.*field = median([&](const FrameTimings& f) { return f.sum.*field; });
+    for (size_t g = 0; g < m.generations.size(); ++g) {
+      m.generations[g].*field = median([&](const FrameTimings& f) {
+        return g < f.generations.size() ? f.generations[g].*field : 0.0;
+      });
+    }
   }
   return m;
 }
 
 void print_timings(const FrameTimings& t) {
-  std::printf("stage                ms\n");
-  std::printf("kd-tree build   %9.2f\n", t.build_ms);
-  std::printf("primary rays    %9.2f\n", t.rays_ms);
-  std::printf("upload          %9.2f\n", t.upload_ms);
-  std::printf("traversal pass  %9.2f   %.2f Mrays/s primary (%u rays); %.2f Mrays/s with the %llu shadow rays\n",
-              t.trace_ms, t.trace_mrays_per_s(), t.rays, t.trace_all_mrays_per_s(),
-              static_cast<unsigned long long>(t.shadow_rays));
-  std::printf("read-back       %9.2f\n", t.trace_readback_ms);
-  std::printf("hit decoding    %9.2f   (%u hits, %u capped rays traced on the CPU)\n", t.decode_ms,
-              t.hits, t.capped);
-  std::printf("shading pass    %9.2f\n", t.shade_ms);
-  std::printf("shade read-back %9.2f\n", t.shade_readback_ms);
-  std::printf("accumulate      %9.2f\n", t.accumulate_ms);
-  std::printf("frame           %9.2f\n", t.total_ms);
+  const GenerationTimings& s = t.sum;
+  auto mrays = [](double rays, double ms) { return ms > 0 ? rays / (ms * 1e3) : 0.0; };
+  std::printf("stage                   ms\n");
+  std::printf("kd-tree build      %9.2f\n", t.build_ms);
+  std::printf("primary rays       %9.2f\n", t.rays_ms);
+  std::printf("upload             %9.2f   (tree, rays, shading inputs)\n", s.upload_ms);
+  std::printf("traversal passes   %9.2f   %.2f Mrays/s (%u rays + %llu shadow rays)\n", s.trace_ms,
+              mrays(double(s.rays + s.shadow_rays), s.trace_ms), s.rays,
+              static_cast<unsigned long long>(s.shadow_rays));
+  std::printf("read-back          %9.2f   (%llu bytes from the GPU, 4 per ray and pass)\n",
+              s.trace_readback_ms + s.shade_readback_ms, static_cast<unsigned long long>(s.bytes_read));
+  std::printf("hit decoding       %9.2f   (%u hits, %u capped rays traced on the CPU)\n", s.decode_ms,
+              s.hits, s.capped);
+  std::printf("shading passes     %9.2f\n", s.shade_ms);
+  std::printf("accumulate         %9.2f\n", s.accumulate_ms);
+  std::printf("secondary rays     %9.2f\n", s.secondary_ms);
+  std::printf("frame              %9.2f   (%.1f fps)\n", t.total_ms, t.total_ms > 0 ? 1000.0 / t.total_ms : 0.0);
+  if (t.generations.size() > 1) {
+    std::printf("generation   rays   shadow   traversal ms  Mrays/s   shading ms\n");
+    for (size_t g = 0; g < t.generations.size(); ++g) {
+      const GenerationTimings& x = t.generations[g];
+      std::printf("%10zu %6u %8llu %14.2f %8.2f %12.2f\n", g, x.rays,
+                  static_cast<unsigned long long>(x.shadow_rays), x.trace_ms,
+                  mrays(double(x.rays + x.shadow_rays), x.trace_ms), x.shade_ms);
+    }
+  }
 }
 
 int cmd_render(Args args) {
@@ -216,7 +240,14 @@ int cmd_render(Args args) {
     } else if (a == "--max-depth") {
       settings.kd.max_depth = parse_int(a, args.value(a), -1, 128);
     } else if (a == "--epsilon") {
-      settings.shadows.epsilon = parse_float(a, args.value(a), 0.0f, 1.0f);
+      settings.shadow_rays.epsilon = parse_float(a, args.value(a), 0.0f, 1.0f);
+      settings.secondary.epsilon = settings.shadow_rays.epsilon;
+    } else if (a == "--depth") {
+      settings.depth = parse_int(a, args.value(a), 0, 64);
+    } else if (a == "--no-shadows") {
+      settings.shadows = false;
+    } else if (a == "--min-weight") {
+      settings.secondary.min_weight = parse_float(a, args.value(a), 0.0f, 1.0f);
     } else if (a == "--light") {
       lights.push_back(parse_light(args.value(a)));
     } else if (a == "--camera") {

@@ -110,7 +110,8 @@ SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ra
 
 std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays,
                                     std::span<const uint32_t> texels, Packing packing,
-                                    const ShadowSettings& shadows, DecodeStats* stats) {
+                                    std::span<const Light> lights, const ShadowSettings& shadows,
+                                    DecodeStats* stats) {
   const uint32_t n = rays.count();
   if (texels.size() < n) throw Error(ErrorKind::Internal, "decode_hits: fewer texels than rays");
   const uint32_t prims = uint32_t(scene.mesh.triangle_count());
@@ -125,7 +126,7 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
       ++local.capped;
       const Hit h = traverse(tree, ray, -1);
       prim = h.prim;
-      if (h.valid()) mask = shadow_mask(tree, scene.lights, prim, ray, h.t, shadows, -1);
+      if (h.valid()) mask = shadow_mask(tree, lights, prim, ray, h.t, shadows, -1);
     } else if (texel.hit()) {
       prim = texel.prim();
       mask = texel.mask;
@@ -139,7 +140,7 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
     hits[i] = surface_hit(scene, tree, ray, prim);
     hits[i].mask = mask;
     if (!texel.capped) {
-      local.shadow_rays += shadow_ray_count(tree, scene.lights, prim, ray, hits[i].t, shadows);
+      local.shadow_rays += shadow_ray_count(tree, lights, prim, ray, hits[i].t, shadows);
     }
   }
   if (stats) *stats = local;

@@ -52,9 +52,11 @@ struct DecodeStats {
 
 // Decodes the read-back texels of one pass. Capped rays are traced on the CPU (closest hit and
 // shadow mask), so a loop cap never changes the image.
+// `lights`: the lights the pass cast shadow rays to (none when shadows are off).
 std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays,
                                     std::span<const uint32_t> texels, Packing packing,
-                                    const ShadowSettings& shadows, DecodeStats* stats = nullptr);
+                                    std::span<const Light> lights, const ShadowSettings& shadows,
+                                    DecodeStats* stats = nullptr);
 
 // The full surface record of a known hit (t and barycentrics recomputed on that one triangle).
 SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ray, int32_t prim);

@@ -6,6 +6,7 @@
 
 #include "accel/kdtree.h"
 #include "layout.h"
+#include "raytree/secondary.h"
 
 namespace mobirt {
 
@@ -55,28 +56,41 @@ glm::vec3 shade_phong(const Scene& scene, const SurfaceHit& hit, const glm::vec3
 
 Image render_on_cpu(const Scene& scene, const Camera& camera, const RenderSettings& settings, bool quantize) {
   const FlatKdTree tree = build_kdtree(scene.mesh.positions, settings.kd);
-  const RayBatch rays = primary_rays(camera, settings.width, settings.height);
+  RayBatch rays = primary_rays(camera, settings.width, settings.height);
   Image image(settings.width, settings.height);
-  const uint32_t n = rays.count();
+  const std::span<const Light> lights = settings.shadows ? std::span<const Light>(scene.lights)
+                                                         : std::span<const Light>();
+  const uint32_t all_lights = scene.lights.empty() ? 0u : (2u << (scene.lights.size() - 1)) - 1u;
+  const int depth = scene_has_secondary_rays(scene) ? settings.depth : 0;
   const unsigned threads = std::max(1u, std::thread::hardware_concurrency());
-  std::vector<std::thread> pool;
-  for (unsigned w = 0; w < threads; ++w) {
-    pool.emplace_back([&, w] {
-      for (uint32_t i = w; i < n; i += threads) {
-        const Ray ray = rays.ray(i);
-        const Hit h = traverse(tree, ray, -1);
-        glm::vec3 c = scene.background;
-        if (h.valid()) {
-          SurfaceHit s = surface_hit(scene, tree, ray, h.prim);
-          s.mask = shadow_mask(tree, scene.lights, h.prim, ray, h.t, settings.shadows, -1);
-          c = glm::clamp(shade_phong(scene, s, -glm::normalize(ray.direction)), 0.0f, 1.0f);
+  for (int generation = 0; generation <= depth && rays.count() > 0; ++generation) {
+    const uint32_t n = rays.count();
+    std::vector<SurfaceHit> hits(n);
+    std::vector<glm::vec3> colors(n);
+    std::vector<std::thread> pool;
+    for (unsigned w = 0; w < threads; ++w) {
+      pool.emplace_back([&, w] {
+        for (uint32_t i = w; i < n; i += threads) {
+          const Ray ray = rays.ray(i);
+          const Hit h = traverse(tree, ray, -1);
+          glm::vec3 c = scene.background;
+          if (h.valid()) {
+            hits[i] = surface_hit(scene, tree, ray, h.prim);
+            hits[i].mask = settings.shadows
+                               ? shadow_mask(tree, lights, h.prim, ray, h.t, settings.shadow_rays, -1)
+                               : all_lights;
+            c = shade_phong(scene, hits[i], -glm::normalize(ray.direction));
+          }
+          c = glm::clamp(c, 0.0f, 1.0f);
+          if (quantize) c = glm::round(c * 255.0f) / 255.0f;  // the RGBA8 shading pass
+          colors[i] = c;
         }
-        if (quantize) c = glm::round(glm::clamp(c, 0.0f, 1.0f) * 255.0f) / 255.0f;
-        image.pixels[rays.pixel[i]] += rays.weight[i] * c;
-      }
-    });
+      });
+    }
+    for (std::thread& t : pool) t.join();
+    for (uint32_t i = 0; i < n; ++i) image.pixels[rays.pixel[i]] += rays.weight[i] * colors[i];
+    if (generation < depth) rays = next_generation(scene, rays, hits, settings.secondary);
   }
-  for (std::thread& t : pool) t.join();
   return image;
 }
 

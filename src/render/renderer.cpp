@@ -44,12 +44,13 @@ glm::vec3 light_where(const Light& light) {
 
 }  // namespace
 
-std::vector<float> trace_uniforms(const FlatKdTree& tree, const Scene& scene, const ShadowSettings& s) {
+std::vector<float> trace_uniforms(const FlatKdTree& tree, std::span<const Light> lights,
+                                  const ShadowSettings& s) {
   std::vector<float> u;
   put(u, MOBIRT_TP_BOUNDS_LO, glm::vec4(tree.bounds.lo, s.epsilon));
   put(u, MOBIRT_TP_BOUNDS_HI, glm::vec4(tree.bounds.hi, 0.0f));
-  for (size_t l = 0; l < scene.lights.size(); ++l) {
-    const Light& light = scene.lights[l];
+  for (size_t l = 0; l < lights.size(); ++l) {
+    const Light& light = lights[l];
     const size_t at = MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * l;
     put(u, at, glm::vec4(light_where(light), light_type(light.type)));
     put(u, at + 1, glm::vec4(light.direction, std::cos(light.outer_cone)));
@@ -188,13 +189,18 @@ void Renderer::upload_rays(const RayBatch& rays) {
 }
 
 TraceResult Renderer::trace(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays) {
-  TraceResult result;
-  const int lights = int(scene.lights.size());
-  result.packing = choose_packing(scene.mesh.triangle_count(), lights, scene.source);
   upload_tree(tree);
+  return trace_uploaded(scene, tree, rays);
+}
+
+TraceResult Renderer::trace_uploaded(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays) {
+  TraceResult result;
+  // Without shadows the pass is specialised to no lights: it casts no shadow rays at all.
+  const int lights = int(shadow_lights(scene).size());
+  result.packing = choose_packing(scene.mesh.triangle_count(), lights, scene.source);
   upload_rays(rays);
   const PassHandle pass = trace_pass(lights, result.packing);
-  const std::vector<float> uniforms = trace_uniforms(tree, scene, settings_.shadows);
+  const std::vector<float> uniforms = trace_uniforms(tree, shadow_lights(scene), settings_.shadow_rays);
   const Data& d = *data_;
   const TextureHandle textures[] = {d.nodes.handle, d.prim_list.handle, d.triangles.handle,
                                     d.ray_origin.handle, d.ray_direction.handle};
@@ -203,36 +209,30 @@ TraceResult Renderer::trace(const Scene& scene, const FlatKdTree& tree, const Ra
   return result;
 }
 
-Image Renderer::render(const Scene& scene, const Camera& camera, FrameTimings* timings) {
-  FrameTimings t;
-  const auto frame_start = Clock::now();
-  const int lights = int(scene.lights.size());
-  // Refuse a scene over a limit before any work.
-  choose_packing(scene.mesh.triangle_count(), lights, scene.source);
+std::span<const Light> Renderer::shadow_lights(const Scene& scene) const {
+  return settings_.shadows ? std::span<const Light>(scene.lights) : std::span<const Light>();
+}
 
-  auto stage = Clock::now();
-  const FlatKdTree tree = build_kdtree(scene.mesh.positions, settings_.kd);
-  t.build_ms = elapsed_ms(stage);
+void Renderer::upload_materials(const Scene& scene) {
+  std::vector<glm::vec4> materials;
+  materials.reserve(scene.materials.size() * MOBIRT_TEXELS_PER_MATERIAL);
+  for (const Material& m : scene.materials) {
+    materials.emplace_back(m.diffuse, float(m.texture));
+    materials.emplace_back(m.specular, m.shininess);
+    materials.emplace_back(m.reflectance, m.transmittance, m.ior, m.ambient);
+  }
+  Data& d = *data_;
+  ensure_texture(d.materials.handle, d.materials.rows, kDataWidth, data_rows(materials.size()),
+                 TexelFormat::RGBA32F);
+  backend_.upload(d.materials.handle, materials.data(), materials.size() * sizeof(glm::vec4));
+}
 
-  stage = Clock::now();
-  const RayBatch rays = primary_rays(camera, settings_.width, settings_.height);
-  t.rays_ms = elapsed_ms(stage);
-  t.rays = rays.count();
-
-  const TraceResult traced = trace(scene, tree, rays);
-  t.upload_ms += traced.timing.upload_ms;
-  t.trace_ms = traced.timing.gpu_ms;
-  t.trace_readback_ms = traced.timing.readback_ms;
-
-  stage = Clock::now();
-  DecodeStats stats;
-  const std::vector<SurfaceHit> hits = decode_hits(scene, tree, rays, traced.texels, traced.packing,
-                                                   settings_.shadows, &stats);
-  t.hits = stats.hits;
-  t.capped = stats.capped;
-  t.shadow_rays = stats.shadow_rays;
+std::vector<uint32_t> Renderer::shade(const Scene& scene, const RayBatch& rays,
+                                      std::span<const SurfaceHit> hits, GenerationTimings& timings) {
   // The shading pass's inputs, one texel per ray in the ray layout.
+  auto stage = Clock::now();
   std::vector<glm::vec4> position(rays.count()), normal(rays.count());
+  const uint32_t all_lights = scene.lights.empty() ? 0u : (2u << (scene.lights.size() - 1)) - 1u;
   for (uint32_t i = 0; i < rays.count(); ++i) {
     const SurfaceHit& h = hits[i];
     if (!h.valid()) {
@@ -241,44 +241,100 @@ Image Renderer::render(const Scene& scene, const Camera& camera, FrameTimings* t
       continue;
     }
     position[i] = glm::vec4(h.position, float(h.material));
-    normal[i] = glm::vec4(h.normal, float(h.mask));
+    normal[i] = glm::vec4(h.normal, float(settings_.shadows ? h.mask : all_lights));
   }
-  t.decode_ms = elapsed_ms(stage);
+  timings.decode_ms += elapsed_ms(stage);
 
   Data& d = *data_;
   ensure_texture(d.hit_position.handle, d.hit_position.rows, rays.width, rays.rows(), TexelFormat::RGBA32F);
   ensure_texture(d.hit_normal.handle, d.hit_normal.rows, rays.width, rays.rows(), TexelFormat::RGBA32F);
   backend_.upload(d.hit_position.handle, position.data(), position.size() * sizeof(glm::vec4));
   backend_.upload(d.hit_normal.handle, normal.data(), normal.size() * sizeof(glm::vec4));
-  std::vector<glm::vec4> materials;
-  materials.reserve(scene.materials.size() * MOBIRT_TEXELS_PER_MATERIAL);
-  for (const Material& m : scene.materials) {
-    materials.emplace_back(m.diffuse, float(m.texture));
-    materials.emplace_back(m.specular, m.shininess);
-    materials.emplace_back(m.reflectance, m.transmittance, m.ior, m.ambient);
-  }
-  ensure_texture(d.materials.handle, d.materials.rows, kDataWidth, data_rows(materials.size()),
-                 TexelFormat::RGBA32F);
-  backend_.upload(d.materials.handle, materials.data(), materials.size() * sizeof(glm::vec4));
 
-  const PassHandle shade = shade_pass(lights);
+  const PassHandle pass = shade_pass(int(scene.lights.size()));
   const std::vector<float> uniforms = shade_uniforms(scene);
   const TextureHandle textures[] = {d.hit_position.handle, d.hit_normal.handle, d.materials.handle,
                                     d.ray_direction.handle};
   std::vector<uint32_t> colors(rays.count());
-  const PassTiming shaded = backend_.run_pass(shade, textures, uniforms, rays.width, rays.count(), colors);
-  t.upload_ms += shaded.upload_ms;
-  t.shade_ms = shaded.gpu_ms;
-  t.shade_readback_ms = shaded.readback_ms;
+  const PassTiming shaded = backend_.run_pass(pass, textures, uniforms, rays.width, rays.count(), colors);
+  timings.upload_ms += shaded.upload_ms;
+  timings.shade_ms += shaded.gpu_ms;
+  timings.shade_readback_ms += shaded.readback_ms;
+  timings.bytes_read += shaded.bytes_read;
+  return colors;
+}
+
+Image Renderer::render(const Scene& scene, const Camera& camera, FrameTimings* timings) {
+  FrameTimings t;
+  const auto frame_start = Clock::now();
+  // Refuse a scene over a limit before any work.
+  choose_packing(scene.mesh.triangle_count(), settings_.shadows ? int(scene.lights.size()) : 0,
+                 scene.source);
+
+  auto stage = Clock::now();
+  const FlatKdTree tree = build_kdtree(scene.mesh.positions, settings_.kd);
+  t.build_ms = elapsed_ms(stage);
+  upload_tree(tree);
+  upload_materials(scene);
 
   stage = Clock::now();
+  RayBatch rays = primary_rays(camera, settings_.width, settings_.height);
+  t.rays_ms = elapsed_ms(stage);
+
+  // Work a scene does not need is never done: no second generation without mirrors or glass.
+  const int depth = scene_has_secondary_rays(scene) ? settings_.depth : 0;
   Image image(settings_.width, settings_.height);
-  for (uint32_t i = 0; i < rays.count(); ++i) {
-    const uint32_t c = colors[i];
-    const glm::vec3 rgb(float(c & 0xFFu), float((c >> 8) & 0xFFu), float((c >> 16) & 0xFFu));
-    image.pixels[rays.pixel[i]] += rays.weight[i] * (rgb / 255.0f);
+  for (int generation = 0; generation <= depth && rays.count() > 0; ++generation) {
+    GenerationTimings g;
+    g.rays = rays.count();
+    const TraceResult traced = trace_uploaded(scene, tree, rays);
+    g.upload_ms += traced.timing.upload_ms;
+    g.trace_ms = traced.timing.gpu_ms;
+    g.trace_readback_ms = traced.timing.readback_ms;
+    g.bytes_read += traced.timing.bytes_read;
+
+    stage = Clock::now();
+    DecodeStats stats;
+    const std::vector<SurfaceHit> hits =
+        decode_hits(scene, tree, rays, traced.texels, traced.packing, shadow_lights(scene),
+                    settings_.shadow_rays, &stats);
+    g.hits = stats.hits;
+    g.capped = stats.capped;
+    g.shadow_rays = stats.shadow_rays;
+    g.decode_ms = elapsed_ms(stage);
+
+    const std::vector<uint32_t> colors = shade(scene, rays, hits, g);
+
+    stage = Clock::now();
+    for (uint32_t i = 0; i < rays.count(); ++i) {
+      const uint32_t c = colors[i];
+      const glm::vec3 rgb(float(c & 0xFFu), float((c >> 8) & 0xFFu), float((c >> 16) & 0xFFu));
+      image.pixels[rays.pixel[i]] += rays.weight[i] * (rgb / 255.0f);
+    }
+    g.accumulate_ms = elapsed_ms(stage);
+
+    if (generation < depth) {
+      stage = Clock::now();
+      rays = next_generation(scene, rays, hits, settings_.secondary);
+      g.secondary_ms = elapsed_ms(stage);
+    }
+    t.generations.push_back(g);
   }
-  t.accumulate_ms = elapsed_ms(stage);
+  for (const GenerationTimings& g : t.generations) {
+    t.sum.rays += g.rays;
+    t.sum.hits += g.hits;
+    t.sum.capped += g.capped;
+    t.sum.shadow_rays += g.shadow_rays;
+    t.sum.upload_ms += g.upload_ms;
+    t.sum.trace_ms += g.trace_ms;
+    t.sum.trace_readback_ms += g.trace_readback_ms;
+    t.sum.decode_ms += g.decode_ms;
+    t.sum.shade_ms += g.shade_ms;
+    t.sum.shade_readback_ms += g.shade_readback_ms;
+    t.sum.accumulate_ms += g.accumulate_ms;
+    t.sum.secondary_ms += g.secondary_ms;
+    t.sum.bytes_read += g.bytes_read;
+  }
   t.total_ms = elapsed_ms(frame_start);
   if (timings) *timings = t;
   return image;

@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -15,6 +16,7 @@
 #include "raytree/hits.h"
 #include "raytree/packing.h"
 #include "raytree/rays.h"
+#include "raytree/secondary.h"
 #include "scene/scene.h"
 
 namespace mobirt {
@@ -22,34 +24,41 @@ namespace mobirt {
 struct RenderSettings {
   int width = 400;
   int height = 240;
+  int depth = 2;            // bounces: 0 = ray casting, N = up to N generations of secondary rays
+  bool shadows = true;      // false: no shadow rays, every light lights every surface facing it
   int stack_depth = 4;      // short-stack entries in the traversal shader, 0 = pure kd-restart
   int max_steps = 2048;     // loop cap of one traversal in the shader (see README: "Loop cap")
   KdBuildOptions kd;
-  ShadowSettings shadows;
+  ShadowSettings shadow_rays;
+  SecondarySettings secondary;
 };
 
-// Where one frame's time went, stage by stage (milliseconds).
-struct FrameTimings {
-  double build_ms = 0;          // kd-tree build + flattening (CPU)
-  double rays_ms = 0;           // primary ray generation (CPU)
-  double upload_ms = 0;         // tree, rays and shading inputs into textures
+// One generation of rays: its traversal and shading passes and the CPU work around them.
+struct GenerationTimings {
+  uint32_t rays = 0;
+  uint32_t hits = 0;
+  uint32_t capped = 0;          // rays the loop cap handed back to the CPU
+  uint64_t shadow_rays = 0;     // shadow rays the traversal pass cast
+  double upload_ms = 0;         // textures uploaded for the passes (generation 0: the tree too)
   double trace_ms = 0;          // traversal pass (GPU timestamps)
   double trace_readback_ms = 0; // its RGBA8 result back to the CPU
   double decode_ms = 0;         // hit decoding, capped rays retraced (CPU)
   double shade_ms = 0;          // shading pass (GPU timestamps)
   double shade_readback_ms = 0;
-  double accumulate_ms = 0;     // RGBA8 colours into the float frame (CPU)
-  double total_ms = 0;          // wall clock of the whole frame
-  uint32_t rays = 0;
-  uint32_t hits = 0;
-  uint32_t capped = 0;          // rays the loop cap handed back to the CPU
-  uint64_t shadow_rays = 0;     // shadow rays the traversal pass cast
+  double accumulate_ms = 0;     // RGBA8 colours into the float frame with the rays' weights (CPU)
+  double secondary_ms = 0;      // the next generation's rays (CPU)
+  uint64_t bytes_read = 0;      // bytes that left the GPU: 4 per ray and pass
+};
 
-  // Rays per second of the traversal pass: primary rays only, and all rays it traced.
-  double trace_mrays_per_s() const { return trace_ms > 0 ? rays / (trace_ms * 1e3) : 0.0; }
-  double trace_all_mrays_per_s() const {
-    return trace_ms > 0 ? double(rays + shadow_rays) / (trace_ms * 1e3) : 0.0;
-  }
+// Where one frame's time went, stage by stage (milliseconds); the per-generation stages summed.
+struct FrameTimings {
+  double build_ms = 0;          // kd-tree build + flattening (CPU)
+  double rays_ms = 0;           // primary ray generation (CPU)
+  GenerationTimings sum;        // all generations together
+  std::vector<GenerationTimings> generations;
+  double total_ms = 0;          // wall clock of the whole frame
+
+  uint32_t primary_rays() const { return generations.empty() ? 0 : generations[0].rays; }
 };
 
 // The read-back result of one traversal pass.
@@ -66,12 +75,16 @@ class Renderer {
   Renderer(const Renderer&) = delete;
   Renderer& operator=(const Renderer&) = delete;
 
-  // Ray casting with shadows: one image of width x height.
+  // One frame: ray casting, shadows and up to settings.depth bounces; width x height.
   Image render(const Scene& scene, const Camera& camera, FrameTimings* timings = nullptr);
 
   // The traversal pass alone over the given rays (for tests and benchmarks). The tree must have
   // been built from scene.mesh.
   TraceResult trace(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays);
+
+  // The shading pass alone over decoded hits; one RGBA8 colour per ray.
+  std::vector<uint32_t> shade(const Scene& scene, const RayBatch& rays, std::span<const SurfaceHit> hits,
+                              GenerationTimings& timings);
 
   const RenderSettings& settings() const { return settings_; }
 
@@ -83,6 +96,10 @@ class Renderer {
   PassHandle shade_pass(int lights);
   void upload_tree(const FlatKdTree& tree);
   void upload_rays(const RayBatch& rays);
+  void upload_materials(const Scene& scene);
+  // The lights the traversal pass casts shadow rays to: the scene's, or none without shadows.
+  std::span<const Light> shadow_lights(const Scene& scene) const;
+  TraceResult trace_uploaded(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays);
 
   Backend& backend_;
   RenderSettings settings_;
@@ -90,7 +107,8 @@ class Renderer {
 };
 
 // The traversal and shading uniforms (vec4 arrays, indices in glsl/layout.h).
-std::vector<float> trace_uniforms(const FlatKdTree& tree, const Scene& scene, const ShadowSettings& s);
+std::vector<float> trace_uniforms(const FlatKdTree& tree, std::span<const Light> lights,
+                                  const ShadowSettings& s);
 std::vector<float> shade_uniforms(const Scene& scene);
 
 }  // namespace mobirt

@@ -23,6 +23,9 @@ struct Material {
   float reflectance = 0.0f;      // weight of the mirror ray (fixed coefficient)
   float transmittance = 0.0f;    // weight of the refracted ray
   float ior = 1.5f;              // index of refraction
+  // Schlick's Fresnel term moves weight from the refracted to the reflected ray at grazing angles
+  // (dielectrics with transmittance > 0); false = the fixed coefficients above, as given.
+  bool fresnel = true;
   float ambient = 0.1f;          // share of the diffuse colour lit by the ambient term
   int texture = -1;              // base-colour texture: index into Scene::textures, -1 = none
 };

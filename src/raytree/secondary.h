@@ -1,0 +1,48 @@
+// The CPU ray-tree manager's step from one generation of rays to the next: for every hit on a
+// reflective or refractive material, the mirror ray and, by Snell's law, the transmitted ray
+// (total internal reflection sends the transmitted share into the mirror ray; entering and leaving
+// a medium are told apart by the geometric normal). Each new ray carries its pixel and its weight,
+// and the generation is packed densely, so the next pass is sized to the rays that exist.
+#pragma once
+
+#include <glm/glm.hpp>
+
+#include <span>
+#include <vector>
+
+#include "raytree/hits.h"
+#include "raytree/rays.h"
+#include "scene/scene.h"
+
+namespace mobirt {
+
+struct SecondarySettings {
+  float epsilon = 1e-4f;           // origin offset along the geometric normal, times 1 + max |p|
+  float min_weight = 1.0f / 512.0f;  // rays whose largest weight component is below this are not
+                                     // traced: they cannot move an 8-bit pixel by half a step
+};
+
+struct SecondaryStats {
+  uint32_t reflected = 0;
+  uint32_t refracted = 0;
+  uint32_t total_internal_reflections = 0;
+  uint32_t culled = 0;             // rays dropped for a weight under min_weight
+};
+
+// Schlick's approximation of the Fresnel reflectance for a ray meeting a surface at cos_i, going
+// from a medium of index n1 into one of n2 (cos_t: the refracted angle's cosine, used when n1 > n2).
+float schlick_fresnel(float cos_i, float n1, float n2);
+
+// Refraction of unit direction d at unit normal n (facing against d), eta = n1 / n2. Returns false
+// on total internal reflection.
+bool refract_direction(const glm::vec3& d, const glm::vec3& n, float eta, glm::vec3& out);
+
+// The next generation from the hits of this one (hits[i] belongs to rays ray i).
+RayBatch next_generation(const Scene& scene, const RayBatch& rays, std::span<const SurfaceHit> hits,
+                         const SecondarySettings& settings, SecondaryStats* stats = nullptr);
+
+// True when some material of the scene reflects or refracts: only then is a second generation
+// ever made.
+bool scene_has_secondary_rays(const Scene& scene);
+
+}  // namespace mobirt

@@ -1,0 +1,193 @@
+// The CPU ray-tree manager against known answers: a mirror shows a uniformly coloured wall times
+// its reflectance, a glass slab shifts a ray without turning it, total internal reflection sets in
+// beyond the critical angle; and the GPU frame with bounces matches the CPU expectation.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <sstream>
+
+#include "accel/kdtree.h"
+#include "backend/backend.h"
+#include "raytree/hits.h"
+#include "raytree/secondary.h"
+#include "render/cpu_render.h"
+#include "render/renderer.h"
+#include "scene/loader.h"
+#include "test_scenes.h"
+#include "test_support.h"
+
+namespace mobirt {
+namespace {
+
+// One ray, the hit it makes, and the next generation from it.
+RayBatch one_bounce(const Scene& scene, const FlatKdTree& tree, const Ray& ray, SurfaceHit* hit_out = nullptr) {
+  RayBatch rays;
+  rays.width = 1;
+  rays.push(ray, 0, glm::vec3(1.0f));
+  const Hit h = traverse(tree, ray);
+  EXPECT_TRUE(h.valid());
+  std::vector<SurfaceHit> hits{surface_hit(scene, tree, ray, h.prim)};
+  if (hit_out) *hit_out = hits[0];
+  SecondarySettings settings;
+  settings.min_weight = 0.0f;
+  return next_generation(scene, rays, hits, settings);
+}
+
+Scene glass_slab(float thickness, float ior) {
+  Scene s = test::base_scene("slab");
+  Material glass;
+  glass.diffuse = glm::vec3(0.0f);
+  glass.transmittance = 1.0f;
+  glass.ior = ior;
+  glass.fresnel = false;  // fixed coefficients: all of the weight goes through
+  s.materials.push_back(glass);
+  test::add_box(s, {-50, -thickness, -50}, {50, 0, 50}, 2);
+  return s;
+}
+
+TEST(RayTree, GlassSlabShiftsTheRayWithoutTurningIt) {
+  const float thickness = 2.0f, ior = 1.5f;
+  const Scene scene = glass_slab(thickness, ior);
+  const FlatKdTree tree = build_kdtree(scene.mesh.positions);
+  for (float angle_deg : {0.0f, 20.0f, 45.0f, 70.0f}) {
+    SCOPED_TRACE(angle_deg);
+    const float a = angle_deg * 3.14159265f / 180.0f;
+    const glm::vec3 d(std::sin(a), -std::cos(a), 0.0f);
+    const Ray in{glm::vec3(0.0f, 5.0f, 0.0f), d, 0.0f, kInfinity};
+    RayBatch inside = one_bounce(scene, tree, in);
+    ASSERT_EQ(inside.count(), 1u);
+    RayBatch out = one_bounce(scene, tree, inside.ray(0));
+    ASSERT_EQ(out.count(), 1u);
+    const Ray leaving = out.ray(0);
+    test::expect_vec3(glm::normalize(leaving.direction), d, 1e-5f);
+    EXPECT_NEAR(out.weight[0].x, 1.0f, 1e-6f);
+    // Lateral shift of a slab: t sin(a - b) / cos(b), with sin(b) = sin(a) / ior.
+    const float b = std::asin(std::sin(a) / ior);
+    const float shift = thickness * std::sin(a - b) / std::cos(b);
+    // Distance between the leaving ray's line and the incoming ray's line.
+    const glm::vec3 w = leaving.origin - in.origin;
+    const float distance = glm::length(w - glm::dot(w, d) * d);
+    // The two origins are offset off the surfaces by epsilon (1 + max |p|) each, which moves the
+    // line sideways by up to that much over cos(a) per surface.
+    const float offset = SecondarySettings{}.epsilon * (1.0f + 5.0f);
+    EXPECT_NEAR(distance, shift, 1e-4f + 2.0f * offset / std::cos(a));
+  }
+}
+
+TEST(RayTree, TotalInternalReflectionBeyondTheCriticalAngle) {
+  const float ior = 1.5f;
+  const float critical = std::asin(1.0f / ior);
+  glm::vec3 out;
+  const glm::vec3 n(0, 1, 0);  // facing the ray, which travels downwards out of the glass
+  for (float delta : {-0.05f, 0.05f}) {
+    const float a = critical + delta;
+    const glm::vec3 d(std::sin(a), -std::cos(a), 0.0f);
+    EXPECT_EQ(refract_direction(d, n, ior / 1.0f, out), delta < 0.0f) << "angle " << a;
+  }
+  // Through the ray tree: inside a slab, a steep ray is reflected whole.
+  const Scene scene = glass_slab(2.0f, ior);
+  const FlatKdTree tree = build_kdtree(scene.mesh.positions);
+  const float a = critical + 0.1f;
+  const Ray inside{glm::vec3(0.0f, -1.0f, 0.0f), glm::vec3(std::sin(a), -std::cos(a), 0.0f), 0.0f, kInfinity};
+  SurfaceHit hit;
+  const RayBatch next = one_bounce(scene, tree, inside, &hit);
+  EXPECT_FALSE(hit.entering);
+  ASSERT_EQ(next.count(), 1u);
+  EXPECT_GT(next.direction[0].y, 0.0f);  // reflected back up into the glass
+  EXPECT_NEAR(next.weight[0].x, 1.0f, 1e-6f);
+}
+
+TEST(RayTree, SchlickFresnelLimits) {
+  EXPECT_NEAR(schlick_fresnel(1.0f, 1.0f, 1.5f), 0.04f, 1e-6f);   // normal incidence
+  EXPECT_NEAR(schlick_fresnel(0.0f, 1.0f, 1.5f), 1.0f, 1e-6f);    // grazing
+  EXPECT_EQ(schlick_fresnel(0.1f, 1.5f, 1.0f), 1.0f);             // beyond the critical angle
+}
+
+class VulkanRayTree : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    BackendOptions options;
+    options.validation = true;
+    backend_ = create_vulkan_backend(options);
+  }
+  void TearDown() override {
+    const std::vector<std::string> messages = backend_->take_debug_messages();
+    EXPECT_TRUE(messages.empty()) << (messages.empty() ? "" : messages[0]);
+  }
+  std::unique_ptr<Backend> backend_;
+};
+
+// A mirror at 45 degrees shows a wall of uniform colour c: the mirror's pixels are reflectance x c.
+TEST_F(VulkanRayTree, MirrorShowsTheWallTimesItsReflectance) {
+  Scene s = test::base_scene("mirror");
+  s.materials.clear();
+  Material wall;  // uniform: ambient only, no lights
+  wall.diffuse = glm::vec3(0.8f, 0.4f, 0.2f);
+  wall.ambient = 1.0f;
+  Material mirror;
+  mirror.diffuse = glm::vec3(0.0f);
+  mirror.ambient = 0.0f;
+  mirror.reflectance = 0.5f;
+  s.materials = {wall, mirror};
+  // The camera looks down -z at a mirror tilted 45 degrees about x (a plane through the origin
+  // with normal (0, 1, 1)/sqrt(2)), which shows the wall above (+y).
+  test::add_triangle(s, {-3, -3, 3}, {3, -3, 3}, {3, 3, -3}, 1);
+  test::add_triangle(s, {-3, -3, 3}, {3, 3, -3}, {-3, 3, -3}, 1);
+  // The wall: a big plane at y = 20 facing down.
+  test::add_triangle(s, {-100, 20, -100}, {100, 20, -100}, {100, 20, 100}, 0);
+  test::add_triangle(s, {-100, 20, -100}, {100, 20, 100}, {-100, 20, 100}, 0);
+  const Camera camera{{0, 0, 10}, {0, 0, 0}, {0, 1, 0}, 0.3f, 0.0f};
+  RenderSettings settings;
+  settings.width = 32;
+  settings.height = 32;
+  settings.depth = 1;
+  Renderer renderer(*backend_, settings);
+  const Image image = renderer.render(s, camera);
+  const glm::vec3 expected = 0.5f * glm::round(wall.diffuse * 255.0f) / 255.0f;
+  for (int y = 8; y < 24; ++y) {
+    for (int x = 8; x < 24; ++x) {
+      test::expect_vec3(image.at(x, y), expected, 1.0f / 255.0f);
+    }
+  }
+  // Without bounces the mirror is black.
+  settings.depth = 0;
+  Renderer flat(*backend_, settings);
+  test::expect_vec3(flat.render(s, camera).at(16, 16), glm::vec3(0.0f), 1e-6f);
+}
+
+// Bounces on the GPU match the CPU expectation, and each generation holds only the rays made.
+TEST_F(VulkanRayTree, BouncesMatchTheCpuExpectation) {
+  Scene scene = test::box_grid_scene();
+  scene.materials[1].reflectance = 0.4f;  // reflective boxes
+  Material glass;
+  glass.diffuse = glm::vec3(0.05f);
+  glass.transmittance = 0.8f;
+  glass.ior = 1.5f;
+  scene.materials.push_back(glass);
+  for (size_t i = 2; i < scene.mesh.material_ids.size(); i += 24) {
+    for (size_t k = i; k < std::min(i + 12, scene.mesh.material_ids.size()); ++k) scene.mesh.material_ids[k] = 2;
+  }
+  RenderSettings settings;
+  settings.width = 160;
+  settings.height = 120;
+  settings.depth = 3;
+  Renderer renderer(*backend_, settings);
+  FrameTimings t;
+  const Image gpu = renderer.render(scene, *scene.camera, &t);
+  const Image cpu = render_on_cpu(scene, *scene.camera, settings);
+  ASSERT_GE(t.generations.size(), 2u);
+  for (size_t g = 1; g < t.generations.size(); ++g) {
+    EXPECT_LT(t.generations[g].rays, t.generations[0].rays) << "generation " << g << " sized to the screen";
+  }
+  const ImageDiff d = compare_images(gpu, cpu);
+  if (d.psnr < 40.0 || d.share_over > 0.005) {
+    write_image(test::output_path("bounces-gpu.png").string(), gpu);
+    write_image(test::output_path("bounces-cpu.png").string(), cpu);
+    write_image(test::output_path("bounces-diff.png").string(), difference_image(gpu, cpu));
+    ADD_FAILURE() << "PSNR " << d.psnr << " dB, " << 100 * d.share_over << "% over 2/255; see "
+                  << test::output_path("bounces-diff.png");
+  }
+}
+
+}  // namespace
+}  // namespace mobirt
