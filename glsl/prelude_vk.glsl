@@ -24,6 +24,9 @@ layout(set = 0, binding = 0, std140) uniform Params {
   texelFetch(tex, ivec2(int(index) & (MOBIRT_DATA_WIDTH - 1), int(index) >> MOBIRT_DATA_WIDTH_LOG2), 0)
 // Per-ray textures share the pass's layout: this fragment's own ray.
 #define RAY_TEXEL(tex) texelFetch(tex, ivec2(gl_FragCoord.xy), 0)
+// Texture atlas (RGBA8, NEAREST): the texel at integer coordinates xy (exact floats), no filtering.
+// The GLES prelude reads it with texture2D at the texel centre (xy + 0.5) / MOBIRT_ATLAS_SIZE.
+#define ATLAS_TEXEL(tex, xy) texelFetch(tex, ivec2(xy), 0)
 
 #define SAMPLER(slot, name) layout(set = 0, binding = slot) uniform sampler2D name
 

@@ -1,6 +1,7 @@
-// Phong shading with the shadow mask from the traversal pass and KHR_lights_punctual falloff.
-// Common subset of GLSL 450 and GLSL ES 1.00. Needs from the prelude: DATA_TEXEL, PARAM,
-// LIGHT_COUNT.
+// Phong shading with the shadow mask from the traversal pass and KHR_lights_punctual falloff; the
+// diffuse colour is modulated by the material's texture from the atlas. Common subset of GLSL 450
+// and GLSL ES 1.00. Needs from the prelude: DATA_TEXEL, PARAM, LIGHT_COUNT, TEXTURE_COUNT.
+#include "atlas.glsl"
 
 SAMPLER(MOBIRT_BIND_MATERIALS, u_materials);
 
@@ -20,13 +21,17 @@ float light_attenuation(float distance2, float range) {
   return window / max(distance2, 1e-8);
 }
 
-// p: hit point, n: unit shading normal facing the viewer, v: unit direction towards the viewer.
-vec3 shade_hit(vec3 p, vec3 n, vec3 v, float material, float mask) {
+// p: hit point, n: unit shading normal facing the viewer, v: unit direction towards the viewer,
+// uv: the hit's texture coordinate (used only in scenes with textures).
+vec3 shade_hit(vec3 p, vec3 n, vec3 v, float material, float mask, vec2 uv) {
   float base = material * float(MOBIRT_TEXELS_PER_MATERIAL);
   vec4 m0 = DATA_TEXEL(u_materials, base);        // diffuse, texture
   vec4 m1 = DATA_TEXEL(u_materials, base + 1.0);  // specular, shininess
   vec4 m2 = DATA_TEXEL(u_materials, base + 2.0);  // reflectance, transmittance, ior, ambient
-  vec3 color = m2.w * m0.rgb;
+  vec3 diffuse = m0.rgb;
+  // TEXTURE_COUNT is a specialization constant: scenes without textures get no atlas code.
+  if (TEXTURE_COUNT > 0 && m0.a >= 0.0) diffuse = diffuse * sample_atlas(m0.a, uv);
+  vec3 color = m2.w * diffuse;
   for (int l = 0; l < LIGHT_COUNT; ++l) {
     if (!mask_bit(mask, l)) continue;
     int at = MOBIRT_SP_LIGHTS + MOBIRT_SP_VEC4S_PER_LIGHT * l;
@@ -49,7 +54,7 @@ vec3 shade_hit(vec3 p, vec3 n, vec3 v, float material, float mask) {
     if (n_dot_l <= 0.0) continue;
     vec3 r = 2.0 * n_dot_l * n - l_dir;
     float spec = m1.a > 0.0 ? pow(max(dot(r, v), 0.0), m1.a) : 0.0;
-    color = color + falloff * radiance.rgb * (m0.rgb * n_dot_l + m1.rgb * spec);
+    color = color + falloff * radiance.rgb * (diffuse * n_dot_l + m1.rgb * spec);
   }
   return color;
 }

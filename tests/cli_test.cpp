@@ -117,16 +117,36 @@ TEST(Cli, HelpAndInfo) {
 }
 
 // scenes/ holds exactly what tools/make_scenes.cpp generates.
+std::string file_bytes(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// Every file the tool writes (scenes, .bin buffers, .mtl, textures/*.png) is committed byte for byte,
+// and scenes/textures holds nothing the tool does not write.
 TEST(Scenes, CommittedScenesAreWhatTheToolMakes) {
   const fs::path dir = test::temp_dir();
-  ASSERT_EQ(std::system((std::string(MOBIRT_MAKE_SCENES_EXE) + " " + quoted(dir)).c_str()), 0);
-  for (const char* name : {"default.gltf"}) {
-    std::ifstream a(dir / name, std::ios::binary), b(fs::path(MOBIRT_SOURCE_DIR) / "scenes" / name, std::ios::binary);
-    std::stringstream sa, sb;
-    sa << a.rdbuf();
-    sb << b.rdbuf();
-    EXPECT_EQ(sa.str(), sb.str()) << name << " differs from the generator's output: run "
-                                  << "build/mobirt_make_scenes scenes";
+  const fs::path committed = fs::path(MOBIRT_SOURCE_DIR) / "scenes";
+  ASSERT_EQ(std::system((std::string(MOBIRT_MAKE_SCENES_EXE) + " " + quoted(dir) + " > /dev/null").c_str()), 0);
+  for (const char* name : {"default.gltf", "toaster.gltf", "toaster.bin", "marbles.gltf", "marbles.bin", "fish.gltf",
+                           "fish.bin", "utah-toasters.mtl"}) {
+    EXPECT_TRUE(fs::is_regular_file(dir / name)) << name << " is not made by the tool";
+  }
+  const std::string hint = " differs from the generator's output: run build/mobirt_make_scenes scenes";
+  size_t files = 0;
+  for (const fs::directory_entry& e : fs::recursive_directory_iterator(dir)) {
+    if (!e.is_regular_file()) continue;
+    const fs::path rel = fs::relative(e.path(), dir);
+    ASSERT_TRUE(fs::is_regular_file(committed / rel)) << "scenes/" << rel.string() << " is missing:" << hint;
+    EXPECT_TRUE(file_bytes(e.path()) == file_bytes(committed / rel)) << "scenes/" << rel.string() << hint;
+    ++files;
+  }
+  EXPECT_GE(files, 8u + 20u);  // the scenes above and their textures
+  for (const fs::directory_entry& e : fs::directory_iterator(committed / "textures")) {
+    EXPECT_TRUE(fs::is_regular_file(dir / "textures" / e.path().filename()))
+        << "scenes/textures/" << e.path().filename().string() << " is not made by the tool: remove it";
   }
 }
 

@@ -1,5 +1,9 @@
 // The mobirt command line: render, info.
+#include <unistd.h>
+
 #include <algorithm>
+#include <cctype>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -14,6 +18,7 @@
 #include "core/error.h"
 #include "core/image.h"
 #include "render/renderer.h"
+#include "scene/animation.h"
 #include "scene/loader.h"
 #include "scene/overrides.h"
 
@@ -23,7 +28,8 @@ namespace {
 constexpr const char* kUsage = R"(mobirt: a headless CPU-GPU hybrid Whitted ray tracer (MobiRT on Vulkan)
 
 Usage:
-  mobirt render SCENE -o OUT [options]   render a .gltf, .glb or .obj scene to OUT (.png, .exr, ...)
+  mobirt render SCENE -o OUT [options]   render a .gltf, .glb or .obj scene (or an OBJ sequence:
+                                         a folder or a pattern like doll_%02d.obj) to OUT
   mobirt info [--device D]               print the Vulkan device and the limits that matter here
   mobirt COMMAND --help                  help on one command
 )";
@@ -59,6 +65,11 @@ Options:
   --background R,G,B      colour of rays that miss (default 0,0,0)
   --device D              Vulkan device: index or part of its name (default: lavapipe)
   --validation            enable the Khronos validation layer; any message is an error
+  --frames A:B            render frames A to B of the animation at --fps into OUT, a pattern
+                          such as out/frame_%04d.png; the kd-tree is rebuilt every frame
+  --fps F                 frames per second of --frames (default: the scene's, else 24)
+  --time T                render the animation at T seconds (default 0)
+  --mtl FILE              an OBJ's material library instead of the one it names (mtllib)
   --timings               print the time of each stage of the frame: one warm-up frame (the
                           driver compiles shaders at first use), then the median of --repeat
                           frames
@@ -120,6 +131,40 @@ class Args {
   std::vector<std::string> args_;
   size_t next_ = 0;
 };
+
+// The output file of one frame: OUT's single printf integer conversion (%d, %04d, ...) filled in.
+std::string frame_path(const std::string& pattern, int frame) {
+  std::string result;
+  bool converted = false;
+  for (size_t i = 0; i < pattern.size(); ++i) {
+    if (pattern[i] != '%') {
+      result.push_back(pattern[i]);
+      continue;
+    }
+    if (i + 1 < pattern.size() && pattern[i + 1] == '%') {
+      result.push_back('%');
+      ++i;
+      continue;
+    }
+    size_t j = i + 1;
+    bool zero = j < pattern.size() && pattern[j] == '0';
+    if (zero) ++j;
+    int width = 0;
+    while (j < pattern.size() && std::isdigit(static_cast<unsigned char>(pattern[j])) && width < 100) {
+      width = width * 10 + (pattern[j++] - '0');
+    }
+    if (j >= pattern.size() || pattern[j] != 'd' || converted) {
+      usage_error("-o " + pattern + ": the frame pattern needs exactly one %d (e.g. frame_%04d.png)");
+    }
+    std::string number = std::to_string(frame);
+    if (int(number.size()) < width) number.insert(0, size_t(width) - number.size(), zero ? '0' : ' ');
+    result.append(number);
+    converted = true;
+    i = j;
+  }
+  if (!converted) usage_error("-o " + pattern + ": the frame pattern needs one %d (e.g. frame_%04d.png)");
+  return result;
+}
 
 bool is_help(const std::string& a) { return a == "-h" || a == "--help"; }
 
@@ -212,6 +257,9 @@ int cmd_render(Args args) {
   std::optional<glm::vec3> background;
   bool timings = false;
   int repeat = 5;
+  std::string mtl;
+  std::optional<double> fps, time;
+  std::optional<std::pair<int, int>> frames;
   while (!args.empty()) {
     const std::string a = args.take();
     if (is_help(a)) {
@@ -258,6 +306,21 @@ int cmd_render(Args args) {
       backend_options.device = args.value(a);
     } else if (a == "--validation") {
       backend_options.validation = true;
+    } else if (a == "--mtl") {
+      mtl = args.value(a);
+    } else if (a == "--fps") {
+      fps = parse_float(a, args.value(a), 0.001f, 10000.0f);
+    } else if (a == "--time") {
+      time = parse_float(a, args.value(a), -1e6f, 1e6f);
+    } else if (a == "--frames") {
+      const std::string v = args.value(a);
+      int first = 0, last = 0;
+      char extra = 0;
+      if (std::sscanf(v.c_str(), "%d:%d%c", &first, &last, &extra) != 2 || first < 0 || last < first ||
+          last - first > 100000) {
+        usage_error("--frames " + v + ": expected A:B with 0 <= A <= B, e.g. 0:28");
+      }
+      frames = std::make_pair(first, last);
     } else if (a == "--timings") {
       timings = true;
     } else if (a == "--repeat") {
@@ -271,38 +334,88 @@ int cmd_render(Args args) {
     }
   }
   if (scene_path.empty()) usage_error("render: no scene given");
+  if (frames && time) usage_error("render: --frames and --time exclude each other");
   if (output.empty()) usage_error("render: no output given: add -o OUT.png");
   check_image_output(output);
 
-  Scene scene = load_scene(scene_path);
-  apply_overrides(scene, lights, camera);
-  if (background) scene.background = *background;
-  const Camera view = scene.camera ? *scene.camera
-                                   : frame_box(scene.bounds(), 0.7854f,
-                                               float(settings.width) / float(settings.height));
+  LoadOptions load_options;
+  load_options.mtl = mtl;
+  if (fps) load_options.fps = *fps;
+  const AnimatedScene animation = load_animated_scene(scene_path, load_options);
+  const double frame_rate = fps ? *fps : animation.fps();
+  Scene scene = animation.rest();
+  // One camera for the whole sequence: the file's (animated with it), --camera, or one framing
+  // the scene at rest, so that the view does not jump from frame to frame.
+  const Camera fallback_camera =
+      frame_box(scene.bounds(), 0.7854f, float(settings.width) / float(settings.height));
+  auto scene_at = [&](double seconds) {
+    if (animation.animated()) animation.evaluate(seconds, scene);
+    apply_overrides(scene, lights, camera);
+    if (background) scene.background = *background;
+    return scene.camera ? *scene.camera : fallback_camera;
+  };
+
+  std::vector<int> frame_list;
+  if (frames) {
+    if (output.find('%') == std::string::npos && frames->second > frames->first) {
+      usage_error("-o " + output + ": several frames need a pattern with a frame number, e.g. out/frame_%04d.png");
+    }
+    for (int f = frames->first; f <= frames->second; ++f) frame_list.push_back(f);
+  }
+  auto output_for = [&](int frame) { return frames ? frame_path(output, frame) : output; };
+  check_image_output(output_for(frames ? frames->first : 0));
 
   auto backend = create_vulkan_backend(backend_options);
   Renderer renderer(*backend, settings);
-  FrameTimings t;
-  Image image = renderer.render(scene, view, &t);
-  if (timings) {
-    std::vector<FrameTimings> frames;
-    for (int i = 0; i < repeat; ++i) {
-      image = renderer.render(scene, view, &t);
-      frames.push_back(t);
+  std::vector<FrameTimings> measured;
+  auto check_messages = [&] {
+    for (const std::string& message : backend->take_debug_messages()) {
+      throw Error(ErrorKind::Internal, "validation: " + message);
     }
-    t = median_timings(frames);
+  };
+  if (!frames) {
+    const Camera view = scene_at(time ? *time : 0.0);
+    FrameTimings t;
+    Image image = renderer.render(scene, view, &t);
+    if (timings) {  // the first frame paid for shader compilation: time the next ones
+      for (int i = 0; i < repeat; ++i) {
+        image = renderer.render(scene, view, &t);
+        measured.push_back(t);
+      }
+    }
+    check_messages();
+    write_image(output, image);
+  } else {
+    const bool tty = isatty(2);
+    const auto start = std::chrono::steady_clock::now();
+    for (size_t i = 0; i < frame_list.size(); ++i) {
+      const int frame = frame_list[i];
+      const Camera view = scene_at(double(frame) / frame_rate);
+      FrameTimings t;
+      const Image image = renderer.render(scene, view, &t);
+      if (i > 0 || frame_list.size() == 1) measured.push_back(t);
+      check_messages();
+      write_image(output_for(frame), image);
+      if (tty) {
+        const double seconds = elapsed_ms(start) / 1000.0;
+        const int width = 30, done = int(width * double(i + 1) / double(frame_list.size()));
+        std::fprintf(stderr, "\r[%s%s] %zu/%zu frames, %.1f frames/s", std::string(size_t(done), '#').c_str(),
+                     std::string(size_t(width - done), ' ').c_str(), i + 1, frame_list.size(),
+                     double(i + 1) / seconds);
+      }
+    }
+    if (tty) std::fprintf(stderr, "\n");
   }
-  for (const std::string& message : backend->take_debug_messages()) {
-    throw Error(ErrorKind::Internal, "validation: " + message);
-  }
-  write_image(output, image);
-  if (timings) {
-    std::printf("%s: %zu triangles, %zu lights, %dx%d on %s\n", scene_path.c_str(),
+  if (timings && !measured.empty()) {
+    std::printf("%s: %zu triangles, %zu lights, %dx%d, depth %d on %s\n", scene_path.c_str(),
                 scene.mesh.triangle_count(), scene.lights.size(), settings.width, settings.height,
-                backend->device_info().device.c_str());
-    std::printf("median of %d frames after one warm-up frame\n", repeat);
-    print_timings(t);
+                settings.depth, backend->device_info().device.c_str());
+    if (frames) {
+      std::printf("median of %zu frames (the first frame, which compiles the shaders, left out)\n", measured.size());
+    } else {
+      std::printf("median of %d frames after one warm-up frame\n", repeat);
+    }
+    print_timings(median_timings(measured));
   }
   return 0;
 }

@@ -22,6 +22,7 @@ const char* shader_name(ShaderId id) {
     case ShaderId::TestNineTextures: return "test/nine_textures.frag";
     case ShaderId::TestCopyInput: return "test/copy_input.frag";
     case ShaderId::TestSpin: return "test/spin.frag";
+    case ShaderId::TestAtlasLookup: return "test/atlas_lookup.frag";
   }
   return "unknown shader";
 }

@@ -35,6 +35,7 @@ enum class ShaderId {
   TestNineTextures,   // samples nine textures: must be refused
   TestCopyInput,      // copies texture 1 to the output: plumbing tests
   TestSpin,           // loops until the cap: watchdog tests
+  TestAtlasLookup,    // atlas.glsl's lookup for (uv, texture) per ray: atlas tests
 };
 const char* shader_name(ShaderId id);
 

@@ -24,9 +24,11 @@ float light_attenuation(float distance2, float range) {
 
 }  // namespace
 
-glm::vec3 shade_phong(const Scene& scene, const SurfaceHit& hit, const glm::vec3& view) {
+glm::vec3 shade_phong(const Scene& scene, const SurfaceHit& hit, const glm::vec3& view, const Atlas& atlas) {
   const Material& m = scene.materials[hit.material];
-  glm::vec3 color = m.ambient * m.diffuse;
+  glm::vec3 diffuse = m.diffuse;
+  if (!atlas.empty() && m.texture >= 0) diffuse *= sample_atlas(atlas, m.texture, hit.texcoord);
+  glm::vec3 color = m.ambient * diffuse;
   for (size_t l = 0; l < scene.lights.size(); ++l) {
     if (!(hit.mask & (1u << l))) continue;
     const Light& light = scene.lights[l];
@@ -49,13 +51,14 @@ glm::vec3 shade_phong(const Scene& scene, const SurfaceHit& hit, const glm::vec3
     if (n_dot_l <= 0.0f) continue;
     const glm::vec3 r = 2.0f * n_dot_l * hit.normal - l_dir;
     const float spec = m.shininess > 0.0f ? std::pow(std::max(glm::dot(r, view), 0.0f), m.shininess) : 0.0f;
-    color += falloff * light.color * light.intensity * (m.diffuse * n_dot_l + m.specular * spec);
+    color += falloff * light.color * light.intensity * (diffuse * n_dot_l + m.specular * spec);
   }
   return color;
 }
 
 Image render_on_cpu(const Scene& scene, const Camera& camera, const RenderSettings& settings, bool quantize) {
   const FlatKdTree tree = build_kdtree(scene.mesh.positions, settings.kd);
+  const Atlas atlas = build_atlas(scene);
   RayBatch rays = primary_rays(camera, settings.width, settings.height);
   Image image(settings.width, settings.height);
   const std::span<const Light> lights = settings.shadows ? std::span<const Light>(scene.lights)
@@ -79,7 +82,7 @@ Image render_on_cpu(const Scene& scene, const Camera& camera, const RenderSettin
             hits[i].mask = settings.shadows
                                ? shadow_mask(tree, lights, h.prim, ray, h.t, settings.shadow_rays, -1)
                                : all_lights;
-            c = shade_phong(scene, hits[i], -glm::normalize(ray.direction));
+            c = shade_phong(scene, hits[i], -glm::normalize(ray.direction), atlas);
           }
           c = glm::clamp(c, 0.0f, 1.0f);
           if (quantize) c = glm::round(c * 255.0f) / 255.0f;  // the RGBA8 shading pass

@@ -8,12 +8,14 @@
 #include "core/image.h"
 #include "raytree/hits.h"
 #include "render/renderer.h"
+#include "scene/atlas.h"
 #include "scene/scene.h"
 
 namespace mobirt {
 
-// Phong with the shadow mask, as glsl/shade.glsl computes it. `view` points towards the viewer.
-glm::vec3 shade_phong(const Scene& scene, const SurfaceHit& hit, const glm::vec3& view);
+// Phong with the shadow mask, as glsl/shade.glsl computes it. `view` points towards the viewer;
+// `atlas` gives the textures (may be empty).
+glm::vec3 shade_phong(const Scene& scene, const SurfaceHit& hit, const glm::vec3& view, const Atlas& atlas);
 
 // Ray casting with shadows on the CPU (no quantisation to 8 bits unless quantize is set, which
 // mimics the RGBA8 shading pass).

@@ -7,6 +7,7 @@
 
 #include "core/error.h"
 #include "layout.h"
+#include "scene/atlas.h"
 
 namespace mobirt {
 
@@ -78,10 +79,14 @@ struct Renderer::Data {
     uint32_t rows = 0;
   };
   Texture nodes, prim_list, triangles, materials;
-  Texture ray_origin, ray_direction, hit_position, hit_normal;
+  Texture ray_origin, ray_direction, hit_position, hit_normal, hit_texcoord;
+  TextureHandle atlas;          // the scene's texture atlas, or a 1x1 stand-in without textures
+  Atlas atlas_data;             // placements for the uniforms, kept while the scene's textures stay
+  std::string atlas_scene;      // the scene (source + texture count) the atlas was built for
+  bool has_atlas = false;
   uint32_t ray_width = 0;  // the ray textures' row width; a change recreates them
   std::map<std::pair<int, int>, PassHandle> trace_passes;  // (lights, packing)
-  std::map<int, PassHandle> shade_passes;                  // lights
+  std::map<std::pair<int, int>, PassHandle> shade_passes;  // (lights, textures)
 };
 
 Renderer::Renderer(Backend& backend, const RenderSettings& settings)
@@ -102,9 +107,10 @@ Renderer::Renderer(Backend& backend, const RenderSettings& settings)
 Renderer::~Renderer() {
   Data& d = *data_;
   for (Data::Texture* t : {&d.nodes, &d.prim_list, &d.triangles, &d.materials, &d.ray_origin,
-                           &d.ray_direction, &d.hit_position, &d.hit_normal}) {
+                           &d.ray_direction, &d.hit_position, &d.hit_normal, &d.hit_texcoord}) {
     if (t->handle) backend_.destroy(t->handle);
   }
+  if (d.atlas) backend_.destroy(d.atlas);
   for (auto& [key, pass] : d.trace_passes) backend_.destroy(pass);
   for (auto& [key, pass] : d.shade_passes) backend_.destroy(pass);
 }
@@ -138,18 +144,43 @@ PassHandle Renderer::trace_pass(int lights, Packing packing) {
   return pass;
 }
 
-PassHandle Renderer::shade_pass(int lights) {
-  auto it = data_->shade_passes.find(lights);
+PassHandle Renderer::shade_pass(int lights, int textures) {
+  const auto key = std::make_pair(lights, textures);
+  auto it = data_->shade_passes.find(key);
   if (it != data_->shade_passes.end()) return it->second;
   PassDesc desc;
   desc.shader = ShaderId::Shade;
-  desc.specialization = {{MOBIRT_SPEC_LIGHT_COUNT, lights}};
-  desc.uniform_vec4s = MOBIRT_SP_LIGHTS + MOBIRT_SP_VEC4S_PER_LIGHT * uint32_t(lights);
+  desc.specialization = {{MOBIRT_SPEC_LIGHT_COUNT, lights}, {MOBIRT_SPEC_TEXTURE_COUNT, textures}};
+  desc.uniform_vec4s = MOBIRT_SP_TEXTURES(uint32_t(lights)) + MOBIRT_SP_VEC4S_PER_TEXTURE * uint32_t(textures);
   desc.texture_bindings = {MOBIRT_BIND_HIT_POSITION, MOBIRT_BIND_HIT_NORMAL, MOBIRT_BIND_MATERIALS,
-                           MOBIRT_BIND_SHADE_RAY_DIRECTION};
+                           MOBIRT_BIND_SHADE_RAY_DIRECTION, MOBIRT_BIND_HIT_TEXCOORD, MOBIRT_BIND_ATLAS};
   PassHandle pass = backend_.create_pass(desc);
-  data_->shade_passes.emplace(lights, pass);
+  data_->shade_passes.emplace(key, pass);
   return pass;
+}
+
+void Renderer::prepare_atlas(const Scene& scene) {
+  Data& d = *data_;
+  // Textures never change during an animation: rebuild only for another set of textures.
+  std::string key = scene.source;
+  for (const TextureRef& t : scene.textures) {
+    key.append("|").append(t.name).append(":").append(t.path).append(":").append(std::to_string(t.data.size()));
+    key.append(":").append(std::to_string(int(t.wrap_s))).append(std::to_string(int(t.wrap_t)));
+  }
+  if (d.atlas && key == d.atlas_scene) return;
+  if (d.atlas) backend_.destroy(d.atlas);
+  d.atlas_data = build_atlas(scene);
+  d.has_atlas = !d.atlas_data.empty();
+  if (d.has_atlas) {
+    d.atlas = backend_.create_texture(uint32_t(d.atlas_data.size), uint32_t(d.atlas_data.size), TexelFormat::RGBA8);
+    backend_.upload(d.atlas, d.atlas_data.pixels.data(), d.atlas_data.pixels.size() * sizeof(uint32_t));
+  } else {
+    // The shading pass always binds the slot; specialised to no textures, it never reads it.
+    d.atlas = backend_.create_texture(1, 1, TexelFormat::RGBA8);
+    const uint32_t black = 0;
+    backend_.upload(d.atlas, &black, sizeof(black));
+  }
+  d.atlas_scene = key;
 }
 
 void Renderer::upload_tree(const FlatKdTree& tree) {
@@ -176,7 +207,7 @@ void Renderer::upload_tree(const FlatKdTree& tree) {
 void Renderer::upload_rays(const RayBatch& rays) {
   Data& d = *data_;
   if (d.ray_width != rays.width) {
-    for (Data::Texture* t : {&d.ray_origin, &d.ray_direction, &d.hit_position, &d.hit_normal}) {
+    for (Data::Texture* t : {&d.ray_origin, &d.ray_direction, &d.hit_position, &d.hit_normal, &d.hit_texcoord}) {
       if (t->handle) backend_.destroy(t->handle);
       *t = {};
     }
@@ -246,15 +277,31 @@ std::vector<uint32_t> Renderer::shade(const Scene& scene, const RayBatch& rays,
   timings.decode_ms += elapsed_ms(stage);
 
   Data& d = *data_;
+  prepare_atlas(scene);
   ensure_texture(d.hit_position.handle, d.hit_position.rows, rays.width, rays.rows(), TexelFormat::RGBA32F);
   ensure_texture(d.hit_normal.handle, d.hit_normal.rows, rays.width, rays.rows(), TexelFormat::RGBA32F);
   backend_.upload(d.hit_position.handle, position.data(), position.size() * sizeof(glm::vec4));
   backend_.upload(d.hit_normal.handle, normal.data(), normal.size() * sizeof(glm::vec4));
+  // Texture coordinates only where the scene has textures (the CPU computed them in decoding).
+  TextureHandle texcoords = d.hit_position.handle;
+  if (d.has_atlas) {
+    stage = Clock::now();
+    std::vector<glm::vec4> uv(rays.count(), glm::vec4(0.0f));
+    for (uint32_t i = 0; i < rays.count(); ++i) {
+      if (hits[i].valid()) uv[i] = glm::vec4(hits[i].texcoord, 0.0f, 0.0f);
+    }
+    timings.decode_ms += elapsed_ms(stage);
+    ensure_texture(d.hit_texcoord.handle, d.hit_texcoord.rows, rays.width, rays.rows(), TexelFormat::RGBA32F);
+    backend_.upload(d.hit_texcoord.handle, uv.data(), uv.size() * sizeof(glm::vec4));
+    texcoords = d.hit_texcoord.handle;
+  }
 
-  const PassHandle pass = shade_pass(int(scene.lights.size()));
-  const std::vector<float> uniforms = shade_uniforms(scene);
+  const int texture_count = int(d.atlas_data.tiles.size());
+  const PassHandle pass = shade_pass(int(scene.lights.size()), texture_count);
+  std::vector<float> uniforms = shade_uniforms(scene);
+  append_atlas_uniforms(d.atlas_data, int(scene.lights.size()), uniforms);
   const TextureHandle textures[] = {d.hit_position.handle, d.hit_normal.handle, d.materials.handle,
-                                    d.ray_direction.handle};
+                                    d.ray_direction.handle, texcoords, d.atlas};
   std::vector<uint32_t> colors(rays.count());
   const PassTiming shaded = backend_.run_pass(pass, textures, uniforms, rays.width, rays.count(), colors);
   timings.upload_ms += shaded.upload_ms;

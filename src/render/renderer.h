@@ -93,7 +93,8 @@ class Renderer {
   TextureHandle ensure_texture(TextureHandle& handle, uint32_t& capacity_rows, uint32_t width,
                                uint32_t rows, TexelFormat format);
   PassHandle trace_pass(int lights, Packing packing);
-  PassHandle shade_pass(int lights);
+  PassHandle shade_pass(int lights, int textures);
+  void prepare_atlas(const Scene& scene);
   void upload_tree(const FlatKdTree& tree);
   void upload_rays(const RayBatch& rays);
   void upload_materials(const Scene& scene);

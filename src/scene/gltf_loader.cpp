@@ -29,10 +29,14 @@
 #include <iterator>
 #include <limits>
 #include <map>
+#include <memory>
+#include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
 #include "core/error.h"
+#include "scene/animation.h"
 #include "scene/loader.h"
 #include "scene/validate.h"
 
@@ -122,6 +126,107 @@ double number_or(const tinygltf::Value& object, const char* key, double fallback
   return v.IsNumber() ? v.GetNumberAsDouble() : fallback;
 }
 
+// ---- The rig: what the file animates, in a form evaluate() walks without the tinygltf model ----
+
+enum class ChannelPath { Translation, Rotation, Scale, Weights };
+enum class Interpolation { Linear, Step, CubicSpline };
+
+struct AnimSampler {
+  std::vector<double> times;   // key times, non-decreasing
+  std::vector<double> values;  // per key `width` numbers (CUBICSPLINE: in-tangent, value, out-tangent)
+  Interpolation interpolation = Interpolation::Linear;
+  size_t width = 0;
+};
+
+struct AnimChannel {
+  size_t node = 0;
+  ChannelPath path = ChannelPath::Translation;
+  size_t sampler = 0;
+};
+
+// One triangle primitive in its mesh's space, ready to be posed.
+struct PrimData {
+  std::vector<glm::vec3> positions;                 // per vertex
+  std::vector<glm::vec3> normals;                   // per vertex; empty: flat normals
+  std::vector<std::vector<glm::vec3>> target_positions;  // per morph target (empty: none)
+  std::vector<std::vector<glm::vec3>> target_normals;    // per morph target (empty: none)
+  std::vector<glm::uvec4> joints;                   // JOINTS_0; empty: not skinnable
+  std::vector<glm::vec4> weights;                   // WEIGHTS_0, renormalised to sum 1
+  uint32_t max_joint = 0;
+  std::vector<uint32_t> triangles;                  // vertex indices, the file's winding
+  std::vector<glm::vec2> uvs;                       // per vertex; empty: none
+  uint32_t material = 0;
+};
+
+struct MeshData {
+  bool prepared = false;
+  std::vector<PrimData> prims;
+};
+
+struct SkinData {
+  std::vector<size_t> joints;         // node indices
+  std::vector<glm::dmat4> inverse_bind;
+};
+
+// A node as visited by the traversal of the scene (a node reached twice is two instances).
+struct Instance {
+  size_t node = 0;
+  int parent = -1;  // instance index
+};
+
+struct Draw {
+  size_t instance = 0;
+  size_t mesh = 0;
+  int skin = -1;
+  size_t first_corner = 0;  // where its triangles start in the scene's vertex arrays
+  bool flip = false;        // the rest pose mirrors (negative determinant): winding reversed
+};
+
+struct LightInstance {
+  size_t instance = 0;
+  Light light;  // everything but position and direction
+};
+
+struct CameraInstance {
+  size_t instance = 0;
+  size_t camera = 0;
+  double yfov = 0.0;
+  float znear = 0.0f;
+};
+
+class GltfRig : public detail::Animator {
+ public:
+  void evaluate(double t, Scene& out) const override;
+
+  std::string file;
+  // Nodes.
+  std::vector<glm::dmat4> rest_local;         // the file's local transforms
+  std::vector<glm::dvec3> rest_translation;   // TRS (a matrix node that is animated: decomposed)
+  std::vector<glm::dquat> rest_rotation;
+  std::vector<glm::dvec3> rest_scale;
+  std::vector<uint8_t> animated_node;         // 1: its local transform comes from TRS at t
+  std::vector<size_t> weight_offset;          // into rest_weights; npos: no morph weights
+  std::vector<size_t> weight_count;
+  std::vector<double> rest_weights;
+  std::vector<int> node_parent;               // first parent, -1: root
+  std::vector<size_t> node_order;             // parents before children (for joint worlds)
+  // Scene traversal.
+  std::vector<Instance> instances;
+  std::vector<MeshData> meshes;
+  std::vector<SkinData> skins;
+  std::vector<Draw> draws;
+  std::vector<LightInstance> lights;
+  std::optional<CameraInstance> camera;
+  size_t corners = 0;
+  // Animation.
+  std::vector<AnimSampler> samplers;
+  std::vector<AnimChannel> channels;
+  double duration = 0.0;
+
+ private:
+  [[noreturn]] void fail_at(double t, const std::string& message) const;
+};
+
 class GltfReader {
  public:
   GltfReader(const std::string& file, const tinygltf::Model& model) : file_(file), model_(model) {
@@ -129,14 +234,17 @@ class GltfReader {
     quantized_ = std::find(used.begin(), used.end(), "KHR_mesh_quantization") != used.end();
   }
 
-  Scene read();
+  // The static parts of the scene (materials, textures, texture coordinates, material ids) and
+  // the rig that poses it.
+  std::shared_ptr<GltfRig> read(const LoadOptions& options, bool animated, Scene& scene);
 
  private:
   [[noreturn]] void fail(const std::string& message) const { throw input_error(file_, message); }
 
   const uint8_t* view_bytes(int view_index, size_t offset, size_t count, size_t elem,
                             size_t stride, const std::string& who) const;
-  std::vector<double> read_accessor(int index, const std::string& user) const;
+  std::vector<double> read_accessor(int index, const std::string& user,
+                                    bool matrix4 = false) const;
   const tinygltf::Accessor& accessor(int index, const std::string& user) const;
   std::vector<glm::vec3> read_vec3(int index, const std::string& user, const char* attribute) const;
   std::vector<glm::vec2> read_texcoords(int index, const std::string& user) const;
@@ -144,10 +252,15 @@ class GltfReader {
 
   glm::dmat4 local_transform(size_t node_index) const;
   void traverse(const std::vector<int>& roots, const std::string& roots_name);
-  void add_mesh(size_t mesh_index, const glm::dmat4& world);
-  void add_primitive(size_t mesh_index, size_t prim_index, const glm::dmat4& world);
-  void add_camera(size_t node_index, const glm::dmat4& world);
-  void add_light(size_t node_index, const glm::dmat4& world);
+  void prepare_mesh(size_t mesh_index);
+  bool prepare_primitive(size_t mesh_index, size_t prim_index, PrimData& out);
+  void add_draw(size_t instance, size_t mesh_index, int skin);
+  int prepare_skin(size_t node_index);
+  void add_camera(size_t instance);
+  void add_light(size_t instance);
+  void prepare_nodes();
+  void prepare_animations(int only, bool warn_overrides);
+  size_t mesh_targets(size_t mesh_index) const;
   void convert_materials();
   int texture_for(int gltf_texture, const std::string& user);
   uint32_t default_material();
@@ -157,7 +270,9 @@ class GltfReader {
   bool quantized_ = false;
   bool warned_orthographic_ = false;
   Scene scene_;
+  std::shared_ptr<GltfRig> rig_;
   std::map<int, int> texture_map_;  // glTF texture -> Scene::textures
+  std::map<int, int> skin_map_;     // glTF skin -> GltfRig::skins
   int default_material_ = -1;
 };
 
@@ -245,7 +360,8 @@ double read_component(const uint8_t* p, int ct, bool normalized) {
 
 // All components of an accessor as doubles (normalised integers mapped to [0, 1] or [-1, 1]),
 // sparse substitution applied.
-std::vector<double> GltfReader::read_accessor(int index, const std::string& user) const {
+std::vector<double> GltfReader::read_accessor(int index, const std::string& user,
+                                              bool matrix4) const {
   const tinygltf::Accessor& a = accessor(index, user);
   const std::string name = element("accessors", static_cast<size_t>(index)) + " (" + user + ")";
   const int ncomp = tinygltf::GetNumComponentsInType(static_cast<uint32_t>(a.type));
@@ -254,8 +370,13 @@ std::vector<double> GltfReader::read_accessor(int index, const std::string& user
     fail(name + ": unsupported type " + type_name(a.type) + " of " +
          component_name(a.componentType));
   }
-  if (a.type != TINYGLTF_TYPE_SCALAR && a.type != TINYGLTF_TYPE_VEC2 &&
-      a.type != TINYGLTF_TYPE_VEC3 && a.type != TINYGLTF_TYPE_VEC4) {
+  if (matrix4) {
+    if (a.type != TINYGLTF_TYPE_MAT4 || a.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT) {
+      fail(name + ": type " + type_name(a.type) + " of " + component_name(a.componentType) +
+           ", expected MAT4 of FLOAT");
+    }
+  } else if (a.type != TINYGLTF_TYPE_SCALAR && a.type != TINYGLTF_TYPE_VEC2 &&
+             a.type != TINYGLTF_TYPE_VEC3 && a.type != TINYGLTF_TYPE_VEC4) {
     fail(name + ": matrix accessors are not vertex data (type " + type_name(a.type) + ")");
   }
   const size_t n = static_cast<size_t>(ncomp);
@@ -445,7 +566,9 @@ uint32_t GltfReader::default_material() {
   return static_cast<uint32_t>(default_material_);
 }
 
-void GltfReader::add_primitive(size_t mesh_index, size_t prim_index, const glm::dmat4& world) {
+// Reads primitive `prim_index` of mesh `mesh_index` into `out`; false when it is skipped (no
+// POSITION, or no whole triangle).
+bool GltfReader::prepare_primitive(size_t mesh_index, size_t prim_index, PrimData& out) {
   const tinygltf::Primitive& prim = model_.meshes[mesh_index].primitives[prim_index];
   const std::string path =
       element("meshes", mesh_index) + "." + element("primitives", prim_index);
@@ -460,32 +583,97 @@ void GltfReader::add_primitive(size_t mesh_index, size_t prim_index, const glm::
     fail(path + ": unknown primitive mode " + str(mode));
   }
 
-  auto attr = [&](const char* key) {
-    auto it = prim.attributes.find(key);
-    return it == prim.attributes.end() ? -1 : it->second;
+  auto attr = [&](const std::map<std::string, int>& attributes, const char* key) {
+    auto it = attributes.find(key);
+    return it == attributes.end() ? -1 : it->second;
   };
-  const int pos_acc = attr("POSITION");
+  const int pos_acc = attr(prim.attributes, "POSITION");
   if (pos_acc < 0) {
     scene_warning(file_, path + " has no POSITION attribute: skipped");
-    return;
+    return false;
   }
-  const std::vector<glm::vec3> positions = read_vec3(pos_acc, path, "POSITION");
-  const size_t nverts = positions.size();
-  std::vector<glm::vec3> normals;
-  std::vector<glm::vec2> uvs;
-  auto check_count = [&](int acc, size_t count, const char* what) {
+  out.positions = read_vec3(pos_acc, path, "POSITION");
+  const size_t nverts = out.positions.size();
+  auto check_count = [&](int acc, size_t count, const std::string& what) {
     if (count != nverts) {
       fail(element("accessors", static_cast<size_t>(acc)) + " (" + path + " " + what + "): " +
            str(count) + " elements, but POSITION has " + str(nverts));
     }
   };
-  if (const int acc = attr("NORMAL"); acc >= 0) {
-    normals = read_vec3(acc, path, "NORMAL");
-    check_count(acc, normals.size(), "NORMAL");
+  if (const int acc = attr(prim.attributes, "NORMAL"); acc >= 0) {
+    out.normals = read_vec3(acc, path, "NORMAL");
+    check_count(acc, out.normals.size(), "NORMAL");
   }
-  if (const int acc = attr("TEXCOORD_0"); acc >= 0) {
-    uvs = read_texcoords(acc, path);
-    check_count(acc, uvs.size(), "TEXCOORD_0");
+  if (const int acc = attr(prim.attributes, "TEXCOORD_0"); acc >= 0) {
+    out.uvs = read_texcoords(acc, path);
+    check_count(acc, out.uvs.size(), "TEXCOORD_0");
+  }
+
+  // Morph targets.
+  out.target_positions.resize(prim.targets.size());
+  out.target_normals.resize(prim.targets.size());
+  for (size_t k = 0; k < prim.targets.size(); ++k) {
+    const std::string tname = element("targets", k);
+    if (const int acc = attr(prim.targets[k], "POSITION"); acc >= 0) {
+      out.target_positions[k] = read_vec3(acc, path, (tname + ".POSITION").c_str());
+      check_count(acc, out.target_positions[k].size(), tname + ".POSITION");
+    }
+    if (const int acc = attr(prim.targets[k], "NORMAL"); acc >= 0 && !out.normals.empty()) {
+      out.target_normals[k] = read_vec3(acc, path, (tname + ".NORMAL").c_str());
+      check_count(acc, out.target_normals[k].size(), tname + ".NORMAL");
+    }
+  }
+
+  // Skinning attributes (set 0; further sets are ignored with a warning).
+  const int joints_acc = attr(prim.attributes, "JOINTS_0");
+  const int weights_acc = attr(prim.attributes, "WEIGHTS_0");
+  if (joints_acc >= 0 && weights_acc >= 0) {
+    const tinygltf::Accessor& ja = accessor(joints_acc, path);
+    if (ja.type != TINYGLTF_TYPE_VEC4 ||
+        (ja.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
+         ja.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT) ||
+        ja.normalized) {
+      fail(element("accessors", static_cast<size_t>(joints_acc)) + " (" + path +
+           " JOINTS_0): " + type_name(ja.type) + " of " + component_name(ja.componentType) +
+           ", expected VEC4 of UNSIGNED_BYTE or UNSIGNED_SHORT");
+    }
+    const tinygltf::Accessor& wa = accessor(weights_acc, path);
+    const int wct = wa.componentType;
+    if (wa.type != TINYGLTF_TYPE_VEC4 ||
+        !(wct == TINYGLTF_COMPONENT_TYPE_FLOAT ||
+          ((wct == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE ||
+            wct == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT) &&
+           wa.normalized))) {
+      fail(element("accessors", static_cast<size_t>(weights_acc)) + " (" + path +
+           " WEIGHTS_0): " + type_name(wa.type) + " of " + component_name(wct) +
+           ", expected VEC4 of FLOAT or normalized UNSIGNED_BYTE / UNSIGNED_SHORT");
+    }
+    const std::vector<double> j = read_accessor(joints_acc, path + " JOINTS_0");
+    const std::vector<double> w = read_accessor(weights_acc, path + " WEIGHTS_0");
+    check_count(joints_acc, ja.count, "JOINTS_0");
+    check_count(weights_acc, wa.count, "WEIGHTS_0");
+    out.joints.resize(nverts);
+    out.weights.resize(nverts);
+    for (size_t v = 0; v < nverts; ++v) {
+      glm::dvec4 wv(w[4 * v], w[4 * v + 1], w[4 * v + 2], w[4 * v + 3]);
+      for (int c = 0; c < 4; ++c) {
+        const double jc = j[4 * v + static_cast<size_t>(c)];
+        out.joints[v][c] = static_cast<uint32_t>(jc);
+        if (!std::isfinite(wv[c]) || wv[c] < 0.0) {
+          fail(element("accessors", static_cast<size_t>(weights_acc)) + " (" + path +
+               " WEIGHTS_0): vertex " + str(v) + " has a negative or non-finite weight");
+        }
+        if (wv[c] > 0.0) out.max_joint = std::max(out.max_joint, out.joints[v][c]);
+      }
+      const double sum = wv.x + wv.y + wv.z + wv.w;
+      out.weights[v] = sum > 0.0 ? glm::vec4(wv / sum) : glm::vec4(0.0f);
+    }
+    if (prim.attributes.count("JOINTS_1") != 0) {
+      scene_warning(file_, path + ": JOINTS_1 / WEIGHTS_1 are ignored (mobirt skins with the "
+                                  "first four influences)");
+    }
+  } else if (joints_acc >= 0 || weights_acc >= 0) {
+    scene_warning(file_, path + ": JOINTS_0 without WEIGHTS_0 (or the reverse): not skinned");
   }
 
   std::vector<uint32_t> indices;
@@ -504,7 +692,7 @@ void GltfReader::add_primitive(size_t mesh_index, size_t prim_index, const glm::
   }
 
   // Triangle list in the file's winding.
-  std::vector<uint32_t> tri;
+  std::vector<uint32_t>& tri = out.triangles;
   const size_t n = indices.size();
   if (mode == TINYGLTF_MODE_TRIANGLES) {
     if (n % 3 != 0) {
@@ -527,72 +715,114 @@ void GltfReader::add_primitive(size_t mesh_index, size_t prim_index, const glm::
       tri.push_back(indices[i + 1]);
     }
   }
-  if (tri.empty()) return;
+  if (tri.empty()) return false;
 
-  uint32_t material_id;
   if (prim.material < 0) {
-    material_id = default_material();
+    out.material = default_material();
   } else if (static_cast<size_t>(prim.material) >= model_.materials.size()) {
     fail(path + ": material " + str(prim.material) + " does not exist (the file has " +
          str(model_.materials.size()) + " materials)");
   } else {
-    material_id = static_cast<uint32_t>(prim.material);
+    out.material = static_cast<uint32_t>(prim.material);
   }
+  return true;
+}
 
-  const glm::dmat3 linear(world);
-  const double det = glm::determinant(linear);
-  const bool flip = det < 0.0;
-  const bool invertible = std::abs(det) > 1e-300 && std::isfinite(det);
-  const glm::dmat3 normal_matrix = invertible ? glm::inverseTranspose(linear) : glm::dmat3(1.0);
-
-  TriangleMesh& mesh = scene_.mesh;
-  if (!uvs.empty() && mesh.texcoords.empty() && !mesh.positions.empty()) {
-    mesh.texcoords.assign(mesh.positions.size(), glm::vec2(0.0f));
+size_t GltfReader::mesh_targets(size_t mesh_index) const {
+  size_t targets = 0;
+  for (const tinygltf::Primitive& prim : model_.meshes[mesh_index].primitives) {
+    targets = std::max(targets, prim.targets.size());
   }
-  for (size_t t = 0; t + 2 < tri.size(); t += 3) {
-    uint32_t v[3] = {tri[t], tri[t + 1], tri[t + 2]};
-    if (flip) std::swap(v[1], v[2]);
-    glm::vec3 p[3];
-    for (int k = 0; k < 3; ++k) {
-      p[k] = glm::vec3(world * glm::dvec4(glm::dvec3(positions[v[k]]), 1.0));
+  return targets;
+}
+
+void GltfReader::prepare_mesh(size_t mesh_index) {
+  MeshData& mesh = rig_->meshes[mesh_index];
+  if (mesh.prepared) return;
+  mesh.prepared = true;
+  const tinygltf::Mesh& src = model_.meshes[mesh_index];
+  for (size_t p = 0; p < src.primitives.size(); ++p) {
+    PrimData prim;
+    if (prepare_primitive(mesh_index, p, prim)) mesh.prims.push_back(std::move(prim));
+  }
+}
+
+// The skin of node `node_index` as an index into rig_->skins, or -1 for none.
+int GltfReader::prepare_skin(size_t node_index) {
+  const tinygltf::Node& node = model_.nodes[node_index];
+  if (node.skin < 0) return -1;
+  const std::string name = element("nodes", node_index);
+  if (static_cast<size_t>(node.skin) >= model_.skins.size()) {
+    fail(name + ": skin " + str(node.skin) + " does not exist (the file has " +
+         str(model_.skins.size()) + " skins)");
+  }
+  if (auto it = skin_map_.find(node.skin); it != skin_map_.end()) return it->second;
+  const tinygltf::Skin& src = model_.skins[static_cast<size_t>(node.skin)];
+  const std::string sname = element("skins", static_cast<size_t>(node.skin));
+  SkinData skin;
+  for (int j : src.joints) {
+    if (j < 0 || static_cast<size_t>(j) >= model_.nodes.size()) {
+      fail(sname + ".joints: node " + str(j) + " does not exist (the file has " +
+           str(model_.nodes.size()) + " nodes)");
     }
-    const glm::vec3 flat = geometric_normal(p[0], p[1], p[2]);
-    for (int k = 0; k < 3; ++k) {
-      mesh.positions.push_back(p[k]);
-      glm::vec3 nrm = flat;
-      if (!normals.empty() && invertible) {
-        const glm::dvec3 wn = normal_matrix * glm::dvec3(normals[v[k]]);
-        const double len = glm::length(wn);
-        if (!std::isfinite(len)) {
-          nrm = glm::vec3(wn);  // NaN or infinite in the file: validation names the triangle
-        } else if (len > 0.0) {
-          nrm = glm::vec3(wn / len);
+    skin.joints.push_back(static_cast<size_t>(j));
+  }
+  if (skin.joints.empty()) fail(sname + ": no joints");
+  skin.inverse_bind.assign(skin.joints.size(), glm::dmat4(1.0));
+  if (src.inverseBindMatrices >= 0) {
+    const std::vector<double> m =
+        read_accessor(src.inverseBindMatrices, sname + ".inverseBindMatrices", true);
+    if (m.size() < 16 * skin.joints.size()) {
+      fail(sname + ".inverseBindMatrices: " + str(m.size() / 16) + " matrices for " +
+           str(skin.joints.size()) + " joints");
+    }
+    for (size_t k = 0; k < skin.joints.size(); ++k) {
+      for (size_t c = 0; c < 16; ++c) {
+        if (!std::isfinite(m[16 * k + c])) {
+          fail(sname + ".inverseBindMatrices: matrix " + str(k) + " is not finite");
         }
       }
-      mesh.normals.push_back(nrm);
-      if (!uvs.empty()) {
-        mesh.texcoords.push_back(uvs[v[k]]);
-      } else if (!mesh.texcoords.empty()) {
-        mesh.texcoords.push_back(glm::vec2(0.0f));
+      skin.inverse_bind[k] = glm::make_mat4(m.data() + 16 * k);
+    }
+  }
+  const int index = static_cast<int>(rig_->skins.size());
+  rig_->skins.push_back(std::move(skin));
+  skin_map_[node.skin] = index;
+  return index;
+}
+
+void GltfReader::add_draw(size_t instance, size_t mesh_index, int skin) {
+  prepare_mesh(mesh_index);
+  const MeshData& mesh = rig_->meshes[mesh_index];
+  const size_t node = rig_->instances[instance].node;
+  if (skin >= 0) {
+    const SkinData& s = rig_->skins[static_cast<size_t>(skin)];
+    for (size_t p = 0; p < mesh.prims.size(); ++p) {
+      if (!mesh.prims[p].joints.empty() && mesh.prims[p].max_joint >= s.joints.size()) {
+        fail(element("meshes", mesh_index) + ".primitives: JOINTS_0 uses joint " +
+             str(static_cast<size_t>(mesh.prims[p].max_joint)) + ", but the skin of " +
+             element("nodes", node) + " has " + str(s.joints.size()) + " joints");
       }
     }
-    mesh.material_ids.push_back(material_id);
   }
+  Draw draw;
+  draw.instance = instance;
+  draw.mesh = mesh_index;
+  draw.skin = skin;
+  draw.first_corner = rig_->corners;
+  for (const PrimData& prim : mesh.prims) rig_->corners += prim.triangles.size();
+  rig_->draws.push_back(draw);
 }
 
-void GltfReader::add_mesh(size_t mesh_index, const glm::dmat4& world) {
-  const tinygltf::Mesh& mesh = model_.meshes[mesh_index];
-  for (size_t p = 0; p < mesh.primitives.size(); ++p) add_primitive(mesh_index, p, world);
-}
-
-void GltfReader::add_camera(size_t node_index, const glm::dmat4& world) {
+void GltfReader::add_camera(size_t instance) {
+  const size_t node_index = rig_->instances[instance].node;
   const tinygltf::Node& node = model_.nodes[node_index];
   const std::string name = element("nodes", node_index);
   if (static_cast<size_t>(node.camera) >= model_.cameras.size()) {
     fail(name + ": camera " + str(node.camera) + " does not exist (the file has " +
          str(model_.cameras.size()) + " cameras)");
   }
-  if (scene_.camera) return;
+  if (rig_->camera) return;
   const tinygltf::Camera& cam = model_.cameras[static_cast<size_t>(node.camera)];
   const std::string cname = element("cameras", static_cast<size_t>(node.camera));
   if (cam.type != "perspective") {
@@ -607,27 +837,16 @@ void GltfReader::add_camera(size_t node_index, const glm::dmat4& world) {
   if (!(yfov > 0.0) || !(yfov < glm::pi<double>())) {
     fail(cname + ": yfov " + std::to_string(yfov) + " must lie in (0, pi) radians");
   }
-  const glm::dmat3 linear(world);
-  const glm::dvec3 eye = glm::dvec3(world[3]);
-  const glm::dvec3 forward = linear * glm::dvec3(0.0, 0.0, -1.0);
-  const glm::dvec3 up = linear * glm::dvec3(0.0, 1.0, 0.0);
-  const double fl = glm::length(forward);
-  const double ul = glm::length(up);
-  if (!(fl > 0.0) || !(ul > 0.0) || !std::isfinite(fl) || !std::isfinite(ul) ||
-      glm::length(glm::cross(forward / fl, up / ul)) < 1e-9) {
-    fail(name + ": the transform of camera " + str(node.camera) +
-         " is singular (zero scale): no view direction");
-  }
-  Camera c;
-  c.eye = glm::vec3(eye);
-  c.target = glm::vec3(eye + forward / fl);
-  c.up = glm::vec3(up / ul);
-  c.yfov = static_cast<float>(yfov);
+  CameraInstance c;
+  c.instance = instance;
+  c.camera = static_cast<size_t>(node.camera);
+  c.yfov = yfov;
   c.znear = cam.perspective.znear > 0.0 ? static_cast<float>(cam.perspective.znear) : 0.0f;
-  scene_.camera = c;
+  rig_->camera = c;
 }
 
-void GltfReader::add_light(size_t node_index, const glm::dmat4& world) {
+void GltfReader::add_light(size_t instance) {
+  const size_t node_index = rig_->instances[instance].node;
   const tinygltf::Node& node = model_.nodes[node_index];
   auto ext = node.extensions.find("KHR_lights_punctual");
   if (ext == node.extensions.end()) return;
@@ -662,13 +881,6 @@ void GltfReader::add_light(size_t node_index, const glm::dmat4& world) {
       !std::isfinite(light.color.z)) {
     fail(lname + ": colour, intensity and range must be finite and non-negative");
   }
-  light.position = glm::vec3(world[3]);
-  const glm::dvec3 dir = glm::dmat3(world) * glm::dvec3(0.0, 0.0, -1.0);
-  const double len = glm::length(dir);
-  if (light.type != LightType::Point && (!(len > 0.0) || !std::isfinite(len))) {
-    fail(name + ": the node transform is singular: the light has no direction");
-  }
-  if (len > 0.0 && std::isfinite(len)) light.direction = glm::vec3(dir / len);
   if (light.type == LightType::Spot) {
     light.inner_cone = static_cast<float>(src.spot.innerConeAngle);
     light.outer_cone = static_cast<float>(src.spot.outerConeAngle);
@@ -677,13 +889,13 @@ void GltfReader::add_light(size_t node_index, const glm::dmat4& world) {
       fail(lname + ": spot cone angles must satisfy 0 <= innerConeAngle < outerConeAngle <= pi/2");
     }
   }
-  scene_.lights.push_back(light);
+  rig_->lights.push_back({instance, light});
 }
 
 void GltfReader::traverse(const std::vector<int>& roots, const std::string& roots_name) {
   struct Item {
     size_t node;
-    glm::dmat4 parent;
+    int parent;  // instance
     size_t depth;
   };
   std::vector<Item> stack;
@@ -693,7 +905,7 @@ void GltfReader::traverse(const std::vector<int>& roots, const std::string& root
       fail(roots_name + ": node " + str(*it) + " does not exist (the file has " + str(nnodes) +
            " nodes)");
     }
-    stack.push_back({static_cast<size_t>(*it), glm::dmat4(1.0), 0});
+    stack.push_back({static_cast<size_t>(*it), -1, 0});
   }
   size_t visits = 0;
   while (!stack.empty()) {
@@ -704,24 +916,566 @@ void GltfReader::traverse(const std::vector<int>& roots, const std::string& root
       fail(name + ": the node hierarchy has a cycle (or shares nodes too often)");
     }
     const tinygltf::Node& node = model_.nodes[item.node];
-    const glm::dmat4 world = item.parent * local_transform(item.node);
+    const size_t instance = rig_->instances.size();
+    rig_->instances.push_back({item.node, item.parent});
     if (node.mesh >= 0) {
       if (static_cast<size_t>(node.mesh) >= model_.meshes.size()) {
         fail(name + ": mesh " + str(node.mesh) + " does not exist (the file has " +
              str(model_.meshes.size()) + " meshes)");
       }
-      add_mesh(static_cast<size_t>(node.mesh), world);
+      add_draw(instance, static_cast<size_t>(node.mesh), prepare_skin(item.node));
     }
-    if (node.camera >= 0) add_camera(item.node, world);
-    add_light(item.node, world);
+    if (node.camera >= 0) add_camera(instance);
+    add_light(instance);
     for (auto it = node.children.rbegin(); it != node.children.rend(); ++it) {
       if (*it < 0 || static_cast<size_t>(*it) >= nnodes) {
         fail(name + ".children: node " + str(*it) + " does not exist (the file has " +
              str(nnodes) + " nodes)");
       }
-      stack.push_back({static_cast<size_t>(*it), world, item.depth + 1});
+      stack.push_back({static_cast<size_t>(*it), static_cast<int>(instance), item.depth + 1});
     }
   }
+}
+
+// Rest transforms, morph weights and the parent-first order of every node of the file.
+void GltfReader::prepare_nodes() {
+  const size_t nnodes = model_.nodes.size();
+  GltfRig& rig = *rig_;
+  rig.rest_local.resize(nnodes);
+  rig.rest_translation.assign(nnodes, glm::dvec3(0.0));
+  rig.rest_rotation.assign(nnodes, glm::dquat(1.0, 0.0, 0.0, 0.0));
+  rig.rest_scale.assign(nnodes, glm::dvec3(1.0));
+  rig.animated_node.assign(nnodes, 0);
+  rig.weight_offset.assign(nnodes, std::numeric_limits<size_t>::max());
+  rig.weight_count.assign(nnodes, 0);
+  rig.node_parent.assign(nnodes, -1);
+  for (size_t i = 0; i < nnodes; ++i) {
+    const tinygltf::Node& node = model_.nodes[i];
+    rig.rest_local[i] = local_transform(i);
+    if (!node.matrix.empty()) {
+      // Only used when the node is animated (which glTF forbids for matrix nodes): T * R * S
+      // read back from the matrix.
+      const glm::dmat4& m = rig.rest_local[i];
+      glm::dvec3 s(glm::length(glm::dvec3(m[0])), glm::length(glm::dvec3(m[1])),
+                   glm::length(glm::dvec3(m[2])));
+      if (glm::determinant(glm::dmat3(m)) < 0.0) s.x = -s.x;
+      rig.rest_translation[i] = glm::dvec3(m[3]);
+      rig.rest_scale[i] = s;
+      if (s.x != 0.0 && s.y != 0.0 && s.z != 0.0) {
+        rig.rest_rotation[i] = glm::normalize(glm::quat_cast(
+            glm::dmat3(glm::dvec3(m[0]) / s.x, glm::dvec3(m[1]) / s.y, glm::dvec3(m[2]) / s.z)));
+      }
+    } else {
+      if (!node.translation.empty()) {
+        rig.rest_translation[i] =
+            glm::dvec3(node.translation[0], node.translation[1], node.translation[2]);
+      }
+      if (!node.rotation.empty()) {
+        const glm::dquat q(node.rotation[3], node.rotation[0], node.rotation[1], node.rotation[2]);
+        rig.rest_rotation[i] = q / glm::length(q);  // local_transform refused a zero quaternion
+      }
+      if (!node.scale.empty()) {
+        rig.rest_scale[i] = glm::dvec3(node.scale[0], node.scale[1], node.scale[2]);
+      }
+    }
+    if (node.mesh >= 0 && static_cast<size_t>(node.mesh) < model_.meshes.size()) {
+      const size_t targets = mesh_targets(static_cast<size_t>(node.mesh));
+      if (targets > 0) {
+        const tinygltf::Mesh& mesh = model_.meshes[static_cast<size_t>(node.mesh)];
+        const std::vector<double>* w = nullptr;
+        if (node.weights.size() == targets) {
+          w = &node.weights;
+        } else if (mesh.weights.size() == targets) {
+          w = &mesh.weights;
+        }
+        if (!node.weights.empty() && node.weights.size() != targets) {
+          scene_warning(file_, element("nodes", i) + ": " + str(node.weights.size()) +
+                                   " morph weights for " + str(targets) + " targets: ignored");
+        }
+        rig.weight_offset[i] = rig.rest_weights.size();
+        rig.weight_count[i] = targets;
+        for (size_t k = 0; k < targets; ++k) {
+          const double v = w != nullptr ? (*w)[k] : 0.0;
+          if (!std::isfinite(v)) fail(element("nodes", i) + ": a morph weight is not finite");
+          rig.rest_weights.push_back(v);
+        }
+      }
+    }
+    for (int c : node.children) {
+      if (c >= 0 && static_cast<size_t>(c) < nnodes && rig.node_parent[static_cast<size_t>(c)] < 0 &&
+          static_cast<size_t>(c) != i) {
+        rig.node_parent[static_cast<size_t>(c)] = static_cast<int>(i);
+      }
+    }
+  }
+  // Parents before children: breadth-first from the roots (nodes in a parent cycle never come
+  // up; their world transform stays the identity).
+  std::vector<std::vector<size_t>> children(nnodes);
+  for (size_t i = 0; i < nnodes; ++i) {
+    if (rig.node_parent[i] >= 0) children[static_cast<size_t>(rig.node_parent[i])].push_back(i);
+  }
+  for (size_t i = 0; i < nnodes; ++i) {
+    if (rig.node_parent[i] < 0) rig.node_order.push_back(i);
+  }
+  for (size_t k = 0; k < rig.node_order.size(); ++k) {
+    for (size_t c : children[rig.node_order[k]]) rig.node_order.push_back(c);
+  }
+}
+
+// Channels and samplers of the animations played: all (only < 0) or animations[only].
+void GltfReader::prepare_animations(int only, bool warn_overrides) {
+  GltfRig& rig = *rig_;
+  const size_t nanim = model_.animations.size();
+  if (only >= 0 && static_cast<size_t>(only) >= nanim) {
+    fail("animation " + str(only) + " does not exist (the file has " + str(nanim) +
+         " animations)");
+  }
+  std::set<size_t> claimed;        // node * 4 + path
+  std::vector<size_t> overridden;  // animations with channels dropped
+  for (size_t a = 0; a < nanim; ++a) {
+    if (only >= 0 && a != static_cast<size_t>(only)) continue;
+    const tinygltf::Animation& anim = model_.animations[a];
+    const std::string aname = element("animations", a);
+    std::map<int, size_t> sampler_map;  // the animation's sampler -> rig.samplers
+    for (size_t c = 0; c < anim.channels.size(); ++c) {
+      const tinygltf::AnimationChannel& ch = anim.channels[c];
+      const std::string cname = aname + "." + element("channels", c);
+      if (ch.target_node < 0) continue;  // no target node: the channel is ignored (glTF 2.0)
+      if (static_cast<size_t>(ch.target_node) >= model_.nodes.size()) {
+        fail(cname + ": target node " + str(ch.target_node) + " does not exist (the file has " +
+             str(model_.nodes.size()) + " nodes)");
+      }
+      const size_t node = static_cast<size_t>(ch.target_node);
+      ChannelPath path;
+      size_t width;
+      int want_type;
+      if (ch.target_path == "translation") {
+        path = ChannelPath::Translation, width = 3, want_type = TINYGLTF_TYPE_VEC3;
+      } else if (ch.target_path == "rotation") {
+        path = ChannelPath::Rotation, width = 4, want_type = TINYGLTF_TYPE_VEC4;
+      } else if (ch.target_path == "scale") {
+        path = ChannelPath::Scale, width = 3, want_type = TINYGLTF_TYPE_VEC3;
+      } else if (ch.target_path == "weights") {
+        path = ChannelPath::Weights, width = rig.weight_count[node],
+        want_type = TINYGLTF_TYPE_SCALAR;
+        if (width == 0) {
+          scene_warning(file_, cname + ": animates the morph weights of " +
+                                   element("nodes", node) +
+                                   ", which has no mesh with morph targets: ignored");
+          continue;
+        }
+      } else {
+        scene_warning(file_, cname + ": target path '" + ch.target_path + "' is not supported: "
+                                 "ignored");
+        continue;
+      }
+      // Played together, the first channel that drives a property of a node wins.
+      const size_t claim = node * 4 + static_cast<size_t>(path);
+      if (!claimed.insert(claim).second) {
+        if (overridden.empty() || overridden.back() != a) overridden.push_back(a);
+        continue;
+      }
+      if (ch.sampler < 0 || static_cast<size_t>(ch.sampler) >= anim.samplers.size()) {
+        fail(cname + ": sampler " + str(ch.sampler) + " does not exist (the animation has " +
+             str(anim.samplers.size()) + " samplers)");
+      }
+      size_t sampler_index;
+      if (auto it = sampler_map.find(ch.sampler); it != sampler_map.end()) {
+        sampler_index = it->second;
+        if (rig.samplers[sampler_index].width != width) {
+          fail(cname + ": sampler " + str(ch.sampler) + " is shared by targets of different sizes");
+        }
+      } else {
+        const tinygltf::AnimationSampler& src = anim.samplers[static_cast<size_t>(ch.sampler)];
+        const std::string sname = aname + "." + element("samplers", static_cast<size_t>(ch.sampler));
+        AnimSampler s;
+        s.width = width;
+        if (src.interpolation.empty() || src.interpolation == "LINEAR") {
+          s.interpolation = Interpolation::Linear;
+        } else if (src.interpolation == "STEP") {
+          s.interpolation = Interpolation::Step;
+        } else if (src.interpolation == "CUBICSPLINE") {
+          s.interpolation = Interpolation::CubicSpline;
+        } else {
+          fail(sname + ": interpolation '" + src.interpolation +
+               "' must be LINEAR, STEP or CUBICSPLINE");
+        }
+        const tinygltf::Accessor& in = accessor(src.input, sname + ".input");
+        if (in.type != TINYGLTF_TYPE_SCALAR || in.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT) {
+          fail(element("accessors", static_cast<size_t>(src.input)) + " (" + sname +
+               ".input): " + type_name(in.type) + " of " + component_name(in.componentType) +
+               ", expected SCALAR of FLOAT (key times in seconds)");
+        }
+        s.times = read_accessor(src.input, sname + ".input");
+        if (s.times.empty()) fail(sname + ".input: no key times");
+        for (size_t k = 0; k < s.times.size(); ++k) {
+          if (!std::isfinite(s.times[k]) || s.times[k] < 0.0 ||
+              (k > 0 && s.times[k] < s.times[k - 1])) {
+            fail(sname + ".input: key time " + str(k) + " (" + std::to_string(s.times[k]) +
+                 ") is negative, not finite or smaller than the one before");
+          }
+        }
+        const tinygltf::Accessor& out = accessor(src.output, sname + ".output");
+        if (out.type != want_type) {
+          fail(element("accessors", static_cast<size_t>(src.output)) + " (" + sname +
+               ".output): type " + type_name(out.type) + ", expected " + type_name(want_type) +
+               " for " + ch.target_path);
+        }
+        const bool float_or_normalized =
+            out.componentType == TINYGLTF_COMPONENT_TYPE_FLOAT ||
+            (out.normalized && path != ChannelPath::Translation && path != ChannelPath::Scale);
+        if (!float_or_normalized) {
+          fail(element("accessors", static_cast<size_t>(src.output)) + " (" + sname +
+               ".output): component type " + component_name(out.componentType) +
+               ", expected FLOAT (or normalized integers for rotation and weights)");
+        }
+        s.values = read_accessor(src.output, sname + ".output");
+        const size_t per_key = s.interpolation == Interpolation::CubicSpline ? 3 : 1;
+        const size_t want = s.times.size() * per_key * (path == ChannelPath::Weights ? width : 1);
+        if (out.count != want) {
+          fail(element("accessors", static_cast<size_t>(src.output)) + " (" + sname +
+               ".output): " + str(out.count) + " elements, expected " + str(want) + " (" +
+               str(s.times.size()) + " key times" + (per_key == 3 ? " x 3 for CUBICSPLINE" : "") +
+               (path == ChannelPath::Weights ? " x " + str(width) + " morph targets" : "") + ")");
+        }
+        for (double v : s.values) {
+          if (!std::isfinite(v)) fail(sname + ".output: a value is not finite");
+        }
+        if (path == ChannelPath::Rotation) {
+          for (size_t k = 0; k < s.times.size(); ++k) {
+            const double* q = &s.values[(k * per_key + (per_key == 3 ? 1 : 0)) * 4];
+            if (q[0] == 0.0 && q[1] == 0.0 && q[2] == 0.0 && q[3] == 0.0) {
+              fail(sname + ".output: key " + str(k) + " is a zero quaternion");
+            }
+          }
+        }
+        rig.duration = std::max(rig.duration, s.times.back());
+        sampler_index = rig.samplers.size();
+        rig.samplers.push_back(std::move(s));
+        sampler_map[ch.sampler] = sampler_index;
+      }
+      if (path != ChannelPath::Weights) {
+        if (!model_.nodes[node].matrix.empty() && !rig.animated_node[node]) {
+          scene_warning(file_, cname + ": " + element("nodes", node) +
+                                   " has a matrix, which glTF forbids for animated nodes; it is "
+                                   "split into translation, rotation and scale");
+        }
+        rig.animated_node[node] = 1;
+      }
+      rig.channels.push_back({node, path, sampler_index});
+    }
+  }
+  if (!overridden.empty() && warn_overrides) {
+    std::string list;
+    for (size_t a : overridden) {
+      if (!list.empty()) list.append(", ");
+      list.append(element("animations", a));
+    }
+    scene_warning(file_, list + (overridden.size() == 1 ? " drives" : " drive") +
+                             " node properties that an earlier animation drives already; all "
+                             "animations play together and the earlier wins (choose one "
+                             "animation to see it alone)");
+  }
+}
+
+// ---- Evaluation -------------------------------------------------------------------------------
+
+glm::dquat slerp_shortest(glm::dquat a, glm::dquat b, double u) {
+  double d = glm::dot(a, b);
+  if (d < 0.0) {
+    b = -b;
+    d = -d;
+  }
+  if (d > 0.9995) return glm::normalize(a * (1.0 - u) + b * u);
+  const double theta = std::acos(std::min(d, 1.0));
+  const double s = std::sin(theta);
+  return a * (std::sin((1.0 - u) * theta) / s) + b * (std::sin(u * theta) / s);
+}
+
+// The sampler's value at time t into out[0 .. width).
+void sample(const AnimSampler& s, double t, bool quaternion, double* out) {
+  const size_t w = s.width;
+  const size_t n = s.times.size();
+  const bool cubic = s.interpolation == Interpolation::CubicSpline;
+  const size_t stride = cubic ? 3 * w : w;
+  const size_t value = cubic ? w : 0;  // offset of the value inside a key
+  auto key = [&](size_t k) { return &s.values[k * stride + value]; };
+  if (n == 1 || t <= s.times[0]) {
+    std::copy(key(0), key(0) + w, out);
+    return;
+  }
+  if (t >= s.times[n - 1]) {
+    std::copy(key(n - 1), key(n - 1) + w, out);
+    return;
+  }
+  const size_t k =
+      static_cast<size_t>(std::upper_bound(s.times.begin(), s.times.end(), t) - s.times.begin()) -
+      1;  // times[k] <= t < times[k + 1]
+  const double t0 = s.times[k];
+  const double td = s.times[k + 1] - t0;
+  const double u = td > 0.0 ? (t - t0) / td : 1.0;
+  const double* a = key(k);
+  const double* b = key(k + 1);
+  switch (s.interpolation) {
+    case Interpolation::Step:
+      std::copy(a, a + w, out);
+      return;
+    case Interpolation::Linear:
+      if (quaternion) {
+        const glm::dquat q = slerp_shortest(glm::dquat(a[3], a[0], a[1], a[2]),
+                                            glm::dquat(b[3], b[0], b[1], b[2]), u);
+        out[0] = q.x, out[1] = q.y, out[2] = q.z, out[3] = q.w;
+      } else {
+        for (size_t c = 0; c < w; ++c) out[c] = a[c] + (b[c] - a[c]) * u;
+      }
+      return;
+    case Interpolation::CubicSpline: {
+      // glTF 2.0 Appendix C: p(u) = (2u^3 - 3u^2 + 1) v_k + (u^3 - 2u^2 + u) td b_k
+      //                             + (-2u^3 + 3u^2) v_k+1 + (u^3 - u^2) td a_k+1
+      const double u2 = u * u;
+      const double u3 = u2 * u;
+      const double h00 = 2.0 * u3 - 3.0 * u2 + 1.0;
+      const double h10 = (u3 - 2.0 * u2 + u) * td;
+      const double h01 = -2.0 * u3 + 3.0 * u2;
+      const double h11 = (u3 - u2) * td;
+      const double* out_tangent = a + w;  // b_k
+      const double* in_tangent = b - w;   // a_k+1
+      for (size_t c = 0; c < w; ++c) {
+        out[c] = h00 * a[c] + h10 * out_tangent[c] + h01 * b[c] + h11 * in_tangent[c];
+      }
+      if (quaternion) {
+        const double len = std::sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2] +
+                                     out[3] * out[3]);
+        if (len > 0.0) {
+          for (size_t c = 0; c < 4; ++c) out[c] /= len;
+        } else {
+          out[0] = out[1] = out[2] = 0.0, out[3] = 1.0;
+        }
+      }
+      return;
+    }
+  }
+}
+
+glm::dmat4 trs_matrix(const glm::dvec3& t, const glm::dquat& r, const glm::dvec3& s) {
+  glm::dmat4 m(1.0);
+  m[3] = glm::dvec4(t, 1.0);
+  m = m * glm::mat4_cast(r);
+  return m * glm::scale(glm::dmat4(1.0), s);
+}
+
+// Inverse transpose of the upper 3x3 of m, up to the determinant's magnitude (normals are
+// normalised afterwards): the cofactor matrix, times the determinant's sign.
+glm::dmat3 normal_matrix_of(const glm::dmat3& m, double det) {
+  const glm::dmat3 cof(glm::cross(m[1], m[2]), glm::cross(m[2], m[0]), glm::cross(m[0], m[1]));
+  return det < 0.0 ? -cof : cof;
+}
+
+void GltfRig::fail_at(double t, const std::string& message) const {
+  throw input_error(file, message + (channels.empty() ? std::string()
+                                                      : " (at t = " + std::to_string(t) + " s)"));
+}
+
+struct Pose {
+  std::vector<glm::dvec3> translation;
+  std::vector<glm::dquat> rotation;
+  std::vector<glm::dvec3> scale;
+  std::vector<double> weights;
+  std::vector<glm::dmat4> instance_world;
+  std::vector<glm::dmat4> node_world;
+  std::vector<std::vector<glm::dmat4>> joint_matrices;  // per skin
+};
+
+void pose(const GltfRig& rig, double t, Pose& p) {
+  const size_t nnodes = rig.rest_local.size();
+  p.translation = rig.rest_translation;
+  p.rotation = rig.rest_rotation;
+  p.scale = rig.rest_scale;
+  p.weights = rig.rest_weights;
+  double v[4];
+  for (const AnimChannel& ch : rig.channels) {
+    const AnimSampler& s = rig.samplers[ch.sampler];
+    switch (ch.path) {
+      case ChannelPath::Translation:
+        sample(s, t, false, v);
+        p.translation[ch.node] = glm::dvec3(v[0], v[1], v[2]);
+        break;
+      case ChannelPath::Rotation: {
+        sample(s, t, true, v);
+        const glm::dquat q(v[3], v[0], v[1], v[2]);
+        const double len = glm::length(q);
+        p.rotation[ch.node] = len > 0.0 ? q / len : glm::dquat(1.0, 0.0, 0.0, 0.0);
+        break;
+      }
+      case ChannelPath::Scale:
+        sample(s, t, false, v);
+        p.scale[ch.node] = glm::dvec3(v[0], v[1], v[2]);
+        break;
+      case ChannelPath::Weights:
+        sample(s, t, false, &p.weights[rig.weight_offset[ch.node]]);
+        break;
+    }
+  }
+  auto local = [&](size_t node) {
+    return rig.animated_node[node]
+               ? trs_matrix(p.translation[node], p.rotation[node], p.scale[node])
+               : rig.rest_local[node];
+  };
+  p.instance_world.resize(rig.instances.size());
+  for (size_t i = 0; i < rig.instances.size(); ++i) {
+    const Instance& inst = rig.instances[i];
+    p.instance_world[i] =
+        inst.parent < 0 ? local(inst.node)
+                        : p.instance_world[static_cast<size_t>(inst.parent)] * local(inst.node);
+  }
+  p.joint_matrices.resize(rig.skins.size());
+  if (rig.skins.empty()) return;
+  p.node_world.assign(nnodes, glm::dmat4(1.0));
+  for (size_t node : rig.node_order) {
+    const int parent = rig.node_parent[node];
+    p.node_world[node] =
+        parent < 0 ? local(node) : p.node_world[static_cast<size_t>(parent)] * local(node);
+  }
+  for (size_t s = 0; s < rig.skins.size(); ++s) {
+    const SkinData& skin = rig.skins[s];
+    p.joint_matrices[s].resize(skin.joints.size());
+    for (size_t j = 0; j < skin.joints.size(); ++j) {
+      p.joint_matrices[s][j] = p.node_world[skin.joints[j]] * skin.inverse_bind[j];
+    }
+  }
+}
+
+void GltfRig::evaluate(double t, Scene& out) const {
+  Pose p;
+  pose(*this, t, p);
+  TriangleMesh& mesh = out.mesh;
+  mesh.positions.resize(corners);
+  mesh.normals.resize(corners);
+  // Per vertex of one primitive: posed position, and normal (zero: use the flat normal).
+  std::vector<glm::vec3> pos;
+  std::vector<glm::vec3> nrm;
+  for (const Draw& draw : draws) {
+    const MeshData& md = meshes[draw.mesh];
+    const size_t node = instances[draw.instance].node;
+    const double* weights =
+        weight_count[node] > 0 ? &p.weights[weight_offset[node]] : nullptr;
+    const glm::dmat4& world = p.instance_world[draw.instance];
+    const glm::dmat3 linear(world);
+    const double det = glm::determinant(linear);
+    const bool invertible = std::abs(det) > 1e-300 && std::isfinite(det);
+    const glm::dmat3 normal_matrix =
+        invertible ? glm::inverseTranspose(linear) : glm::dmat3(1.0);
+    size_t corner = draw.first_corner;
+    for (const PrimData& prim : md.prims) {
+      const size_t nv = prim.positions.size();
+      pos.resize(nv);
+      nrm.resize(nv);
+      const bool has_normals = !prim.normals.empty();
+      const bool skinned = draw.skin >= 0 && !prim.joints.empty();
+      const std::vector<glm::dmat4>* joints =
+          skinned ? &p.joint_matrices[static_cast<size_t>(draw.skin)] : nullptr;
+      for (size_t v = 0; v < nv; ++v) {
+        glm::vec3 lp = prim.positions[v];
+        glm::vec3 ln = has_normals ? prim.normals[v] : glm::vec3(0.0f);
+        if (weights != nullptr) {
+          for (size_t k = 0; k < prim.target_positions.size(); ++k) {
+            const float wk = static_cast<float>(weights[k]);
+            if (wk == 0.0f) continue;
+            if (!prim.target_positions[k].empty()) lp += wk * prim.target_positions[k][v];
+            if (has_normals && !prim.target_normals[k].empty()) {
+              ln += wk * prim.target_normals[k][v];
+            }
+          }
+        }
+        glm::dmat4 m;
+        glm::dmat3 nm;
+        bool ok;
+        if (skinned) {
+          const glm::vec4& w = prim.weights[v];
+          const glm::uvec4& j = prim.joints[v];
+          if (w.x + w.y + w.z + w.w > 0.0f) {
+            m = double(w.x) * (*joints)[j.x] + double(w.y) * (*joints)[j.y] +
+                double(w.z) * (*joints)[j.z] + double(w.w) * (*joints)[j.w];
+          } else {
+            m = glm::dmat4(1.0);
+          }
+          const glm::dmat3 l(m);
+          const double d = glm::determinant(l);
+          ok = std::abs(d) > 1e-300 && std::isfinite(d);
+          nm = normal_matrix_of(l, d);
+        } else {
+          m = world;
+          nm = normal_matrix;
+          ok = invertible;
+        }
+        pos[v] = glm::vec3(m * glm::dvec4(glm::dvec3(lp), 1.0));
+        glm::vec3 n(0.0f);
+        if (has_normals && ok) {
+          const glm::dvec3 wn = nm * glm::dvec3(ln);
+          const double len = glm::length(wn);
+          if (!std::isfinite(len)) {
+            n = glm::vec3(wn);  // NaN or infinite in the file: validation names the triangle
+          } else if (len > 0.0) {
+            n = glm::vec3(wn / len);
+          }
+        }
+        nrm[v] = n;
+      }
+      const size_t ntri = prim.triangles.size() / 3;
+      for (size_t tr = 0; tr < ntri; ++tr) {
+        uint32_t vi[3] = {prim.triangles[3 * tr], prim.triangles[3 * tr + 1],
+                          prim.triangles[3 * tr + 2]};
+        if (draw.flip && !skinned) std::swap(vi[1], vi[2]);
+        const glm::vec3 flat = geometric_normal(pos[vi[0]], pos[vi[1]], pos[vi[2]]);
+        for (int k = 0; k < 3; ++k) {
+          mesh.positions[corner] = pos[vi[k]];
+          const glm::vec3& n = nrm[vi[k]];
+          mesh.normals[corner] = (n.x == 0.0f && n.y == 0.0f && n.z == 0.0f) ? flat : n;
+          ++corner;
+        }
+      }
+    }
+  }
+
+  out.lights.resize(lights.size());
+  for (size_t i = 0; i < lights.size(); ++i) {
+    const glm::dmat4& world = p.instance_world[lights[i].instance];
+    Light light = lights[i].light;
+    light.position = glm::vec3(world[3]);
+    const glm::dvec3 dir = glm::dmat3(world) * glm::dvec3(0.0, 0.0, -1.0);
+    const double len = glm::length(dir);
+    if (light.type != LightType::Point && (!(len > 0.0) || !std::isfinite(len))) {
+      fail_at(t, element("nodes", instances[lights[i].instance].node) +
+                     ".extensions.KHR_lights_punctual: the node transform is singular: the "
+                     "light has no direction");
+    }
+    if (len > 0.0 && std::isfinite(len)) light.direction = glm::vec3(dir / len);
+    out.lights[i] = light;
+  }
+
+  out.camera.reset();
+  if (camera) {
+    const glm::dmat4& world = p.instance_world[camera->instance];
+    const glm::dmat3 linear(world);
+    const glm::dvec3 eye = glm::dvec3(world[3]);
+    const glm::dvec3 forward = linear * glm::dvec3(0.0, 0.0, -1.0);
+    const glm::dvec3 up = linear * glm::dvec3(0.0, 1.0, 0.0);
+    const double fl = glm::length(forward);
+    const double ul = glm::length(up);
+    if (!(fl > 0.0) || !(ul > 0.0) || !std::isfinite(fl) || !std::isfinite(ul) ||
+        glm::length(glm::cross(forward / fl, up / ul)) < 1e-9) {
+      fail_at(t, element("nodes", instances[camera->instance].node) + ": the transform of camera " +
+                     str(camera->camera) + " is singular (zero scale): no view direction");
+    }
+    Camera c;
+    c.eye = glm::vec3(eye);
+    c.target = glm::vec3(eye + forward / fl);
+    c.up = glm::vec3(up / ul);
+    c.yfov = static_cast<float>(camera->yfov);
+    c.znear = camera->znear;
+    out.camera = c;
+  }
+  validate_scene(out);
 }
 
 TextureWrap wrap_mode(int mode) {
@@ -843,8 +1597,17 @@ void GltfReader::convert_materials() {
   }
 }
 
-Scene GltfReader::read() {
+std::shared_ptr<GltfRig> GltfReader::read(const LoadOptions& options, bool animated,
+                                          Scene& scene) {
+  scene_ = Scene();
   scene_.source = file_;
+  if (!options.mtl.empty()) {
+    scene_warning(file_, "a replacement .mtl (" + options.mtl + ") applies to OBJ files only: "
+                         "ignored for glTF");
+  }
+  rig_ = std::make_shared<GltfRig>();
+  rig_->file = file_;
+  rig_->meshes.resize(model_.meshes.size());
   convert_materials();
   std::vector<int> roots;
   std::string roots_name;
@@ -868,12 +1631,41 @@ Scene GltfReader::read() {
     roots_name = "root nodes";
   }
   traverse(roots, roots_name);
-  return std::move(scene_);
+  prepare_nodes();
+  prepare_animations(options.animation, animated);
+
+  // The winding is fixed at t = 0: a draw whose node mirrors at t = 0 has its triangles reversed
+  // (and its texture coordinates with them) in every frame. Skinned primitives keep the file's.
+  Pose rest;
+  pose(*rig_, 0.0, rest);
+  bool any_uvs = false;
+  for (Draw& draw : rig_->draws) {
+    draw.flip = glm::determinant(glm::dmat3(rest.instance_world[draw.instance])) < 0.0;
+    for (const PrimData& prim : rig_->meshes[draw.mesh].prims) any_uvs |= !prim.uvs.empty();
+  }
+  TriangleMesh& mesh = scene_.mesh;
+  mesh.material_ids.reserve(rig_->corners / 3);
+  if (any_uvs) mesh.texcoords.reserve(rig_->corners);
+  for (const Draw& draw : rig_->draws) {
+    for (const PrimData& prim : rig_->meshes[draw.mesh].prims) {
+      const bool flip = draw.flip && !(draw.skin >= 0 && !prim.joints.empty());
+      for (size_t t = 0; t + 2 < prim.triangles.size(); t += 3) {
+        mesh.material_ids.push_back(prim.material);
+        if (!any_uvs) continue;
+        uint32_t v[3] = {prim.triangles[t], prim.triangles[t + 1], prim.triangles[t + 2]};
+        if (flip) std::swap(v[1], v[2]);
+        for (int k = 0; k < 3; ++k) {
+          mesh.texcoords.push_back(prim.uvs.empty() ? glm::vec2(0.0f) : prim.uvs[v[k]]);
+        }
+      }
+    }
+  }
+  rig_->evaluate(0.0, scene_);
+  scene = std::move(scene_);
+  return std::move(rig_);
 }
 
-}  // namespace
-
-Scene load_gltf(const std::string& path) {
+tinygltf::Model parse_gltf(const std::string& path) {
   check_scene_file(path);
   std::ifstream in(path, std::ios::binary);
   if (!in) throw input_error(path, "cannot be opened for reading");
@@ -905,11 +1697,34 @@ Scene load_gltf(const std::string& path) {
                                 ": " + (why.empty() ? "tinygltf could not parse it" : why));
   }
   if (!warn.empty()) scene_warning(path, library_message(warn));
+  return model;
+}
 
+}  // namespace
+
+Scene load_gltf(const std::string& path) { return load_gltf(path, LoadOptions{}); }
+
+Scene load_gltf(const std::string& path, const LoadOptions& options) {
+  const tinygltf::Model model = parse_gltf(path);
   GltfReader reader(path, model);
-  Scene scene = reader.read();
-  validate_scene(scene);
+  Scene scene;
+  reader.read(options, false, scene);
   return scene;
 }
+
+namespace detail {
+
+AnimatedScene load_gltf_animated(const std::string& path, const LoadOptions& options) {
+  const tinygltf::Model model = parse_gltf(path);
+  GltfReader reader(path, model);
+  Scene scene;
+  std::shared_ptr<GltfRig> rig = reader.read(options, true, scene);
+  const double duration = rig->duration;
+  std::shared_ptr<const Animator> animator;
+  if (!rig->channels.empty()) animator = std::move(rig);
+  return AnimatedScene(std::move(scene), std::move(animator), duration, options.fps);
+}
+
+}  // namespace detail
 
 }  // namespace mobirt

@@ -21,13 +21,15 @@ void check_scene_file(const std::string& path) {
   }
 }
 
-Scene load_scene(const std::string& path) {
+Scene load_scene(const std::string& path) { return load_scene(path, LoadOptions{}); }
+
+Scene load_scene(const std::string& path, const LoadOptions& options) {
   check_scene_file(path);
   std::string ext = std::filesystem::path(path).extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  if (ext == ".gltf" || ext == ".glb") return load_gltf(path);
-  if (ext == ".obj") return load_obj(path);
+  if (ext == ".gltf" || ext == ".glb") return load_gltf(path, options);
+  if (ext == ".obj") return load_obj(path, options);
   throw input_error(path, "unsupported scene format '" + (ext.empty() ? std::string("") : ext) +
                               "': mobirt reads .gltf, .glb and .obj");
 }

@@ -6,13 +6,20 @@
 #pragma GCC diagnostic pop
 
 #include <algorithm>
+#include <atomic>
+#include <exception>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <map>
+#include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "core/error.h"
+#include "scene/animation.h"
 #include "scene/loader.h"
 #include "scene/validate.h"
 
@@ -49,32 +56,110 @@ Material convert(const tinyobj::material_t& src) {
   return m;
 }
 
-}  // namespace
+// Reads the .mtl given in LoadOptions::mtl for every `mtllib` of the OBJ, once.
+class OverrideMtlReader : public tinyobj::MaterialReader {
+ public:
+  explicit OverrideMtlReader(const std::string& path) : path_(path) {}
+  bool operator()(const std::string&, std::vector<tinyobj::material_t>* materials,
+                  std::map<std::string, int>* material_map, std::string* warn,
+                  std::string* err) override {
+    if (loaded_) return true;
+    loaded_ = true;
+    std::ifstream in(path_);
+    if (!in) throw input_error(path_, "cannot be opened for reading");
+    tinyobj::LoadMtl(material_map, materials, &in, warn, err);
+    return true;
+  }
 
-Scene load_obj(const std::string& path) {
-  check_scene_file(path);
+ private:
+  std::string path_;
+  bool loaded_ = false;
+};
+
+// True when a line of `text` is an mtllib statement.
+bool has_mtllib(const std::string& text) {
+  size_t pos = 0;
+  while (pos < text.size()) {
+    size_t i = pos;
+    while (i < text.size() && (text[i] == ' ' || text[i] == '\t')) ++i;
+    if (text.compare(i, 6, "mtllib") == 0 && i + 6 < text.size() &&
+        (text[i + 6] == ' ' || text[i + 6] == '\t')) {
+      return true;
+    }
+    const size_t end = text.find('\n', pos);
+    if (end == std::string::npos) break;
+    pos = end + 1;
+  }
+  return false;
+}
+
+// The OBJ parsed; `material_folder` gets the folder that map_Kd paths are relative to.
+struct ParsedObj {
+  tinyobj::attrib_t attrib;
+  std::vector<tinyobj::shape_t> shapes;
+  std::vector<tinyobj::material_t> materials;
+  std::string warning;
+  std::string error;
+  std::string material_folder;
+};
+
+void parse_obj(const std::string& path, const std::string& mtl, ParsedObj& out) {
   const std::filesystem::path file(path);
   std::string folder = file.parent_path().string();
   if (folder.empty()) folder = ".";
-
-  tinyobj::ObjReaderConfig config;
-  config.triangulate = true;
-  config.vertex_color = false;
-  config.mtl_search_path = folder;
-  tinyobj::ObjReader reader;
-  const bool ok = reader.ParseFromFile(path, config);
-  if (!ok || !reader.Valid()) {
-    const std::string why = library_message(reader.Error());
+  bool ok;
+  if (mtl.empty()) {
+    // What tinyobj::ObjReader::ParseFromFile does, without copying its results.
+    ok = tinyobj::LoadObj(&out.attrib, &out.shapes, &out.materials, &out.warning, &out.error,
+                          path.c_str(), folder.c_str(), /*triangulate=*/true,
+                          /*default_vcols_fallback=*/false);
+    out.material_folder = folder;
+  } else {
+    check_scene_file(mtl);
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw input_error(path, "cannot be opened for reading");
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    // An OBJ without mtllib resolves no usemtl; the replacement .mtl is read up front then.
+    if (!has_mtllib(text)) text.insert(0, "mtllib replacement.mtl\n");
+    std::istringstream stream(std::move(text));
+    OverrideMtlReader reader(mtl);
+    ok = tinyobj::LoadObj(&out.attrib, &out.shapes, &out.materials, &out.warning, &out.error,
+                          &stream, &reader, true, false);
+    std::string mfolder = std::filesystem::path(mtl).parent_path().string();
+    out.material_folder = mfolder.empty() ? "." : mfolder;
+  }
+  if (!ok) {
+    const std::string why = library_message(out.error);
     throw input_error(path, "not a valid OBJ file: " +
                                 (why.empty() ? std::string("tinyobjloader could not parse it")
                                              : why));
   }
-  if (!reader.Warning().empty()) scene_warning(path, library_message(reader.Warning()));
-  if (!reader.Error().empty()) scene_warning(path, library_message(reader.Error()));
+}
 
-  const tinyobj::attrib_t& attrib = reader.GetAttrib();
-  const std::vector<tinyobj::shape_t>& shapes = reader.GetShapes();
-  const std::vector<tinyobj::material_t>& materials = reader.GetMaterials();
+}  // namespace
+
+Scene load_obj(const std::string& path) { return load_obj(path, LoadOptions{}); }
+
+Scene load_obj(const std::string& path, const LoadOptions& options) {
+  return detail::load_obj_frame(path, options.mtl, true);
+}
+
+namespace detail {
+
+Scene load_obj_frame(const std::string& path, const std::string& mtl, bool warnings) {
+  check_scene_file(path);
+  ParsedObj parsed;
+  parse_obj(path, mtl, parsed);
+  auto warn = [&](const std::string& message) {
+    if (warnings) scene_warning(path, message);
+  };
+  if (!parsed.warning.empty()) warn(library_message(parsed.warning));
+  if (!parsed.error.empty()) warn(library_message(parsed.error));
+  const std::string& folder = parsed.material_folder;
+
+  const tinyobj::attrib_t& attrib = parsed.attrib;
+  const std::vector<tinyobj::shape_t>& shapes = parsed.shapes;
+  const std::vector<tinyobj::material_t>& materials = parsed.materials;
 
   Scene scene;
   scene.source = path;
@@ -90,7 +175,7 @@ Scene load_obj(const std::string& path) {
         ref.name = src.diffuse_texname;
         ref.path = tex;
         if (!std::filesystem::exists(tex)) {
-          scene_warning(path, "material '" + src.name + "': texture " + tex + " not found");
+          warn("material '" + src.name + "': texture " + tex + " not found");
         }
         it = texture_by_path.emplace(tex, static_cast<int>(scene.textures.size())).first;
         scene.textures.push_back(std::move(ref));
@@ -179,5 +264,105 @@ Scene load_obj(const std::string& path) {
   validate_scene(scene);
   return scene;
 }
+
+
+namespace {
+
+// The frames of an OBJ sequence, all in memory: positions and normals per frame (the triangle
+// soup of TriangleMesh), frame = floor(t * fps) clamped.
+class ObjSequence : public detail::Animator {
+ public:
+  void evaluate(double t, Scene& out) const override {
+    const size_t n = positions.size();
+    // The small bias keeps t = k / fps on frame k despite rounding.
+    const double f = std::floor(t * fps + 1e-9);
+    const size_t frame = !(f > 0.0) ? 0 : f >= static_cast<double>(n - 1) ? n - 1
+                                                                           : static_cast<size_t>(f);
+    out.mesh.positions.assign(positions[frame].begin(), positions[frame].end());
+    out.mesh.normals.assign(normals[frame].begin(), normals[frame].end());
+    out.lights.clear();
+    out.camera.reset();
+    out.degenerate_triangles = degenerate[frame];
+  }
+
+  double fps = 24.0;
+  std::vector<std::vector<glm::vec3>> positions;
+  std::vector<std::vector<glm::vec3>> normals;
+  std::vector<size_t> degenerate;
+};
+
+}  // namespace
+
+AnimatedScene load_obj_sequence(const std::vector<std::string>& files, const std::string& source,
+                                const LoadOptions& options) {
+  if (files.empty()) throw input_error(source, "no frame files");
+  const size_t n = files.size();
+  // Frames load in parallel (one worker per core); only the first frame prints warnings.
+  std::vector<Scene> frames(n);
+  std::vector<std::exception_ptr> errors(n);
+  std::atomic<size_t> next{0};
+  auto work = [&] {
+    for (size_t i = next++; i < n; i = next++) {
+      try {
+        frames[i] = load_obj_frame(files[i], options.mtl, i == 0);
+      } catch (...) {
+        errors[i] = std::current_exception();
+      }
+    }
+  };
+  const size_t workers =
+      std::min<size_t>(n, std::max(1u, std::thread::hardware_concurrency()));
+  std::vector<std::thread> threads;
+  for (size_t w = 1; w < workers; ++w) threads.emplace_back(work);
+  work();
+  for (std::thread& th : threads) th.join();
+  for (size_t i = 0; i < n; ++i) {
+    if (errors[i]) std::rethrow_exception(errors[i]);
+  }
+
+  const Scene& first = frames[0];
+  auto seq = std::make_shared<ObjSequence>();
+  seq->fps = options.fps;
+  for (size_t i = 0; i < n; ++i) {
+    Scene& frame = frames[i];
+    if (i > 0) {
+      const std::string why = "the frames of a sequence need the same topology as the first, " +
+                              files[0];
+      if (frame.mesh.triangle_count() != first.mesh.triangle_count()) {
+        throw input_error(files[i], "frame " + std::to_string(i) + " has " +
+                                        std::to_string(frame.mesh.triangle_count()) +
+                                        " triangles, the first frame " +
+                                        std::to_string(first.mesh.triangle_count()) + ": " + why);
+      }
+      for (size_t t = 0; t < frame.mesh.material_ids.size(); ++t) {
+        const Material& a = frame.materials[frame.mesh.material_ids[t]];
+        const Material& b = first.materials[first.mesh.material_ids[t]];
+        if (a.name != b.name) {
+          throw input_error(files[i], "frame " + std::to_string(i) + ": triangle " +
+                                          std::to_string(t) + " has material '" + a.name +
+                                          "', in the first frame '" + b.name + "': " + why);
+        }
+      }
+      if (frame.mesh.texcoords.empty() != first.mesh.texcoords.empty()) {
+        throw input_error(files[i], "frame " + std::to_string(i) +
+                                        (frame.mesh.texcoords.empty() ? " lacks" : " has") +
+                                        " texture coordinates, unlike the first frame: " + why);
+      }
+    }
+    seq->positions.push_back(std::move(frame.mesh.positions));
+    seq->normals.push_back(std::move(frame.mesh.normals));
+    seq->degenerate.push_back(frame.degenerate_triangles);
+  }
+  Scene rest = std::move(frames[0]);
+  rest.source = source;
+  rest.mesh.positions = seq->positions[0];
+  rest.mesh.normals = seq->normals[0];
+  const double duration = static_cast<double>(n) / options.fps;
+  std::shared_ptr<const Animator> animator;
+  if (n > 1) animator = std::move(seq);
+  return AnimatedScene(std::move(rest), std::move(animator), duration, options.fps, n);
+}
+
+}  // namespace detail
 
 }  // namespace mobirt

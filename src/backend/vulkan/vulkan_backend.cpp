@@ -24,6 +24,7 @@
 #include "layout.h"
 
 // SPIR-V of the shaders, generated at build time from glsl/ (build/spirv/<name>.h).
+#include "atlas_lookup.frag.h"
 #include "copy_input.frag.h"
 #include "fullscreen.vert.h"
 #include "nine_textures.frag.h"
@@ -91,6 +92,7 @@ std::span<const uint32_t> shader_code(ShaderId id) {
     case ShaderId::TestNineTextures: return spirv_nine_textures_frag;
     case ShaderId::TestCopyInput: return spirv_copy_input_frag;
     case ShaderId::TestSpin: return spirv_spin_frag;
+    case ShaderId::TestAtlasLookup: return spirv_atlas_lookup_frag;
   }
   throw Error(ErrorKind::Internal, std::string("shader ") + shader_name(id) +
                                        " not built: its source is missing from glsl/ at build time");

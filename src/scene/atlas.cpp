@@ -1,0 +1,199 @@
+#include "scene/atlas.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <numeric>
+#include <string>
+
+#include "core/error.h"
+#include "scene/validate.h"
+
+namespace mobirt {
+
+namespace {
+
+std::string size_text(int width, int height) {
+  std::string s = std::to_string(width);
+  s.append("x").append(std::to_string(height));
+  return s;
+}
+
+std::string texture_label(const Scene& scene, size_t index) {
+  const TextureRef& ref = scene.textures[index];
+  if (!ref.name.empty()) return ref.name;
+  if (!ref.path.empty()) return std::filesystem::path(ref.path).filename().string();
+  std::string label("textures[");
+  label.append(std::to_string(index)).append("]");
+  return label;
+}
+
+void check_texture_count(size_t count, const std::string& source) {
+  if (count <= size_t(MOBIRT_ATLAS_MAX_TEXTURES)) return;
+  std::string message(std::to_string(count));
+  message.append(" textures, but the texture atlas holds at most ")
+      .append(std::to_string(MOBIRT_ATLAS_MAX_TEXTURES))
+      .append(" (one ")
+      .append(size_text(MOBIRT_ATLAS_SIZE, MOBIRT_ATLAS_SIZE))
+      .append(" RGBA8 atlas, tiles up to ")
+      .append(size_text(MOBIRT_ATLAS_MAX_TILE, MOBIRT_ATLAS_MAX_TILE))
+      .append("); merge textures into fewer images or remove some materials' base-colour textures");
+  throw input_error(source, message);
+}
+
+// Linear value of an 8-bit channel, as the shader computes it from the UNORM texel.
+float channel_linear(uint32_t texel, int channel) {
+  return srgb_to_linear(float((texel >> (8 * channel)) & 0xffu) / 255.0f);
+}
+
+glm::vec3 texel_linear(const Atlas& atlas, float x, float y) {
+  const uint32_t texel = atlas.at(int(x), int(y));
+  return glm::vec3(channel_linear(texel, 0), channel_linear(texel, 1), channel_linear(texel, 2));
+}
+
+// GLSL mix(): x * (1 - a) + y * a.
+glm::vec3 mix3(const glm::vec3& x, const glm::vec3& y, float a) { return x * (1.0f - a) + y * a; }
+
+}  // namespace
+
+float wrap_value(TextureWrap wrap) {
+  switch (wrap) {
+    case TextureWrap::Repeat: return float(MOBIRT_WRAP_REPEAT);
+    case TextureWrap::MirroredRepeat: return float(MOBIRT_WRAP_MIRRORED_REPEAT);
+    case TextureWrap::ClampToEdge: return float(MOBIRT_WRAP_CLAMP);
+  }
+  return float(MOBIRT_WRAP_REPEAT);
+}
+
+std::vector<AtlasTile> pack_tiles(const std::vector<glm::ivec2>& sizes, int atlas_size) {
+  std::vector<size_t> order(sizes.size());
+  std::iota(order.begin(), order.end(), size_t(0));
+  // Tallest first (then widest, then input order): each shelf's first tile sets its height.
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    if (sizes[a].y != sizes[b].y) return sizes[a].y > sizes[b].y;
+    return sizes[a].x > sizes[b].x;
+  });
+  std::vector<AtlasTile> tiles(sizes.size());
+  int x = 0, y = 0, shelf_height = 0;
+  for (size_t i : order) {
+    const int w = sizes[i].x, h = sizes[i].y;
+    if (w <= 0 || h <= 0 || w > atlas_size || h > atlas_size) {
+      std::string message("atlas tile ");
+      message.append(std::to_string(i)).append(" has an invalid size ").append(size_text(w, h));
+      throw Error(ErrorKind::Internal, message);
+    }
+    if (x + w > atlas_size) {  // next shelf
+      y += shelf_height;
+      x = 0;
+      shelf_height = 0;
+    }
+    if (y + h > atlas_size) {
+      std::string message("atlas tiles do not fit into ");
+      message.append(size_text(atlas_size, atlas_size));
+      throw Error(ErrorKind::Internal, message);
+    }
+    tiles[i] = AtlasTile{x, y, w, h, 0.0f, 0.0f};
+    x += w;
+    shelf_height = std::max(shelf_height, h);
+  }
+  return tiles;
+}
+
+Atlas assemble_atlas(const std::vector<AtlasTexture>& textures) {
+  check_texture_count(textures.size(), "");
+  Atlas atlas;
+  if (textures.empty()) return atlas;
+  std::vector<glm::ivec2> sizes;
+  for (size_t i = 0; i < textures.size(); ++i) {
+    const TextureImage& image = textures[i].image;
+    if (image.width > MOBIRT_ATLAS_MAX_TILE || image.height > MOBIRT_ATLAS_MAX_TILE ||
+        image.pixels.size() != size_t(image.width) * size_t(image.height)) {
+      std::string message("atlas texture ");
+      message.append(std::to_string(i)).append(" is ").append(size_text(image.width, image.height));
+      message.append(": not downscaled to the tile size, or inconsistent");
+      throw Error(ErrorKind::Internal, message);
+    }
+    sizes.emplace_back(image.width, image.height);
+  }
+  atlas.tiles = pack_tiles(sizes, atlas.size);
+  atlas.pixels.assign(size_t(atlas.size) * size_t(atlas.size), 0u);
+  for (size_t i = 0; i < textures.size(); ++i) {
+    AtlasTile& tile = atlas.tiles[i];
+    tile.wrap_s = wrap_value(textures[i].wrap_s);
+    tile.wrap_t = wrap_value(textures[i].wrap_t);
+    const TextureImage& image = textures[i].image;
+    for (int row = 0; row < image.height; ++row) {
+      std::copy_n(&image.pixels[size_t(row) * size_t(image.width)], size_t(image.width),
+                  &atlas.pixels[size_t(tile.y + row) * size_t(atlas.size) + size_t(tile.x)]);
+    }
+  }
+  return atlas;
+}
+
+Atlas build_atlas(const Scene& scene) {
+  check_texture_count(scene.textures.size(), scene.source);
+  std::vector<AtlasTexture> textures(scene.textures.size());
+  for (size_t i = 0; i < scene.textures.size(); ++i) {
+    TextureImage image = decode_texture(scene, int(i));
+    if (image.width > MOBIRT_ATLAS_MAX_TILE || image.height > MOBIRT_ATLAS_MAX_TILE) {
+      TextureImage smaller = downscale_to_fit(image, MOBIRT_ATLAS_MAX_TILE);
+      std::string message("texture '");
+      message.append(texture_label(scene, i)).append("' ").append(size_text(image.width, image.height));
+      message.append(" downscaled to ").append(size_text(smaller.width, smaller.height)).append(" for the atlas");
+      scene_warning(scene.source, message);
+      image = std::move(smaller);
+    }
+    textures[i].image = std::move(image);
+    textures[i].wrap_s = scene.textures[i].wrap_s;
+    textures[i].wrap_t = scene.textures[i].wrap_t;
+  }
+  return assemble_atlas(textures);
+}
+
+void append_atlas_uniforms(const Atlas& atlas, int light_count, std::vector<float>& uniforms) {
+  const size_t base = size_t(MOBIRT_SP_TEXTURES(light_count));
+  const size_t end = base + size_t(MOBIRT_SP_VEC4S_PER_TEXTURE) * atlas.tiles.size();
+  if (uniforms.size() < end * 4) uniforms.resize(end * 4, 0.0f);
+  for (size_t t = 0; t < atlas.tiles.size(); ++t) {
+    const AtlasTile& tile = atlas.tiles[t];
+    float* at = &uniforms[(base + size_t(MOBIRT_SP_VEC4S_PER_TEXTURE) * t) * 4];
+    const float values[8] = {float(tile.x), float(tile.y), float(tile.width), float(tile.height),
+                             tile.wrap_s,   tile.wrap_t,   0.0f,              0.0f};
+    std::copy_n(values, 8, at);
+  }
+}
+
+float atlas_wrap(float texel, float size, float mode) {
+  float r = texel;
+  if (mode == float(MOBIRT_WRAP_MIRRORED_REPEAT)) {
+    const float period = 2.0f * size;
+    r = texel - period * std::floor((texel + 0.5f) / period);
+    if (r >= size) r = period - 1.0f - r;
+  } else if (mode != float(MOBIRT_WRAP_CLAMP)) {
+    r = texel - size * std::floor((texel + 0.5f) / size);
+  }
+  return std::clamp(r, 0.0f, size - 1.0f);
+}
+
+glm::vec3 sample_atlas(const Atlas& atlas, int texture, glm::vec2 uv) {
+  glm::vec4 tile(0.0f, 0.0f, 1.0f, 1.0f);
+  glm::vec2 wrap(0.0f);
+  if (texture >= 0 && size_t(texture) < atlas.tiles.size()) {
+    const AtlasTile& t = atlas.tiles[size_t(texture)];
+    tile = glm::vec4(float(t.x), float(t.y), float(t.width), float(t.height));
+    wrap = glm::vec2(t.wrap_s, t.wrap_t);
+  }
+  if (atlas.pixels.empty()) return glm::vec3(0.0f);
+  const glm::vec2 p = uv * glm::vec2(tile.z, tile.w) - 0.5f;
+  const glm::vec2 p0 = glm::floor(p);
+  const glm::vec2 f = p - p0;
+  const float x0 = tile.x + atlas_wrap(p0.x, tile.z, wrap.x);
+  const float x1 = tile.x + atlas_wrap(p0.x + 1.0f, tile.z, wrap.x);
+  const float y0 = tile.y + atlas_wrap(p0.y, tile.w, wrap.y);
+  const float y1 = tile.y + atlas_wrap(p0.y + 1.0f, tile.w, wrap.y);
+  const glm::vec3 top = mix3(texel_linear(atlas, x0, y0), texel_linear(atlas, x1, y0), f.x);
+  const glm::vec3 bottom = mix3(texel_linear(atlas, x0, y1), texel_linear(atlas, x1, y1), f.x);
+  return mix3(top, bottom, f.y);
+}
+
+}  // namespace mobirt
