@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "core/error.h"
+#include "gltf_builder.h"
 #include "scene/animation.h"
 #include "scene/loader.h"
 #include "test_support.h"
@@ -25,106 +26,11 @@ namespace {
 
 using test::expect_bad_input;
 using test::expect_vec3;
+using test::Gltf;
+using test::kU8;
 
 using nlohmann::json;
 namespace fs = std::filesystem;
-
-constexpr int kFloat = 5126;
-constexpr int kU8 = 5121;
-constexpr int kU16 = 5123;
-
-std::string base64(const std::vector<uint8_t>& data) {
-  static const char* table = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-  std::string out;
-  size_t i = 0;
-  for (; i + 2 < data.size(); i += 3) {
-    const uint32_t v = (uint32_t(data[i]) << 16) | (uint32_t(data[i + 1]) << 8) | data[i + 2];
-    out += table[(v >> 18) & 63];
-    out += table[(v >> 12) & 63];
-    out += table[(v >> 6) & 63];
-    out += table[v & 63];
-  }
-  if (i + 1 == data.size()) {
-    const uint32_t v = uint32_t(data[i]) << 16;
-    out += table[(v >> 18) & 63];
-    out += table[(v >> 12) & 63];
-    out += "==";
-  } else if (i + 2 == data.size()) {
-    const uint32_t v = (uint32_t(data[i]) << 16) | (uint32_t(data[i + 1]) << 8);
-    out += table[(v >> 18) & 63];
-    out += table[(v >> 12) & 63];
-    out += table[(v >> 6) & 63];
-    out += '=';
-  }
-  return out;
-}
-
-// A glTF document with one buffer embedded as a data URI (the builder of scene_loader_test, plus
-// animation helpers).
-struct Gltf {
-  json doc = {{"asset", {{"version", "2.0"}}}};
-  std::vector<uint8_t> bin;
-
-  int view(const void* data, size_t bytes) {
-    while (bin.size() % 4 != 0) bin.push_back(0);
-    doc["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", bin.size()}, {"byteLength", bytes}});
-    const auto* p = static_cast<const uint8_t*>(data);
-    bin.insert(bin.end(), p, p + bytes);
-    return static_cast<int>(doc["bufferViews"].size()) - 1;
-  }
-  int accessor(int view_index, int component, size_t count, const char* type) {
-    doc["accessors"].push_back(
-        {{"bufferView", view_index}, {"componentType", component}, {"count", count}, {"type", type}});
-    return static_cast<int>(doc["accessors"].size()) - 1;
-  }
-  // Floats grouped `per` to an element of `type`.
-  int floats(const std::vector<float>& v, const char* type, size_t per) {
-    return accessor(view(v.data(), v.size() * 4), kFloat, v.size() / per, type);
-  }
-  int vec3s(const std::vector<glm::vec3>& v) {
-    return accessor(view(v.data(), v.size() * sizeof(glm::vec3)), kFloat, v.size(), "VEC3");
-  }
-  int u16s(const std::vector<uint16_t>& v) {
-    return accessor(view(v.data(), v.size() * 2), kU16, v.size(), "SCALAR");
-  }
-  int mesh(json primitive, json extra = json::object()) {
-    extra["primitives"] = json::array({primitive});
-    doc["meshes"].push_back(extra);
-    return static_cast<int>(doc["meshes"].size()) - 1;
-  }
-  int node(json n) {
-    doc["nodes"].push_back(n);
-    return static_cast<int>(doc["nodes"].size()) - 1;
-  }
-  void scene(std::vector<int> roots) {
-    doc["scenes"] = json::array({{{"nodes", roots}}});
-    doc["scene"] = 0;
-  }
-  // Adds a channel (with its own sampler) to animations[anim]; values as the accessor holds them.
-  void channel(size_t anim, int node_index, const char* path, const std::vector<float>& times,
-               const std::vector<float>& values, const char* interpolation = "LINEAR") {
-    while (doc["animations"].size() <= anim) {
-      doc["animations"].push_back({{"channels", json::array()}, {"samplers", json::array()}});
-    }
-    const char* type = std::strcmp(path, "rotation") == 0   ? "VEC4"
-                       : std::strcmp(path, "weights") == 0 ? "SCALAR"
-                                                           : "VEC3";
-    const size_t per = std::strcmp(path, "rotation") == 0 ? 4 : std::strcmp(path, "weights") == 0 ? 1 : 3;
-    const int in = floats(times, "SCALAR", 1);
-    const int out = floats(values, type, per);
-    json& a = doc["animations"][anim];
-    a["samplers"].push_back({{"input", in}, {"output", out}, {"interpolation", interpolation}});
-    a["channels"].push_back({{"sampler", a["samplers"].size() - 1},
-                             {"target", {{"node", node_index}, {"path", path}}}});
-  }
-  std::string write(const fs::path& path) const {
-    json d = doc;
-    d["buffers"] = json::array(
-        {{{"byteLength", bin.size()}, {"uri", "data:application/octet-stream;base64," + base64(bin)}}});
-    std::ofstream(path) << d.dump(1);
-    return path.string();
-  }
-};
 
 // One triangle (1,0,0), (0,1,0), (0,0,0) with +Z normals; returns the mesh index.
 int triangle_mesh(Gltf& g) {
@@ -157,7 +63,7 @@ AnimatedScene trs_scene(const fs::path& dir) {
             {0, 0, 0, /*v0*/ 0, 0, 0, /*b0*/ 3, 0, 0,
              /*a1*/ -1, 0, 0, /*v1*/ 1, 0, 0, 0, 0, 0},
             "CUBICSPLINE");
-  return load_animated_scene(g.write(dir / "trs.gltf"));
+  return load_animated_scene(g.write_gltf(dir / "trs.gltf"));
 }
 
 TEST(GltfAnimation, TranslationRotationScaleStepCubic) {
@@ -247,7 +153,7 @@ TEST(GltfAnimation, ChooseOneAnimationAndEarlierWins) {
   g.scene({n});
   g.channel(0, n, "translation", {0, 1}, {0, 0, 0, 1, 0, 0});
   g.channel(1, n, "translation", {0, 4}, {0, 0, 0, 0, 8, 0});
-  const std::string path = g.write(test::temp_dir() / "two.gltf");
+  const std::string path = g.write_gltf(test::temp_dir() / "two.gltf");
   const AnimatedScene both = load_animated_scene(path);
   EXPECT_DOUBLE_EQ(both.duration(), 1.0);  // animations[1] drives what [0] drives: dropped
   expect_vec3(both.at(0.5).mesh.positions[0], {1.5f, 0, 0});
@@ -267,7 +173,7 @@ TEST(GltfAnimation, ChooseOneAnimationAndEarlierWins) {
 TEST(GltfAnimation, StaticFileIsNotAnimated) {
   Gltf g;
   g.scene({g.node({{"mesh", triangle_mesh(g)}, {"translation", {0, 0, 2}}})});
-  const AnimatedScene a = load_animated_scene(g.write(test::temp_dir() / "static.gltf"));
+  const AnimatedScene a = load_animated_scene(g.write_gltf(test::temp_dir() / "static.gltf"));
   EXPECT_FALSE(a.animated());
   EXPECT_DOUBLE_EQ(a.duration(), 0.0);
   const Scene s = a.at(3.0);
@@ -282,7 +188,7 @@ TEST(GltfAnimation, BrokenChannels) {
     const int n = g.node({{"mesh", triangle_mesh(g)}});
     g.scene({n});
     g.channel(0, n, "translation", {0, 1}, {0, 0, 0});  // one value for two keys
-    expect_bad_input([&] { load_animated_scene(g.write(dir / "count.gltf")); },
+    expect_bad_input([&] { load_animated_scene(g.write_gltf(dir / "count.gltf")); },
                      {"count.gltf", "animations[0].samplers[0].output", "expected 2"});
   }
   {
@@ -290,7 +196,7 @@ TEST(GltfAnimation, BrokenChannels) {
     const int n = g.node({{"mesh", triangle_mesh(g)}});
     g.scene({n});
     g.channel(0, n, "translation", {1, 0}, {0, 0, 0, 1, 1, 1});
-    expect_bad_input([&] { load_scene(g.write(dir / "order.gltf")); },
+    expect_bad_input([&] { load_scene(g.write_gltf(dir / "order.gltf")); },
                      {"order.gltf", "animations[0].samplers[0].input", "smaller than the one before"});
   }
   {
@@ -298,7 +204,7 @@ TEST(GltfAnimation, BrokenChannels) {
     const int n = g.node({{"mesh", triangle_mesh(g)}});
     g.scene({n});
     g.channel(0, n, "translation", {0, 1}, {0, 0, 0, 1, 1, 1}, "BEZIER");
-    expect_bad_input([&] { load_scene(g.write(dir / "interp.gltf")); },
+    expect_bad_input([&] { load_scene(g.write_gltf(dir / "interp.gltf")); },
                      {"interp.gltf", "interpolation 'BEZIER'"});
   }
 }
@@ -331,7 +237,7 @@ AnimatedScene skinned_strip(const fs::path& dir) {
   const int skinned = g.node({{"mesh", m}, {"skin", 0}, {"translation", {5, 5, 5}}});
   g.scene({j0, skinned});
   g.channel(0, j1, "rotation", {0, 1}, {0, 0, 0, 1, 0, 0, kR, kR});
-  return load_animated_scene(g.write(dir / "strip.gltf"));
+  return load_animated_scene(g.write_gltf(dir / "strip.gltf"));
 }
 
 TEST(GltfSkin, TwoJointStripBends) {
@@ -391,7 +297,7 @@ TEST(GltfMorph, MeshWeightsNodeWeightsAndWeightChannel) {
   int node = 0;
   {
     Gltf g = morph_gltf(node);
-    const Scene s = load_scene(g.write(dir / "mesh_weights.gltf"));
+    const Scene s = load_scene(g.write_gltf(dir / "mesh_weights.gltf"));
     expect_vec3(s.mesh.positions[2], {0, 0, 0.25f});
     expect_vec3(s.mesh.positions[1], {0, 1, 0});
     expect_vec3(s.mesh.normals[2], glm::normalize(glm::vec3(0.25f, 0, 1)));
@@ -399,7 +305,7 @@ TEST(GltfMorph, MeshWeightsNodeWeightsAndWeightChannel) {
   {
     Gltf g = morph_gltf(node);
     g.doc["nodes"][node]["weights"] = {0.5, 1.0};  // node weights win over the mesh's
-    const Scene s = load_scene(g.write(dir / "node_weights.gltf"));
+    const Scene s = load_scene(g.write_gltf(dir / "node_weights.gltf"));
     expect_vec3(s.mesh.positions[2], {0, 0, 0.5f});
     expect_vec3(s.mesh.positions[1], {0, 3, 0});
   }
@@ -407,7 +313,7 @@ TEST(GltfMorph, MeshWeightsNodeWeightsAndWeightChannel) {
     Gltf g = morph_gltf(node);
     // Two weights per key: (0, 0) at 0 s, (1, 0.5) at 1 s.
     g.channel(0, node, "weights", {0, 1}, {0, 0, 1, 0.5f});
-    const AnimatedScene a = load_animated_scene(g.write(dir / "animated.gltf"));
+    const AnimatedScene a = load_animated_scene(g.write_gltf(dir / "animated.gltf"));
     ASSERT_TRUE(a.animated());
     EXPECT_DOUBLE_EQ(a.duration(), 1.0);
     // t = 0: the channel's first key (0, 0), not the mesh's 0.25.
@@ -421,7 +327,7 @@ TEST(GltfMorph, MeshWeightsNodeWeightsAndWeightChannel) {
   {
     Gltf g = morph_gltf(node);
     g.channel(0, node, "weights", {0, 1}, {0, 0, 1});  // 3 values for 2 keys x 2 targets
-    expect_bad_input([&] { load_scene(g.write(dir / "bad.gltf")); },
+    expect_bad_input([&] { load_scene(g.write_gltf(dir / "bad.gltf")); },
                      {"bad.gltf", "expected 4", "2 morph targets"});
   }
 }
@@ -443,7 +349,7 @@ TEST(GltfAnimation, ChildLightAndCameraFollowTheParent) {
   g.channel(0, parent, "translation", {0, 1}, {0, 0, 0, 10, 0, 0});
   // +90 degrees about Y from t = 1 on (STEP).
   g.channel(0, parent, "rotation", {0, 1}, {0, 0, 0, 1, 0, kR, 0, kR}, "STEP");
-  const AnimatedScene a = load_animated_scene(g.write(test::temp_dir() / "follow.gltf"));
+  const AnimatedScene a = load_animated_scene(g.write_gltf(test::temp_dir() / "follow.gltf"));
   Scene s;
   a.evaluate(0.0, s);
   ASSERT_EQ(s.lights.size(), 1u);
@@ -473,7 +379,7 @@ TEST(GltfAnimation, CameraScaledToZeroIsAnError) {
   const int cam = g.node({{"camera", 0}});
   g.scene({g.node({{"mesh", triangle_mesh(g)}}), cam});
   g.channel(0, cam, "scale", {0, 1}, {1, 1, 1, 0, 0, 0});
-  const AnimatedScene a = load_animated_scene(g.write(test::temp_dir() / "zero.gltf"));
+  const AnimatedScene a = load_animated_scene(g.write_gltf(test::temp_dir() / "zero.gltf"));
   EXPECT_TRUE(a.at(0.5).camera.has_value());
   expect_bad_input([&] { a.at(1.0); }, {"zero.gltf", "nodes[0]", "singular", "t = 1"});
 }

@@ -22,6 +22,7 @@
 #include "scene/loader.h"
 #include "scene/texture_images.h"
 #include "test_support.h"
+#include "vulkan_fixture.h"
 
 namespace mobirt {
 namespace {
@@ -454,26 +455,8 @@ TEST(AtlasFilter, UniformsFollowTheLights) {
 
 // ---- the GPU lookup (glsl/atlas.glsl) against sample_atlas() -----------------------------------
 
-std::string join(const std::vector<std::string>& lines) {
-  std::string result;
-  for (const std::string& line : lines) result.append(line).append("\n");
-  return result;
-}
-
-class AtlasGpuTest : public ::testing::Test {
+class AtlasGpuTest : public test::VulkanTest {
  protected:
-  void SetUp() override {
-    BackendOptions options;
-    options.validation = true;
-    backend = create_vulkan_backend(options);
-  }
-  void TearDown() override {
-    if (backend) {
-      const auto messages = backend->take_debug_messages();
-      EXPECT_TRUE(messages.empty()) << join(messages);
-    }
-  }
-
   // Runs the test shader for lookups (uv, texture) with `lights` light slots before the textures;
   // returns the RGBA8 texels.
   std::vector<uint32_t> gpu_lookups(const Atlas& atlas, const std::vector<glm::vec3>& lookups, int lights) {
@@ -507,8 +490,6 @@ class AtlasGpuTest : public ::testing::Test {
     backend->destroy(atlas_texture);
     return out;
   }
-
-  std::unique_ptr<Backend> backend;
 };
 
 TEST_F(AtlasGpuTest, LookupMatchesTheCpuInEveryWrapMode) {

@@ -15,6 +15,7 @@
 #include "scene/loader.h"
 #include "test_scenes.h"
 #include "test_support.h"
+#include "vulkan_fixture.h"
 
 namespace mobirt {
 namespace {
@@ -103,19 +104,7 @@ TEST(RayTree, SchlickFresnelLimits) {
   EXPECT_EQ(schlick_fresnel(0.1f, 1.5f, 1.0f), 1.0f);             // beyond the critical angle
 }
 
-class VulkanRayTree : public ::testing::Test {
- protected:
-  void SetUp() override {
-    BackendOptions options;
-    options.validation = true;
-    backend_ = create_vulkan_backend(options);
-  }
-  void TearDown() override {
-    const std::vector<std::string> messages = backend_->take_debug_messages();
-    EXPECT_TRUE(messages.empty()) << (messages.empty() ? "" : messages[0]);
-  }
-  std::unique_ptr<Backend> backend_;
-};
+class VulkanRayTree : public test::VulkanTest {};
 
 // A mirror at 45 degrees shows a wall of uniform colour c: the mirror's pixels are reflectance x c.
 TEST_F(VulkanRayTree, MirrorShowsTheWallTimesItsReflectance) {
@@ -141,7 +130,7 @@ TEST_F(VulkanRayTree, MirrorShowsTheWallTimesItsReflectance) {
   settings.width = 32;
   settings.height = 32;
   settings.depth = 1;
-  Renderer renderer(*backend_, settings);
+  Renderer renderer(*backend, settings);
   const Image image = renderer.render(s, camera);
   const glm::vec3 expected = 0.5f * glm::round(wall.diffuse * 255.0f) / 255.0f;
   for (int y = 8; y < 24; ++y) {
@@ -151,7 +140,7 @@ TEST_F(VulkanRayTree, MirrorShowsTheWallTimesItsReflectance) {
   }
   // Without bounces the mirror is black.
   settings.depth = 0;
-  Renderer flat(*backend_, settings);
+  Renderer flat(*backend, settings);
   test::expect_vec3(flat.render(s, camera).at(16, 16), glm::vec3(0.0f), 1e-6f);
 }
 
@@ -171,7 +160,7 @@ TEST_F(VulkanRayTree, BouncesMatchTheCpuExpectation) {
   settings.width = 160;
   settings.height = 120;
   settings.depth = 3;
-  Renderer renderer(*backend_, settings);
+  Renderer renderer(*backend, settings);
   FrameTimings t;
   const Image gpu = renderer.render(scene, *scene.camera, &t);
   const Image cpu = render_on_cpu(scene, *scene.camera, settings);

@@ -15,25 +15,12 @@
 #include "scene/loader.h"
 #include "test_scenes.h"
 #include "test_support.h"
+#include "vulkan_fixture.h"
 
 namespace mobirt {
 namespace {
 
-class VulkanRender : public ::testing::Test {
- protected:
-  void SetUp() override {
-    BackendOptions options;
-    options.validation = true;
-    backend_ = create_vulkan_backend(options);
-  }
-  void TearDown() override {
-    const std::vector<std::string> messages = backend_->take_debug_messages();
-    std::ostringstream all;
-    for (const std::string& m : messages) all << m << "\n";
-    EXPECT_TRUE(messages.empty()) << "validation layer messages:\n" << all.str();
-  }
-  std::unique_ptr<Backend> backend_;
-};
+class VulkanRender : public test::VulkanTest {};
 
 struct Agreement {
   size_t rays = 0;
@@ -139,15 +126,15 @@ void check_scene(Backend& backend, const Scene& scene, int width, int height, in
 
 TEST_F(VulkanRender, TraversalMatchesCpuOnTheDefaultScene) {
   const Scene scene = load_scene(MOBIRT_SOURCE_DIR "/scenes/default.gltf");
-  check_scene(*backend_, scene, 200, 120, 4);
+  check_scene(*backend, scene, 200, 120, 4);
 }
 
 TEST_F(VulkanRender, TraversalMatchesCpuOnABoxGrid) {
-  check_scene(*backend_, test::box_grid_scene(), 160, 120, 4);
+  check_scene(*backend, test::box_grid_scene(), 160, 120, 4);
 }
 
 TEST_F(VulkanRender, TraversalMatchesCpuOnARandomSoup) {
-  check_scene(*backend_, test::random_soup_scene(), 128, 96, 4);
+  check_scene(*backend, test::random_soup_scene(), 128, 96, 4);
 }
 
 TEST_F(VulkanRender, TraversalMatchesCpuOnUtahToasters) {
@@ -158,13 +145,13 @@ TEST_F(VulkanRender, TraversalMatchesCpuOnUtahToasters) {
   light.position = box.center() + glm::vec3(0.3f, 1.5f, 0.8f) * glm::length(box.extent());
   light.intensity = 10.0f;
   scene.lights = {light};
-  check_scene(*backend_, scene, 200, 120, 4);
+  check_scene(*backend, scene, 200, 120, 4);
 }
 
 // Every short-stack depth, pure kd-restart included, finds the same hits.
 TEST_F(VulkanRender, EveryStackDepthMatchesCpu) {
   const Scene scene = test::box_grid_scene();
-  for (int depth : {0, 1, 2, 8, 32}) check_scene(*backend_, scene, 96, 64, depth);
+  for (int depth : {0, 1, 2, 8, 32}) check_scene(*backend, scene, 96, 64, depth);
 }
 
 // A loop cap too small for the scene costs time, never pixels: capped rays come back flagged and
@@ -178,9 +165,9 @@ TEST_F(VulkanRender, CappedRaysAreTracedOnTheCpu) {
   RenderSettings loose = tight;
   loose.max_steps = 100000;
   FrameTimings t_tight, t_loose;
-  Renderer r_tight(*backend_, tight);
+  Renderer r_tight(*backend, tight);
   const Image a = r_tight.render(scene, *scene.camera, &t_tight);
-  Renderer r_loose(*backend_, loose);
+  Renderer r_loose(*backend, loose);
   const Image b = r_loose.render(scene, *scene.camera, &t_loose);
   EXPECT_GT(t_tight.sum.capped, 0u);
   EXPECT_EQ(t_loose.sum.capped, 0u);
@@ -194,7 +181,7 @@ TEST_F(VulkanRender, DefaultSceneImageMatchesCpuExpectation) {
   RenderSettings settings;
   settings.width = 200;
   settings.height = 120;
-  Renderer renderer(*backend_, settings);
+  Renderer renderer(*backend, settings);
   FrameTimings timings;
   const Image gpu = renderer.render(scene, *scene.camera, &timings);
   const Image cpu = render_on_cpu(scene, *scene.camera, settings);

@@ -4,7 +4,6 @@
 #include <nlohmann/json.hpp>
 
 #include <cmath>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -12,127 +11,24 @@
 #include <vector>
 
 #include "core/error.h"
+#include "gltf_builder.h"
 #include "scene/loader.h"
 #include "test_support.h"
 
 namespace mobirt {
 namespace {
 
+using test::base64;
 using test::expect_bad_input;
 using test::expect_vec3;
+using test::Gltf;
+using test::kFloat;
+using test::kU16;
+using test::kU32;
+using test::kU8;
 
 using nlohmann::json;
 namespace fs = std::filesystem;
-
-constexpr int kFloat = 5126;
-constexpr int kU8 = 5121;
-constexpr int kU16 = 5123;
-constexpr int kU32 = 5125;
-
-std::string base64(const std::vector<uint8_t>& data) {
-  static const char* table = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-  std::string out;
-  size_t i = 0;
-  for (; i + 2 < data.size(); i += 3) {
-    const uint32_t v = (uint32_t(data[i]) << 16) | (uint32_t(data[i + 1]) << 8) | data[i + 2];
-    out += table[(v >> 18) & 63];
-    out += table[(v >> 12) & 63];
-    out += table[(v >> 6) & 63];
-    out += table[v & 63];
-  }
-  if (i + 1 == data.size()) {
-    const uint32_t v = uint32_t(data[i]) << 16;
-    out += table[(v >> 18) & 63];
-    out += table[(v >> 12) & 63];
-    out += "==";
-  } else if (i + 2 == data.size()) {
-    const uint32_t v = (uint32_t(data[i]) << 16) | (uint32_t(data[i + 1]) << 8);
-    out += table[(v >> 18) & 63];
-    out += table[(v >> 12) & 63];
-    out += table[(v >> 6) & 63];
-    out += '=';
-  }
-  return out;
-}
-
-// Builds a glTF document with one binary buffer, written as .gltf (data URI) or .glb.
-struct Gltf {
-  json doc = {{"asset", {{"version", "2.0"}}}};
-  std::vector<uint8_t> bin;
-
-  int view(const void* data, size_t bytes, int stride = 0) {
-    while (bin.size() % 4 != 0) bin.push_back(0);
-    json v = {{"buffer", 0}, {"byteOffset", bin.size()}, {"byteLength", bytes}};
-    if (stride != 0) v["byteStride"] = stride;
-    const auto* p = static_cast<const uint8_t*>(data);
-    bin.insert(bin.end(), p, p + bytes);
-    doc["bufferViews"].push_back(v);
-    return static_cast<int>(doc["bufferViews"].size()) - 1;
-  }
-  int accessor(int view_index, int component, size_t count, const char* type,
-               size_t offset = 0, bool normalized = false) {
-    json a = {{"bufferView", view_index}, {"componentType", component}, {"count", count},
-              {"type", type}};
-    if (offset != 0) a["byteOffset"] = offset;
-    if (normalized) a["normalized"] = true;
-    doc["accessors"].push_back(a);
-    return static_cast<int>(doc["accessors"].size()) - 1;
-  }
-  int vec3s(const std::vector<glm::vec3>& v) {
-    return accessor(view(v.data(), v.size() * sizeof(glm::vec3)), kFloat, v.size(), "VEC3");
-  }
-  int vec2s(const std::vector<glm::vec2>& v) {
-    return accessor(view(v.data(), v.size() * sizeof(glm::vec2)), kFloat, v.size(), "VEC2");
-  }
-  template <class T>
-  int indices(const std::vector<T>& v) {
-    const int ct = sizeof(T) == 1 ? kU8 : sizeof(T) == 2 ? kU16 : kU32;
-    return accessor(view(v.data(), v.size() * sizeof(T)), ct, v.size(), "SCALAR");
-  }
-  // A mesh with one primitive; returns the mesh index.
-  int mesh(json primitive) {
-    doc["meshes"].push_back({{"primitives", json::array({primitive})}});
-    return static_cast<int>(doc["meshes"].size()) - 1;
-  }
-  int node(json n) {
-    doc["nodes"].push_back(n);
-    return static_cast<int>(doc["nodes"].size()) - 1;
-  }
-  void scene(std::vector<int> roots) { doc["scenes"] = json::array({{{"nodes", roots}}}); doc["scene"] = 0; }
-
-  json finished(bool embed) const {
-    json d = doc;
-    if (bin.empty()) return d;
-    json buffer = {{"byteLength", bin.size()}};
-    if (embed) buffer["uri"] = "data:application/octet-stream;base64," + base64(bin);
-    d["buffers"] = json::array({buffer});
-    return d;
-  }
-  std::string write_gltf(const fs::path& path) const {
-    std::ofstream(path) << finished(true).dump(1);
-    return path.string();
-  }
-  std::string write_glb(const fs::path& path) const {
-    std::string text = finished(false).dump();
-    while (text.size() % 4 != 0) text += ' ';
-    std::vector<uint8_t> chunk = bin;
-    while (chunk.size() % 4 != 0) chunk.push_back(0);
-    const uint32_t total = 12 + 8 + static_cast<uint32_t>(text.size()) + 8 +
-                           static_cast<uint32_t>(chunk.size());
-    std::ofstream out(path, std::ios::binary);
-    auto u32 = [&](uint32_t v) { out.write(reinterpret_cast<const char*>(&v), 4); };
-    out.write("glTF", 4);
-    u32(2);
-    u32(total);
-    u32(static_cast<uint32_t>(text.size()));
-    out.write("JSON", 4);
-    out.write(text.data(), static_cast<std::streamsize>(text.size()));
-    u32(static_cast<uint32_t>(chunk.size()));
-    out.write("BIN\0", 4);
-    out.write(reinterpret_cast<const char*>(chunk.data()), static_cast<std::streamsize>(chunk.size()));
-    return path.string();
-  }
-};
 
 // A unit quad in the XY plane facing +Z, indexed (4 vertices, 6 u16 indices), one node.
 Gltf quad_gltf() {

@@ -13,17 +13,14 @@
 #include "backend/vulkan/vulkan_backend.h"
 #include "core/error.h"
 #include "layout.h"
+#include "vulkan_fixture.h"
 
 namespace mobirt {
 namespace {
 
-uint32_t pack_rgba8(uint32_t r, uint32_t g, uint32_t b, uint32_t a) { return r | (g << 8) | (b << 16) | (a << 24); }
+using test::join;
 
-std::string join(const std::vector<std::string>& lines) {
-  std::string result;
-  for (const std::string& line : lines) result += line + "\n";
-  return result;
-}
+uint32_t pack_rgba8(uint32_t r, uint32_t g, uint32_t b, uint32_t a) { return r | (g << 8) | (b << 16) | (a << 24); }
 
 double median(std::vector<double> values) {
   std::sort(values.begin(), values.end());
@@ -38,22 +35,8 @@ double resident_mib() {
   return double(resident) * 4096.0 / (1024.0 * 1024.0);
 }
 
-BackendOptions validated() {
-  BackendOptions options;
-  options.validation = true;
-  return options;
-}
-
-class VulkanBackendTest : public ::testing::Test {
+class VulkanBackendTest : public test::VulkanTest {
  protected:
-  void SetUp() override { backend = create_vulkan_backend(validated()); }
-  void TearDown() override {
-    if (backend) {
-      const auto messages = backend->take_debug_messages();
-      EXPECT_TRUE(messages.empty()) << join(messages);
-    }
-  }
-
   // A copy pass over `count` rays in rows of `width`: texel k/255 values, read back as RGBA8.
   void copy_round_trip(uint32_t width, uint32_t count) {
     SCOPED_TRACE("width " + std::to_string(width) + ", count " + std::to_string(count));
@@ -91,8 +74,6 @@ class VulkanBackendTest : public ::testing::Test {
     backend->destroy(pass);
     backend->destroy(input);
   }
-
-  std::unique_ptr<Backend> backend;
 };
 
 TEST_F(VulkanBackendTest, DeviceInfoListsLavapipe) {
@@ -296,7 +277,7 @@ TEST_F(VulkanBackendTest, SpinHonoursTheCap) {
 }
 
 TEST(VulkanBackendDevice, UnknownDeviceListsTheAvailableOnes) {
-  BackendOptions options = validated();
+  BackendOptions options = test::validated_options();
   options.device = "no-such-device";
   try {
     create_vulkan_backend(options);
