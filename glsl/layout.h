@@ -75,9 +75,12 @@
 
 // ---- Uniforms: one array of vec4 at binding 0 (Vulkan: a std140 uniform block; GLES: a uniform
 // vec4 array), at most MOBIRT_MAX_PARAM_VEC4S entries. Index of each entry:
+// The least self-intersection offset at a point p, relative to max |p|: 2 ulps of a float (2^-22).
+#define MOBIRT_OFFSET_ULPS 2.384185791015625e-07
 #define MOBIRT_MAX_PARAM_VEC4S 112  // 1 + 4 x 16 lights + 2 x 16 textures = 97
 // Traversal pass
-#define MOBIRT_TP_BOUNDS_LO 0      // xyz = scene box min, w = ray epsilon (shadow-ray offset)
+#define MOBIRT_TP_BOUNDS_LO 0      // xyz = scene box min, w = self-intersection offset (absolute:
+                                   // epsilon x the scene box's largest side)
 #define MOBIRT_TP_BOUNDS_HI 1      // xyz = scene box max, w = unused
 #define MOBIRT_TP_LIGHTS 2         // MOBIRT_TP_VEC4S_PER_LIGHT vec4 per light:
                                    //   [0] xyz = position (point, spot) or the direction towards
@@ -116,5 +119,6 @@
 #define MOBIRT_LIGHT_POINT 0.0
 #define MOBIRT_LIGHT_SPOT 1.0
 #define MOBIRT_LIGHT_DIRECTIONAL 2.0
+#define MOBIRT_LIGHT_NONE -1.0  // an unused slot of a general (unspecialised) pass: never lights
 
 #endif  // MOBIRT_LAYOUT_H

@@ -1,26 +1,5 @@
 #version 450
 #extension GL_GOOGLE_include_directive : require
-// The traversal pass: one fragment per ray. Closest hit, then one shadow ray per light; writes
-// ONE RGBA8 texel: hit index + 1 and the shadow mask (glsl/layout.h).
+// The traversal pass (Vulkan): the GLSL 450 prelude and the shared body in trace_main.glsl.
 #include "prelude_vk.glsl"
-#include "traverse.glsl"
-#include "packing.glsl"
-
-SAMPLER(MOBIRT_BIND_RAY_ORIGIN, u_ray_origin);
-SAMPLER(MOBIRT_BIND_RAY_DIRECTION, u_ray_direction);
-
-void main() {
-  vec4 origin = RAY_TEXEL(u_ray_origin);     // xyz, tmin
-  vec4 direction = RAY_TEXEL(u_ray_direction);  // xyz, tmax
-  vec3 hit = traverse(origin.xyz, direction.xyz, origin.w, direction.w, false);
-  if (hit.z > 0.5) {
-    OUTPUT(pack_capped());
-    return;
-  }
-  if (hit.x < 0.0) {
-    OUTPUT(pack_trace(0.0, 0.0));
-    return;
-  }
-  float mask = shadow_mask(hit.x, origin.xyz, direction.xyz, hit.y);
-  OUTPUT(mask < 0.0 ? pack_capped() : pack_trace(hit.x + 1.0, mask));
-}
+#include "trace_main.glsl"

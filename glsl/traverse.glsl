@@ -174,9 +174,10 @@ float shadow_mask(float prim, vec3 o, vec3 d, float t) {
                   DATA_TEXEL(u_triangles, base + 2.0).xyz - v0);
   vec3 p = o + t * d;
   float view_side = dot(ng, d) < 0.0 ? 1.0 : -1.0;
-  // Offset the origin off the surface, on the viewer's side, scaled to the magnitude of p.
+  // Offset the origin off the surface, on the viewer's side: a share of the scene's size (uniform),
+  // never below 2 float ulps of p, so that it holds at any scale and far from the origin.
   vec3 ap = abs(p);
-  float offset = PARAM(MOBIRT_TP_BOUNDS_LO).w * (1.0 + max(ap.x, max(ap.y, ap.z)));
+  float offset = max(PARAM(MOBIRT_TP_BOUNDS_LO).w, max(ap.x, max(ap.y, ap.z)) * MOBIRT_OFFSET_ULPS);
   vec3 origin = p + (view_side * offset / max(length(ng), 1e-30)) * ng;
   float bit = 1.0;
   // lavapipe ends a shader's loops silently once they ran 65,535 iterations in all (llvmpipe's
@@ -189,7 +190,7 @@ float shadow_mask(float prim, vec3 o, vec3 d, float t) {
     bool directional = light.w == MOBIRT_LIGHT_DIRECTIONAL;
     vec3 to_light = directional ? light.xyz : light.xyz - origin;
     float tmax = directional ? 3.0e38 : 1.0;
-    bool lit = dot(ng, to_light) * view_side > 0.0;
+    bool lit = light.w != MOBIRT_LIGHT_NONE && dot(ng, to_light) * view_side > 0.0;
     if (lit && light.w == MOBIRT_LIGHT_SPOT) {
       lit = dot(normalize(-to_light), spot.xyz) > spot.w;
     }

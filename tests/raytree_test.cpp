@@ -31,7 +31,7 @@ RayBatch one_bounce(const Scene& scene, const FlatKdTree& tree, const Ray& ray, 
   if (hit_out) *hit_out = hits[0];
   SecondarySettings settings;
   settings.min_weight = 0.0f;
-  return next_generation(scene, rays, hits, settings);
+  return next_generation(scene, tree.bounds, rays, hits, settings);
 }
 
 Scene glass_slab(float thickness, float ior) {
@@ -68,9 +68,9 @@ TEST(RayTree, GlassSlabShiftsTheRayWithoutTurningIt) {
     // Distance between the leaving ray's line and the incoming ray's line.
     const glm::vec3 w = leaving.origin - in.origin;
     const float distance = glm::length(w - glm::dot(w, d) * d);
-    // The two origins are offset off the surfaces by epsilon (1 + max |p|) each, which moves the
-    // line sideways by up to that much over cos(a) per surface.
-    const float offset = SecondarySettings{}.epsilon * (1.0f + 5.0f);
+    // The two origins are offset off the surfaces (ray_offset(): epsilon x the scene's size) each,
+    // which moves the line sideways by up to that much over cos(a) per surface.
+    const float offset = scene_offset(tree.bounds, SecondarySettings{}.epsilon);
     EXPECT_NEAR(distance, shift, 1e-4f + 2.0f * offset / std::cos(a));
   }
 }

@@ -12,6 +12,7 @@ PACKAGES=(
   libglm-dev libtinygltf-dev nlohmann-json3-dev libstb-dev libtinyobjloader-dev
   libopenimageio-dev libgtest-dev libbenchmark-dev
   libegl-dev libgles-dev libegl-mesa0
+  clang libclang-rt-14-dev    # the scene fuzzer (tools/fuzz.sh): clang 14's libFuzzer, ASan, UBSan
 )
 
 missing=()

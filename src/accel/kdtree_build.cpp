@@ -297,7 +297,8 @@ class Builder {
     float scale[3];
     bool active[3];
     for (int a = 0; a < 3; ++a) {
-      active[a] = box.hi[a] > box.lo[a];
+      // A box thinner than float can bin (k / width overflows: 0 * inf would be NaN) is not split.
+      active[a] = box.hi[a] > box.lo[a] && std::isfinite(float(k) / (box.hi[a] - box.lo[a]));
       scale[a] = active[a] ? float(k) / (box.hi[a] - box.lo[a]) : 0.0f;
     }
     const float top = float(k - 1);

@@ -47,9 +47,11 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <string>
 #include <vector>
 
 #include "accel/kdtree.h"
+#include "core/error.h"
 #include "layout.h"
 
 namespace mobirt {
@@ -80,6 +82,16 @@ bool intersect_triangle(const FlatKdTree& tree, int32_t prim, const Ray& ray, Hi
 }
 
 namespace {
+
+// A texel's index field as an index into an array of `size` entries. Only a corrupt tree (one not
+// made by build_kdtree, e.g. a test's) fails this; it ends in an error instead of a wild read.
+int32_t checked_index(float value, size_t size, const char* what) {
+  if (!(value >= 0.0f && value < static_cast<float>(size))) {
+    throw Error(ErrorKind::Internal, std::string("kd-tree corrupt: ") + what + " " + std::to_string(value) +
+                                         " out of range [0, " + std::to_string(size) + ")");
+  }
+  return static_cast<int32_t>(value);
+}
 
 struct Entry {
   int32_t node;
@@ -162,12 +174,12 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& ray, int stack_depth, Trave
       }
       ++stats.steps;
       ++stats.nodes_visited;
-      const int a = static_cast<int>(n.z);
+      const int a = checked_index(n.z, 3, "split axis");
       const float s = n.x;
       const float tsplit = (s - o[a]) * inv[a];
       const bool below_first = o[a] < s || (o[a] == s && d[a] <= 0.0f);
-      const int32_t below = node + 1;
-      const int32_t above = static_cast<int32_t>(n.y);
+      const int32_t below = checked_index(static_cast<float>(node + 1), tree.nodes.size(), "child");
+      const int32_t above = checked_index(n.y, tree.nodes.size(), "child");
       const int32_t near_child = below_first ? below : above;
       const int32_t far_child = below_first ? above : below;
       if (tsplit > tmax || tsplit <= 0.0f || std::isnan(tsplit)) {
@@ -185,7 +197,7 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& ray, int stack_depth, Trave
     // Leaf: the node fetch shares a step with the first triangle test (an empty leaf: one step).
     ++stats.nodes_visited;
     ++stats.leaves_visited;
-    const int count = static_cast<int>(n.y);
+    const int count = checked_index(n.y, tree.prim_list.size() + 2, "leaf count");
     if (count == 0) {
       if (stats.steps >= cap) {
         stats.capped = 1;
@@ -200,8 +212,9 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& ray, int stack_depth, Trave
       }
       ++stats.steps;
       ++stats.triangles_tested;
-      const int32_t prim = count == 1 ? static_cast<int32_t>(n.x)
-                                      : static_cast<int32_t>(prim_list[static_cast<size_t>(n.x) + i]);
+      const int32_t prim = checked_index(
+          count == 1 ? n.x : prim_list[static_cast<size_t>(checked_index(n.x + float(i), tree.prim_list.size(), "prim-list entry"))],
+          tree.triangles.size() / MOBIRT_TEXELS_PER_TRIANGLE, "primitive");
       if (intersect_triangle(tree, prim, ray, best) && kAnyHit) return best;
     }
     if (best.t <= tmax) return best;

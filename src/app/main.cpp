@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <csignal>
 #include <cstring>
 #include <exception>
 #include <filesystem>
@@ -14,10 +15,12 @@
 #include <string>
 #include <vector>
 
+#include "app/commands.h"
 #include "backend/backend.h"
 #include "core/error.h"
 #include "core/image.h"
 #include "render/renderer.h"
+#include "render/scene_features.h"
 #include "scene/animation.h"
 #include "scene/loader.h"
 #include "scene/overrides.h"
@@ -31,6 +34,7 @@ Usage:
   mobirt render SCENE -o OUT [options]   render a .gltf, .glb or .obj scene (or an OBJ sequence:
                                          a folder or a pattern like doll_%02d.obj) to OUT
   mobirt info [--device D]               print the Vulkan device and the limits that matter here
+  mobirt accuracy SCENE [options]        the GPU image against the double-precision reference
   mobirt COMMAND --help                  help on one command
 )";
 
@@ -46,6 +50,9 @@ Options:
   --depth N               bounces of the ray tree: 0 = ray casting; reflection and refraction
                           rays are made only for materials that reflect or refract (default 2)
   --no-shadows            no shadow rays: every light lights every surface that faces it
+  --general               general passes sized for 8 (or 16) lights and 16 textures instead of
+                          passes specialised to the scene (same image; for comparisons)
+  --always-rebuild        rebuild the kd-tree every frame even when the triangles did not move
   --min-weight W          secondary rays whose weight is below W are not traced (default 1/512)
   --stack N               short-stack entries of the traversal shader, 0 = pure kd-restart
                           (default 4, at most 32)
@@ -54,8 +61,9 @@ Options:
   --bins N                SAH bins per axis of the kd-tree build (default 32)
   --leaf-size N           largest leaf the build may make without trying to split (default 1)
   --max-depth N           kd-tree depth limit, -1 = 8 + 1.3 log2(triangles) (default -1)
-  --epsilon E             shadow-ray origin offset, relative to the hit point's magnitude
-                          (default 1e-4)
+  --epsilon E             offset of shadow, mirror and refracted ray origins off the surface, as
+                          a share of the scene's size, never below 2 float ulps of the hit point
+                          (default 1e-6)
   --light SPEC            replaces the scene's lights (repeat for several):
                             "point pos=X,Y,Z [color=R,G,B] [intensity=I] [range=R]"
                             "spot pos=X,Y,Z dir=X,Y,Z [inner=DEG] [outer=DEG] [color=..] [intensity=..] [range=..]"
@@ -63,6 +71,8 @@ Options:
   --camera SPEC           replaces the scene's camera: "EX,EY,EZ:TX,TY,TZ:UX,UY,UZ:FOVDEG"
                           (look-from, look-at, up, vertical field of view in degrees)
   --background R,G,B      colour of rays that miss (default 0,0,0)
+  --backend gles|vulkan   the API the GPU passes run on: Vulkan, or OpenGL ES 2.0 through EGL
+                          without a window (default vulkan)
   --device D              Vulkan device: index or part of its name (default: lavapipe)
   --validation            enable the Khronos validation layer; any message is an error
   --frames A:B            render frames A to B of the animation at --fps into OUT, a pattern
@@ -76,10 +86,46 @@ Options:
   --repeat N              frames to time with --timings (default 5)
 )";
 
-constexpr const char* kInfoUsage = R"(Usage: mobirt info [--device D] [--validation]
+constexpr const char* kInfoUsage = R"(Usage: mobirt info [SCENE] [--backend gles|vulkan] [--device D] [--validation]
 
-Prints the Vulkan device mobirt would use and the limits that matter to it.
+With SCENE, first prints what the scene needs (lights, textures, mirrors, glass, animation) and
+every choice derived from it (packing, shader specialisation, passes run, kd-tree rebuilds).
+Prints the Vulkan device (or, with --backend gles, the OpenGL ES context, the extensions used and
+GL_MAX_TEXTURE_IMAGE_UNITS) mobirt would use and the limits that matter to it.
 )";
+
+// SIGINT and SIGTERM: outside an image write the process ends at once (exit 130/143): every file
+// already written is complete and no temporary file exists. During write_image (which writes a
+// temporary name and renames it) the signal is held until the file is in place, then the render
+// stops with that exit code. Either way no half-written or temporary file is left behind.
+volatile std::sig_atomic_t g_writing = 0;
+volatile std::sig_atomic_t g_signal = 0;
+
+extern "C" void on_interrupt(int sig) {
+  if (!g_writing) ::_exit(128 + sig);
+  g_signal = sig;
+}
+
+void install_interrupt_handlers() {
+  struct sigaction action {};
+  action.sa_handler = on_interrupt;
+  sigemptyset(&action.sa_mask);
+  sigaction(SIGINT, &action, nullptr);
+  sigaction(SIGTERM, &action, nullptr);
+}
+
+// write_image with SIGINT/SIGTERM held off; returns the exit code of a signal that came meanwhile.
+int write_output(const std::string& path, const Image& image) {
+  g_writing = 1;
+  try {
+    write_image(path, image);
+  } catch (...) {
+    g_writing = 0;
+    throw;
+  }
+  g_writing = 0;
+  return g_signal ? 128 + int(g_signal) : 0;
+}
 
 [[noreturn]] void usage_error(const std::string& message) {
   throw Error(ErrorKind::BadInput, message + " (see mobirt --help)");
@@ -166,10 +212,28 @@ std::string frame_path(const std::string& pattern, int frame) {
   return result;
 }
 
+// Where compiled pipelines are kept between runs: $MOBIRT_PIPELINE_CACHE ("off" for none), else
+// $XDG_CACHE_HOME/mobirt, else ~/.cache/mobirt.
+std::string default_pipeline_cache_dir() {
+  if (const char* dir = std::getenv("MOBIRT_PIPELINE_CACHE")) return std::string(dir) == "off" ? "" : dir;
+  if (const char* xdg = std::getenv("XDG_CACHE_HOME"); xdg && *xdg) return std::string(xdg) + "/mobirt";
+  if (const char* home = std::getenv("HOME"); home && *home) return std::string(home) + "/.cache/mobirt";
+  return "";
+}
+
 bool is_help(const std::string& a) { return a == "-h" || a == "--help"; }
+
+// --backend gles|vulkan: the API the passes run on (default vulkan).
+std::unique_ptr<Backend> create_backend(const std::string& name, const BackendOptions& options) {
+  if (name == "gles") return create_gles_backend(options);
+  if (name == "vulkan") return create_vulkan_backend(options);
+  usage_error("--backend " + name + ": expected gles or vulkan");
+}
 
 int cmd_info(Args args) {
   BackendOptions options;
+  std::string scene_path;
+  std::string backend_name = "vulkan";
   while (!args.empty()) {
     const std::string a = args.take();
     if (is_help(a)) {
@@ -177,13 +241,35 @@ int cmd_info(Args args) {
       return 0;
     } else if (a == "--device") {
       options.device = args.value(a);
+    } else if (a == "--backend") {
+      backend_name = args.value(a);
     } else if (a == "--validation") {
       options.validation = true;
+    } else if (!a.empty() && a[0] != '-' && scene_path.empty()) {
+      scene_path = a;
     } else {
       usage_error("info: unknown option " + a);
     }
   }
-  auto backend = create_vulkan_backend(options);
+  if (!scene_path.empty()) {
+    // The scene's features and every choice derived from them, under the default settings.
+    LoadOptions load_options;
+    const AnimatedScene animation = load_animated_scene(scene_path, load_options);
+    const SceneFeatures f = analyze_scene(animation, RenderSettings{});
+    std::cout << "scene:     " << scene_path << "\n"
+              << "triangles: " << f.triangles << "\n"
+              << "lights:    " << f.lights << "\n"
+              << "textures:  " << f.textures << "\n"
+              << "materials: " << (f.reflective ? "reflective " : "") << (f.refractive ? "refractive " : "")
+              << (!f.reflective && !f.refractive ? "opaque only" : "") << "\n"
+              << "animated:  ";
+    if (f.animated) std::cout << "yes, " << f.duration << " s\n"; else std::cout << "no\n";
+    std::cout
+              << "choices:\n";
+    for (const std::string& choice : f.choices) std::cout << "  " << choice << "\n";
+    std::cout << "\n";
+  }
+  auto backend = create_backend(backend_name, options);
   const DeviceInfo info = backend->device_info();
   std::cout << "api:     " << info.api << "\n"
             << "device:  " << info.device << (info.is_software ? " (software)" : "") << "\n"
@@ -252,6 +338,7 @@ int cmd_render(Args args) {
   std::string scene_path, output;
   RenderSettings settings;
   BackendOptions backend_options;
+  std::string backend_name = "vulkan";
   std::vector<Light> lights;
   std::optional<Camera> camera;
   std::optional<glm::vec3> background;
@@ -294,6 +381,10 @@ int cmd_render(Args args) {
       settings.depth = parse_int(a, args.value(a), 0, 64);
     } else if (a == "--no-shadows") {
       settings.shadows = false;
+    } else if (a == "--general") {
+      settings.specialize = false;
+    } else if (a == "--always-rebuild") {
+      settings.always_rebuild = true;
     } else if (a == "--min-weight") {
       settings.secondary.min_weight = parse_float(a, args.value(a), 0.0f, 1.0f);
     } else if (a == "--light") {
@@ -304,6 +395,8 @@ int cmd_render(Args args) {
       background = parse_color(a, args.value(a));
     } else if (a == "--device") {
       backend_options.device = args.value(a);
+    } else if (a == "--backend") {
+      backend_name = args.value(a);
     } else if (a == "--validation") {
       backend_options.validation = true;
     } else if (a == "--mtl") {
@@ -334,6 +427,7 @@ int cmd_render(Args args) {
     }
   }
   if (scene_path.empty()) usage_error("render: no scene given");
+  backend_options.pipeline_cache_dir = default_pipeline_cache_dir();
   if (frames && time) usage_error("render: --frames and --time exclude each other");
   if (output.empty()) usage_error("render: no output given: add -o OUT.png");
   check_image_output(output);
@@ -365,7 +459,7 @@ int cmd_render(Args args) {
   auto output_for = [&](int frame) { return frames ? frame_path(output, frame) : output; };
   check_image_output(output_for(frames ? frames->first : 0));
 
-  auto backend = create_vulkan_backend(backend_options);
+  auto backend = create_backend(backend_name, backend_options);
   Renderer renderer(*backend, settings);
   std::vector<FrameTimings> measured;
   auto check_messages = [&] {
@@ -384,7 +478,7 @@ int cmd_render(Args args) {
       }
     }
     check_messages();
-    write_image(output, image);
+    if (const int code = write_output(output, image)) return code;
   } else {
     const bool tty = isatty(2);
     const auto start = std::chrono::steady_clock::now();
@@ -395,7 +489,7 @@ int cmd_render(Args args) {
       const Image image = renderer.render(scene, view, &t);
       if (i > 0 || frame_list.size() == 1) measured.push_back(t);
       check_messages();
-      write_image(output_for(frame), image);
+      if (const int code = write_output(output_for(frame), image)) return code;
       if (tty) {
         const double seconds = elapsed_ms(start) / 1000.0;
         const int width = 30, done = int(width * double(i + 1) / double(frame_list.size()));
@@ -428,6 +522,7 @@ int run(int argc, char** argv) {
   const std::string command = argv[1];
   if (command == "render") return cmd_render(Args(argc, argv, 2));
   if (command == "info") return cmd_info(Args(argc, argv, 2));
+  if (command == "accuracy") return cmd_accuracy(std::vector<std::string>(argv + 2, argv + argc));
   usage_error("unknown command '" + command + "'");
 }
 
@@ -435,6 +530,7 @@ int run(int argc, char** argv) {
 }  // namespace mobirt
 
 int main(int argc, char** argv) {
+  mobirt::install_interrupt_handlers();
   try {
     return mobirt::run(argc, argv);
   } catch (const mobirt::Error& e) {

@@ -100,9 +100,17 @@ class Backend {
 struct BackendOptions {
   std::string device;        // Vulkan: index or a substring of the device name; empty = lavapipe
   bool validation = false;   // Khronos validation layer; messages make the backend throw
+  bool sync_validation = false;  // with validation: also the layer's synchronization validation
+  // Vulkan: a folder where the pipeline cache is kept between runs (one file per device and driver,
+  // named by the cache UUID), so that a known scene's first frame does not compile again. Empty:
+  // no cache on disk.
+  std::string pipeline_cache_dir;
 };
 
 std::unique_ptr<Backend> create_vulkan_backend(const BackendOptions& options);
+// OpenGL ES 2.0 through EGL without a window (Mesa's surfaceless platform or an EGL device);
+// options.validation turns KHR_debug output on. Throws Error(Unsupported) naming what is missing.
+std::unique_ptr<Backend> create_gles_backend(const BackendOptions& options);
 
 // Milliseconds since `start`, for stage timings on the CPU clock.
 inline double elapsed_ms(std::chrono::steady_clock::time_point start) {

@@ -2,10 +2,21 @@
 
 #include <algorithm>
 #include <cmath>
+#include <string>
 
 #include "core/error.h"
 
 namespace mobirt {
+
+float scene_offset(const Aabb& bounds, float epsilon) {
+  const glm::vec3 e = bounds.extent();
+  return epsilon * std::max(e.x, std::max(e.y, e.z));
+}
+
+float ray_offset(const glm::vec3& p, float absolute) {
+  const glm::vec3 ap = glm::abs(p);
+  return std::max(absolute, std::max(ap.x, std::max(ap.y, ap.z)) * float(MOBIRT_OFFSET_ULPS));
+}
 
 namespace {
 
@@ -21,8 +32,7 @@ void for_each_shadow_ray(const FlatKdTree& tree, std::span<const Light> lights, 
                                   glm::vec3(tree.triangles[base + 2]) - v0);
   const glm::vec3 p = ray.origin + t * ray.direction;
   const float view_side = glm::dot(ng, ray.direction) < 0.0f ? 1.0f : -1.0f;
-  const glm::vec3 ap = glm::abs(p);
-  const float offset = settings.epsilon * (1.0f + std::max(ap.x, std::max(ap.y, ap.z)));
+  const float offset = ray_offset(p, scene_offset(tree.bounds, settings.epsilon));
   const glm::vec3 origin = p + (view_side * offset / std::max(glm::length(ng), 1e-30f)) * ng;
   for (size_t l = 0; l < lights.size(); ++l) {
     const Light& light = lights[l];
@@ -36,6 +46,18 @@ void for_each_shadow_ray(const FlatKdTree& tree, std::span<const Light> lights, 
   }
 }
 
+// The CPU fallback (capped rays, shadow rays with a full stack) must end even on a corrupt tree: a
+// full-stack walk of a sound tree visits every node at most once and tests every primitive
+// reference at most once, so more steps than this means a cycle (issue 8: never hang).
+int64_t fallback_step_bound(const FlatKdTree& tree) {
+  return 4 * int64_t(tree.nodes.size() + tree.prim_list.size()) + 64;
+}
+
+[[noreturn]] void corrupt_tree(int64_t bound) {
+  throw Error(ErrorKind::Internal, "kd-tree corrupt: a CPU traversal took more than " + std::to_string(bound) +
+                                       " steps (a cycle in the tree)");
+}
+
 }  // namespace
 
 uint32_t shadow_mask(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
@@ -43,7 +65,10 @@ uint32_t shadow_mask(const FlatKdTree& tree, std::span<const Light> lights, int3
   uint32_t mask = 0;
   if (prim < 0) return mask;
   for_each_shadow_ray(tree, lights, prim, ray, t, settings, [&](size_t l, const Ray& shadow) {
-    if (!occluded(tree, shadow, stack_depth)) mask |= 1u << l;
+    TraversalStats stats;
+    const int64_t bound = stack_depth < 0 ? fallback_step_bound(tree) : -1;
+    if (!occluded(tree, shadow, stack_depth, stats, bound)) mask |= 1u << l;
+    if (stats.capped) corrupt_tree(bound);
   });
   return mask;
 }
@@ -124,7 +149,9 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
     uint32_t mask = 0;
     if (texel.capped) {
       ++local.capped;
-      const Hit h = traverse(tree, ray, -1);
+      TraversalStats steps;
+      const Hit h = traverse(tree, ray, -1, steps, fallback_step_bound(tree));
+      if (steps.capped) corrupt_tree(fallback_step_bound(tree));
       prim = h.prim;
       if (h.valid()) mask = shadow_mask(tree, lights, prim, ray, h.t, shadows, -1);
     } else if (texel.hit()) {

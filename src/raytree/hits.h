@@ -33,8 +33,15 @@ struct SurfaceHit {
 // The traversal pass's lights as the shadow rays see them (shared by the GPU uniforms and the
 // CPU fallback so that both test the same rays).
 struct ShadowSettings {
-  float epsilon = 1e-4f;  // origin offset along the geometric normal, times (1 + max |p|)
+  float epsilon = 1e-6f;  // origin offset along the geometric normal, as a share of the scene's size
 };
+
+// The self-intersection offset of a new ray's origin at p, along the geometric normal: `absolute`
+// (epsilon x the scene box's largest side), but never below 2 float ulps of p (MOBIRT_OFFSET_ULPS
+// x max |p|). Relative to the scene, so it holds from 1e-4 to 1e5; floored by float precision,
+// so it holds 1e5 away from the origin. glsl/traverse.glsl computes the same.
+float ray_offset(const glm::vec3& p, float absolute);
+float scene_offset(const Aabb& bounds, float epsilon);  // epsilon x the box's largest side
 
 // Shadow mask of a hit on the CPU, the same rays as glsl/traverse.glsl's shadow_mask().
 uint32_t shadow_mask(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,

@@ -35,10 +35,12 @@ bool scene_has_secondary_rays(const Scene& scene) {
   return false;
 }
 
-RayBatch next_generation(const Scene& scene, const RayBatch& rays, std::span<const SurfaceHit> hits,
-                         const SecondarySettings& settings, SecondaryStats* stats) {
+RayBatch next_generation(const Scene& scene, const Aabb& scene_bounds, const RayBatch& rays,
+                         std::span<const SurfaceHit> hits, const SecondarySettings& settings,
+                         SecondaryStats* stats) {
   RayBatch next;
   next.width = rays.width;
+  const float absolute_offset = scene_offset(scene_bounds, settings.epsilon);
   SecondaryStats local;
   auto emit = [&](const glm::vec3& origin, const glm::vec3& direction, uint32_t pixel, const glm::vec3& w,
                   uint32_t& counter) {
@@ -60,8 +62,7 @@ RayBatch next_generation(const Scene& scene, const RayBatch& rays, std::span<con
     // geometric one decides which side of the surface each new ray starts on.
     const glm::vec3& ng = h.geometric;
     const glm::vec3& ns = h.normal;
-    const glm::vec3 ap = glm::abs(h.position);
-    const float offset = settings.epsilon * (1.0f + std::max(ap.x, std::max(ap.y, ap.z)));
+    const float offset = ray_offset(h.position, absolute_offset);
     const glm::vec3 above = h.position + offset * ng;
     const glm::vec3 below = h.position - offset * ng;
 

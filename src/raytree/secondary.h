@@ -17,7 +17,8 @@
 namespace mobirt {
 
 struct SecondarySettings {
-  float epsilon = 1e-4f;           // origin offset along the geometric normal, times 1 + max |p|
+  float epsilon = 1e-6f;           // origin offset along the geometric normal, a share of the
+                                   // scene's size (see ray_offset() in hits.h)
   float min_weight = 1.0f / 512.0f;  // rays whose largest weight component is below this are not
                                      // traced: they cannot move an 8-bit pixel by half a step
 };
@@ -37,9 +38,11 @@ float schlick_fresnel(float cos_i, float n1, float n2);
 // on total internal reflection.
 bool refract_direction(const glm::vec3& d, const glm::vec3& n, float eta, glm::vec3& out);
 
-// The next generation from the hits of this one (hits[i] belongs to rays ray i).
-RayBatch next_generation(const Scene& scene, const RayBatch& rays, std::span<const SurfaceHit> hits,
-                         const SecondarySettings& settings, SecondaryStats* stats = nullptr);
+// The next generation from the hits of this one (hits[i] belongs to ray i). scene_bounds sizes
+// the self-intersection offset.
+RayBatch next_generation(const Scene& scene, const Aabb& scene_bounds, const RayBatch& rays,
+                         std::span<const SurfaceHit> hits, const SecondarySettings& settings,
+                         SecondaryStats* stats = nullptr);
 
 // True when some material of the scene reflects or refracts: only then is a second generation
 // ever made.

@@ -92,7 +92,7 @@ Image render_on_cpu(const Scene& scene, const Camera& camera, const RenderSettin
     }
     for (std::thread& t : pool) t.join();
     for (uint32_t i = 0; i < n; ++i) image.pixels[rays.pixel[i]] += rays.weight[i] * colors[i];
-    if (generation < depth) rays = next_generation(scene, rays, hits, settings.secondary);
+    if (generation < depth) rays = next_generation(scene, tree.bounds, rays, hits, settings.secondary);
   }
   return image;
 }

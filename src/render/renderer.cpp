@@ -46,10 +46,15 @@ glm::vec3 light_where(const Light& light) {
 }  // namespace
 
 std::vector<float> trace_uniforms(const FlatKdTree& tree, std::span<const Light> lights,
-                                  const ShadowSettings& s) {
+                                  const ShadowSettings& s, int pass_lights) {
   std::vector<float> u;
-  put(u, MOBIRT_TP_BOUNDS_LO, glm::vec4(tree.bounds.lo, s.epsilon));
+  put(u, MOBIRT_TP_BOUNDS_LO, glm::vec4(tree.bounds.lo, scene_offset(tree.bounds, s.epsilon)));
   put(u, MOBIRT_TP_BOUNDS_HI, glm::vec4(tree.bounds.hi, 0.0f));
+  // Slots of a general pass beyond the scene's lights never light anything.
+  for (size_t l = lights.size(); l < size_t(std::max(pass_lights, 0)); ++l) {
+    put(u, MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * l, glm::vec4(0.0f, 0.0f, 0.0f, float(MOBIRT_LIGHT_NONE)));
+    put(u, MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * l + 1, glm::vec4(0.0f));
+  }
   for (size_t l = 0; l < lights.size(); ++l) {
     const Light& light = lights[l];
     const size_t at = MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * l;
@@ -59,9 +64,16 @@ std::vector<float> trace_uniforms(const FlatKdTree& tree, std::span<const Light>
   return u;
 }
 
-std::vector<float> shade_uniforms(const Scene& scene) {
+std::vector<float> shade_uniforms(const Scene& scene, int pass_lights) {
   std::vector<float> u;
   put(u, MOBIRT_SP_BACKGROUND, glm::vec4(scene.background, 0.0f));
+  // A general pass's unused light slots: zero radiance, and their mask bits are never set.
+  for (size_t l = scene.lights.size(); l < size_t(std::max(pass_lights, 0)); ++l) {
+    for (size_t k = 0; k < MOBIRT_SP_VEC4S_PER_LIGHT; ++k) {
+      put(u, MOBIRT_SP_LIGHTS + MOBIRT_SP_VEC4S_PER_LIGHT * l + k,
+          k == 0 ? glm::vec4(0.0f, 0.0f, 0.0f, float(MOBIRT_LIGHT_NONE)) : glm::vec4(0.0f));
+    }
+  }
   for (size_t l = 0; l < scene.lights.size(); ++l) {
     const Light& light = scene.lights[l];
     const size_t at = MOBIRT_SP_LIGHTS + MOBIRT_SP_VEC4S_PER_LIGHT * l;
@@ -84,6 +96,9 @@ struct Renderer::Data {
   Atlas atlas_data;             // placements for the uniforms, kept while the scene's textures stay
   std::string atlas_scene;      // the scene (source + texture count) the atlas was built for
   bool has_atlas = false;
+  FlatKdTree tree;                         // the last tree built, and the triangles it was built on
+  std::vector<glm::vec3> tree_positions;
+  bool tree_valid = false;
   uint32_t ray_width = 0;  // the ray textures' row width; a change recreates them
   std::map<std::pair<int, int>, PassHandle> trace_passes;  // (lights, packing)
   std::map<std::pair<int, int>, PassHandle> shade_passes;  // (lights, textures)
@@ -220,6 +235,7 @@ void Renderer::upload_rays(const RayBatch& rays) {
 }
 
 TraceResult Renderer::trace(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays) {
+  data_->tree_valid = false;  // the GPU now holds this tree, not the cached one
   upload_tree(tree);
   return trace_uploaded(scene, tree, rays);
 }
@@ -227,17 +243,22 @@ TraceResult Renderer::trace(const Scene& scene, const FlatKdTree& tree, const Ra
 TraceResult Renderer::trace_uploaded(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays) {
   TraceResult result;
   // Without shadows the pass is specialised to no lights: it casts no shadow rays at all.
-  const int lights = int(shadow_lights(scene).size());
+  const int lights = pass_lights(int(shadow_lights(scene).size()));
   result.packing = choose_packing(scene.mesh.triangle_count(), lights, scene.source);
   upload_rays(rays);
   const PassHandle pass = trace_pass(lights, result.packing);
-  const std::vector<float> uniforms = trace_uniforms(tree, shadow_lights(scene), settings_.shadow_rays);
+  const std::vector<float> uniforms = trace_uniforms(tree, shadow_lights(scene), settings_.shadow_rays, lights);
   const Data& d = *data_;
   const TextureHandle textures[] = {d.nodes.handle, d.prim_list.handle, d.triangles.handle,
                                     d.ray_origin.handle, d.ray_direction.handle};
   result.texels.resize(rays.count());
   result.timing = backend_.run_pass(pass, textures, uniforms, rays.width, rays.count(), result.texels);
   return result;
+}
+
+int Renderer::pass_lights(int scene_lights) const {
+  if (settings_.specialize) return scene_lights;
+  return scene_lights <= MOBIRT_MAX_LIGHTS_24_8 ? MOBIRT_MAX_LIGHTS_24_8 : MOBIRT_MAX_LIGHTS_16_16;
 }
 
 std::span<const Light> Renderer::shadow_lights(const Scene& scene) const {
@@ -296,10 +317,14 @@ std::vector<uint32_t> Renderer::shade(const Scene& scene, const RayBatch& rays,
     texcoords = d.hit_texcoord.handle;
   }
 
-  const int texture_count = int(d.atlas_data.tiles.size());
-  const PassHandle pass = shade_pass(int(scene.lights.size()), texture_count);
-  std::vector<float> uniforms = shade_uniforms(scene);
-  append_atlas_uniforms(d.atlas_data, int(scene.lights.size()), uniforms);
+  // A general pass is sized for the most lights and textures, not for this scene.
+  const int texture_count = settings_.specialize ? int(d.atlas_data.tiles.size()) : MOBIRT_ATLAS_MAX_TEXTURES;
+  const int lights = pass_lights(int(scene.lights.size()));
+  const PassHandle pass = shade_pass(lights, texture_count);
+  std::vector<float> uniforms = shade_uniforms(scene, lights);
+  append_atlas_uniforms(d.atlas_data, lights, uniforms);
+  const size_t uniform_floats = 4 * size_t(MOBIRT_SP_TEXTURES(lights) + MOBIRT_SP_VEC4S_PER_TEXTURE * texture_count);
+  if (uniforms.size() < uniform_floats) uniforms.resize(uniform_floats, 0.0f);
   const TextureHandle textures[] = {d.hit_position.handle, d.hit_normal.handle, d.materials.handle,
                                     d.ray_direction.handle, texcoords, d.atlas};
   std::vector<uint32_t> colors(rays.count());
@@ -315,13 +340,24 @@ Image Renderer::render(const Scene& scene, const Camera& camera, FrameTimings* t
   FrameTimings t;
   const auto frame_start = Clock::now();
   // Refuse a scene over a limit before any work.
-  choose_packing(scene.mesh.triangle_count(), settings_.shadows ? int(scene.lights.size()) : 0,
+  choose_packing(scene.mesh.triangle_count(), pass_lights(int(shadow_lights(scene).size())),
                  scene.source);
 
+  // The tree is rebuilt from scratch whenever the geometry changed (every frame of an animation,
+  // as in the paper); a static scene, or a frame whose triangles did not move, keeps it.
   auto stage = Clock::now();
-  const FlatKdTree tree = build_kdtree(scene.mesh.positions, settings_.kd);
-  t.build_ms = elapsed_ms(stage);
-  upload_tree(tree);
+  Data& cache = *data_;
+  const bool reuse = !settings_.always_rebuild && cache.tree_valid &&
+                     cache.tree_positions == scene.mesh.positions;
+  if (!reuse) {
+    cache.tree = build_kdtree(scene.mesh.positions, settings_.kd);
+    cache.tree_positions = scene.mesh.positions;
+    t.build_ms = elapsed_ms(stage);
+    upload_tree(cache.tree);
+    cache.tree_valid = true;
+  }
+  t.tree_rebuilt = !reuse;
+  const FlatKdTree& tree = cache.tree;
   upload_materials(scene);
 
   stage = Clock::now();
@@ -362,7 +398,7 @@ Image Renderer::render(const Scene& scene, const Camera& camera, FrameTimings* t
 
     if (generation < depth) {
       stage = Clock::now();
-      rays = next_generation(scene, rays, hits, settings_.secondary);
+      rays = next_generation(scene, tree.bounds, rays, hits, settings_.secondary);
       g.secondary_ms = elapsed_ms(stage);
     }
     t.generations.push_back(g);

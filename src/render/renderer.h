@@ -28,6 +28,12 @@ struct RenderSettings {
   bool shadows = true;      // false: no shadow rays, every light lights every surface facing it
   int stack_depth = 4;      // short-stack entries in the traversal shader, 0 = pure kd-restart
   int max_steps = 2048;     // loop cap of one traversal in the shader (see README: "Loop cap")
+  // Passes specialised to the scene (light and texture counts, packing) or general ones sized for
+  // the most a pass supports; both give the same image (tests/specialisation_test.cpp).
+  bool specialize = true;
+  // Rebuild the kd-tree every frame even when the triangles did not move (the paper's model, and
+  // the benchmarks'); by default a static scene keeps its tree.
+  bool always_rebuild = false;
   KdBuildOptions kd;
   ShadowSettings shadow_rays;
   SecondarySettings secondary;
@@ -52,7 +58,8 @@ struct GenerationTimings {
 
 // Where one frame's time went, stage by stage (milliseconds); the per-generation stages summed.
 struct FrameTimings {
-  double build_ms = 0;          // kd-tree build + flattening (CPU)
+  double build_ms = 0;          // kd-tree build + flattening (CPU); 0 when the tree was kept
+  bool tree_rebuilt = false;
   double rays_ms = 0;           // primary ray generation (CPU)
   GenerationTimings sum;        // all generations together
   std::vector<GenerationTimings> generations;
@@ -100,6 +107,8 @@ class Renderer {
   void upload_materials(const Scene& scene);
   // The lights the traversal pass casts shadow rays to: the scene's, or none without shadows.
   std::span<const Light> shadow_lights(const Scene& scene) const;
+  // The light count a pass is built for: the scene's, or the packing's maximum when general.
+  int pass_lights(int scene_lights) const;
   TraceResult trace_uploaded(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays);
 
   Backend& backend_;
@@ -108,8 +117,9 @@ class Renderer {
 };
 
 // The traversal and shading uniforms (vec4 arrays, indices in glsl/layout.h).
+// pass_lights: the light count the pass was built for (>= lights.size(); the rest are unused).
 std::vector<float> trace_uniforms(const FlatKdTree& tree, std::span<const Light> lights,
-                                  const ShadowSettings& s);
-std::vector<float> shade_uniforms(const Scene& scene);
+                                  const ShadowSettings& s, int pass_lights);
+std::vector<float> shade_uniforms(const Scene& scene, int pass_lights);
 
 }  // namespace mobirt

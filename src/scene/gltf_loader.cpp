@@ -663,7 +663,11 @@ bool GltfReader::prepare_primitive(size_t mesh_index, size_t prim_index, PrimDat
           fail(element("accessors", static_cast<size_t>(weights_acc)) + " (" + path +
                " WEIGHTS_0): vertex " + str(v) + " has a negative or non-finite weight");
         }
-        if (wv[c] > 0.0) out.max_joint = std::max(out.max_joint, out.joints[v][c]);
+        if (wv[c] > 0.0) {
+          out.max_joint = std::max(out.max_joint, out.joints[v][c]);
+        } else {
+          out.joints[v][c] = 0;  // weight 0: unchecked against the skin, so never indexed with
+        }
       }
       const double sum = wv.x + wv.y + wv.z + wv.w;
       out.weights[v] = sum > 0.0 ? glm::vec4(wv / sum) : glm::vec4(0.0f);
@@ -1521,7 +1525,8 @@ int GltfReader::texture_for(int gltf_texture, const std::string& user) {
   } else if (!image.uri.empty()) {
     const std::filesystem::path folder = std::filesystem::path(file_).parent_path();
     ref.path = (folder / url_decode(image.uri)).lexically_normal().string();
-    if (!std::filesystem::exists(ref.path)) {
+    std::error_code ec;  // the non-throwing form: a name too long is just "not found"
+    if (!std::filesystem::exists(ref.path, ec)) {
       scene_warning(file_, iname + ": image file " + ref.path + " not found");
     }
   } else {
@@ -1697,6 +1702,17 @@ tinygltf::Model parse_gltf(const std::string& path) {
                                 ": " + (why.empty() ? "tinygltf could not parse it" : why));
   }
   if (!warn.empty()) scene_warning(path, library_message(warn));
+  // A required extension changes what the file means: one mobirt does not read is an error.
+  static const char* const kSupported[] = {"KHR_lights_punctual", "KHR_materials_transmission",
+                                           "KHR_materials_ior", "KHR_mesh_quantization"};
+  for (size_t i = 0; i < model.extensionsRequired.size(); ++i) {
+    const std::string& name = model.extensionsRequired[i];
+    if (std::find(std::begin(kSupported), std::end(kSupported), name) == std::end(kSupported)) {
+      throw input_error(path, "extensionsRequired[" + std::to_string(i) + "]: extension '" + name +
+                                  "' is not supported (mobirt reads KHR_lights_punctual, "
+                                  "KHR_materials_transmission, KHR_materials_ior, KHR_mesh_quantization)");
+    }
+  }
   return model;
 }
 

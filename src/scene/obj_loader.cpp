@@ -9,9 +9,11 @@
 #include <atomic>
 #include <exception>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <map>
 #include <sstream>
 #include <string>
@@ -93,6 +95,51 @@ bool has_mtllib(const std::string& text) {
   return false;
 }
 
+// tinyobjloader reads a coordinate it cannot parse ("nan", "inf", "1,5") as 0 without a word, which
+// silently moves the vertex. Each v/vn/vt line with characters other than those of plain numbers is
+// checked field by field; a coordinate that is not a whole finite number is recorded (kind 0 = v,
+// 1 = vn, 2 = vt; the element's index; the component) and set to NaN after parsing, so that
+// validate_scene names the triangle that uses it. The character scan keeps ordinary files at one
+// pass over the bytes.
+struct BadCoordinate {
+  int kind;
+  size_t index;
+  int component;
+};
+
+std::vector<BadCoordinate> bad_obj_coordinates(const std::string& text) {
+  std::vector<BadCoordinate> bad;
+  size_t counts[3] = {0, 0, 0};
+  for (size_t pos = 0; pos < text.size();) {
+    size_t end = text.find('\n', pos);
+    if (end == std::string::npos) end = text.size();
+    size_t i = pos;
+    while (i < end && (text[i] == ' ' || text[i] == '\t')) ++i;
+    int kind = -1;
+    if (i + 1 < end && text[i] == 'v' && (text[i + 1] == ' ' || text[i + 1] == '\t')) {
+      kind = 0;
+    } else if (i + 2 < end && text[i] == 'v' && (text[i + 1] == 'n' || text[i + 1] == 't') &&
+               (text[i + 2] == ' ' || text[i + 2] == '\t')) {
+      kind = text[i + 1] == 'n' ? 1 : 2;
+    }
+    if (kind >= 0) {
+      const size_t index = counts[kind]++;
+      if (text.find_first_not_of("0123456789+-.eE \t\r", i + (kind == 0 ? 1 : 2)) < end) {
+        std::istringstream fields(text.substr(i, end - i));
+        std::string field;
+        fields >> field;  // the keyword
+        for (int c = 0; c < (kind == 2 ? 2 : 3) && fields >> field && field[0] != '#'; ++c) {
+          char* stop = nullptr;
+          const double v = std::strtod(field.c_str(), &stop);
+          if (*stop != '\0' || !std::isfinite(v)) bad.push_back({kind, index, c});
+        }
+      }
+    }
+    pos = end + 1;
+  }
+  return bad;
+}
+
 // The OBJ parsed; `material_folder` gets the folder that map_Kd paths are relative to.
 struct ParsedObj {
   tinyobj::attrib_t attrib;
@@ -108,6 +155,12 @@ void parse_obj(const std::string& path, const std::string& mtl, ParsedObj& out) 
   std::string folder = file.parent_path().string();
   if (folder.empty()) folder = ".";
   bool ok;
+  std::vector<BadCoordinate> bad;
+  {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw input_error(path, "cannot be opened for reading");
+    bad = bad_obj_coordinates(std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>()));
+  }
   if (mtl.empty()) {
     // What tinyobj::ObjReader::ParseFromFile does, without copying its results.
     ok = tinyobj::LoadObj(&out.attrib, &out.shapes, &out.materials, &out.warning, &out.error,
@@ -133,6 +186,12 @@ void parse_obj(const std::string& path, const std::string& mtl, ParsedObj& out) 
     throw input_error(path, "not a valid OBJ file: " +
                                 (why.empty() ? std::string("tinyobjloader could not parse it")
                                              : why));
+  }
+  for (const BadCoordinate& b : bad) {  // read as 0 by tinyobjloader: NaN, refused by validate_scene
+    std::vector<tinyobj::real_t>& values =
+        b.kind == 0 ? out.attrib.vertices : b.kind == 1 ? out.attrib.normals : out.attrib.texcoords;
+    const size_t at = b.index * (b.kind == 2 ? 2 : 3) + size_t(b.component);
+    if (at < values.size()) values[at] = std::numeric_limits<tinyobj::real_t>::quiet_NaN();
   }
 }
 
@@ -174,7 +233,8 @@ Scene load_obj_frame(const std::string& path, const std::string& mtl, bool warni
         TextureRef ref;
         ref.name = src.diffuse_texname;
         ref.path = tex;
-        if (!std::filesystem::exists(tex)) {
+        std::error_code ec;  // the non-throwing form: a name too long is just "not found"
+        if (!std::filesystem::exists(tex, ec)) {
           warn("material '" + src.name + "': texture " + tex + " not found");
         }
         it = texture_by_path.emplace(tex, static_cast<int>(scene.textures.size())).first;

@@ -10,12 +10,17 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <mutex>
 #include <span>
 #include <string>
 #include <unordered_map>
 #include <unordered_set>
 #include <vector>
+
+#include <unistd.h>
 
 #include "backend/backend.h"
 #include "backend/shader_constraints.h"
@@ -245,6 +250,9 @@ struct RenderTarget {
 class Impl {
  public:
   explicit Impl(const BackendOptions& options);
+  void save_pipeline_cache();
+  std::string pipeline_cache_file(const std::string& dir) const;
+  std::vector<char> load_pipeline_cache(const std::string& dir);
   ~Impl();
 
   DeviceInfo device_info() const;
@@ -264,10 +272,10 @@ class Impl {
   void throw_validation_errors();
 
  private:
-  void create_instance(bool validation);
+  void create_instance(bool validation, bool sync_validation);
   void pick_physical_device(const std::string& wanted);
   void create_device();
-  void create_shared_objects();
+  void create_shared_objects(const std::string& pipeline_cache_dir);
 
   void usable() const;
   VkResult device_result(VkResult result, const char* call);  // notes VK_ERROR_DEVICE_LOST
@@ -305,6 +313,7 @@ class Impl {
   vk::RenderPass render_pass_;
   vk::ShaderModule vertex_shader_;
   vk::PipelineCache pipeline_cache_;
+  std::string cache_file_;  // where the pipeline cache is saved, empty = nowhere
   HostBuffer staging_;
   HostBuffer readback_;
   RenderTarget target_;
@@ -319,10 +328,11 @@ class Impl {
 };
 
 Impl::Impl(const BackendOptions& options) {
-  create_instance(options.validation || env_flag("MOBIRT_VALIDATION"));
+  create_instance(options.validation || options.sync_validation || env_flag("MOBIRT_VALIDATION"),
+                  options.sync_validation);
   pick_physical_device(options.device);
   create_device();
-  create_shared_objects();
+  create_shared_objects(options.pipeline_cache_dir);
   throw_validation_errors();
 }
 
@@ -331,7 +341,7 @@ Impl::~Impl() {
   // Members go in reverse order: resources, shared objects, the device, then the instance.
 }
 
-void Impl::create_instance(bool validation) {
+void Impl::create_instance(bool validation, bool sync_validation) {
   uint32_t loader_version = VK_API_VERSION_1_0;
   if (vkEnumerateInstanceVersion(&loader_version) != VK_SUCCESS || loader_version < VK_API_VERSION_1_1) {
     throw Error(ErrorKind::NoDevice, "the Vulkan loader supports only Vulkan " + version_string(loader_version) +
@@ -374,6 +384,14 @@ void Impl::create_instance(bool validation) {
 
   VkInstanceCreateInfo info{VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO};
   info.pNext = validation ? &messenger_info : nullptr;  // also catches vkCreateInstance's messages
+  const VkValidationFeatureEnableEXT sync_feature = VK_VALIDATION_FEATURE_ENABLE_SYNCHRONIZATION_VALIDATION_EXT;
+  VkValidationFeaturesEXT features{VK_STRUCTURE_TYPE_VALIDATION_FEATURES_EXT};
+  if (validation && sync_validation) {  // BackendOptions::sync_validation
+    features.enabledValidationFeatureCount = 1;
+    features.pEnabledValidationFeatures = &sync_feature;
+    features.pNext = info.pNext;  // the messenger's create info stays unchained: it is reused below
+    info.pNext = &features;
+  }
   info.pApplicationInfo = &app;
   info.enabledLayerCount = uint32_t(layers.size());
   info.ppEnabledLayerNames = layers.data();
@@ -528,7 +546,7 @@ void Impl::create_device() {
   vkGetDeviceQueue(device, queue_family_, 0, &queue_);
 }
 
-void Impl::create_shared_objects() {
+void Impl::create_shared_objects(const std::string& pipeline_cache_dir) {
   VkCommandPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
   pool_info.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
   pool_info.queueFamilyIndex = queue_family_;
@@ -620,9 +638,70 @@ void Impl::create_shared_objects() {
   vertex_shader_ = vk::ShaderModule(device, module);
 
   VkPipelineCacheCreateInfo cache_info{VK_STRUCTURE_TYPE_PIPELINE_CACHE_CREATE_INFO};
+  const std::vector<char> cached = load_pipeline_cache(pipeline_cache_dir);
+  cache_info.initialDataSize = cached.size();
+  cache_info.pInitialData = cached.empty() ? nullptr : cached.data();
   VkPipelineCache cache = VK_NULL_HANDLE;
   vk::check(vkCreatePipelineCache(device, &cache_info, nullptr, &cache), "vkCreatePipelineCache");
   pipeline_cache_ = vk::PipelineCache(device, cache);
+}
+
+// ---- Pipeline cache on disk ------------------------------------------------------------------
+
+std::string Impl::pipeline_cache_file(const std::string& dir) const {
+  if (dir.empty()) return {};
+  std::string name = "pipelines-";
+  char hex[3];
+  for (uint8_t byte : properties_.pipelineCacheUUID) {
+    std::snprintf(hex, sizeof(hex), "%02x", byte);
+    name.append(hex);
+  }
+  return (std::filesystem::path(dir) / name.append(".bin")).string();
+}
+
+std::vector<char> Impl::load_pipeline_cache(const std::string& dir) {
+  cache_file_ = pipeline_cache_file(dir);
+  std::vector<char> data;
+  if (cache_file_.empty()) return data;
+  std::ifstream in(cache_file_, std::ios::binary);
+  if (!in) return data;
+  data.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  // The header (VkPipelineCacheHeaderVersionOne) must name this device and driver; anything else
+  // is ignored rather than handed to the driver.
+  VkPipelineCacheHeaderVersionOne header{};
+  if (data.size() < sizeof(header)) return {};
+  std::memcpy(&header, data.data(), sizeof(header));
+  if (header.headerVersion != VK_PIPELINE_CACHE_HEADER_VERSION_ONE || header.vendorID != properties_.vendorID ||
+      header.deviceID != properties_.deviceID ||
+      std::memcmp(header.pipelineCacheUUID, properties_.pipelineCacheUUID, VK_UUID_SIZE) != 0) {
+    return {};
+  }
+  return data;
+}
+
+void Impl::save_pipeline_cache() {
+  if (cache_file_.empty() || !pipeline_cache_.get()) return;
+  size_t size = 0;
+  if (vkGetPipelineCacheData(device, pipeline_cache_.get(), &size, nullptr) != VK_SUCCESS || size == 0) return;
+  std::vector<char> data(size);
+  if (vkGetPipelineCacheData(device, pipeline_cache_.get(), &size, data.data()) != VK_SUCCESS) return;
+  // Written whole or not at all: a temporary file renamed into place. A cache is an optimisation,
+  // so a folder that cannot be written only costs the next run its compile time.
+  std::error_code ec;
+  const std::filesystem::path target(cache_file_);
+  std::filesystem::create_directories(target.parent_path(), ec);
+  std::string temp_name = cache_file_;
+  temp_name.append(".tmp").append(std::to_string(::getpid()));
+  {
+    std::ofstream out(temp_name, std::ios::binary);
+    out.write(data.data(), std::streamsize(size));
+    if (!out) {
+      std::filesystem::remove(temp_name, ec);
+      return;
+    }
+  }
+  std::filesystem::rename(temp_name, target, ec);
+  if (ec) std::filesystem::remove(temp_name, ec);
 }
 
 // ---- Helpers ---------------------------------------------------------------------------------
@@ -1315,7 +1394,11 @@ class VulkanBackend final : public Backend {
   ~VulkanBackend() override {
     // A pass that never finished may still use every object: leak them rather than free memory
     // the driver is executing from.
-    if (impl_ && impl_->hung()) static_cast<void>(impl_.release());
+    if (impl_ && impl_->hung()) {
+      static_cast<void>(impl_.release());
+      return;
+    }
+    if (impl_) impl_->save_pipeline_cache();
   }
 
   DeviceInfo device_info() const override { return impl_->device_info(); }

@@ -1,0 +1,54 @@
+// GLSL ES 1.00 (OpenGL ES 2.0) dialect of mobirt's shaders: the same names as prelude_vk.glsl.
+// Every .frag for GLES is
+//   #version 100
+//   #include "prelude_es.glsl"
+// followed by the shared bodies; the build expands the includes (GLSL ES 1.00 has no #include)
+// and the GLES backend inserts the scene's #defines right after the #version line.
+#include "layout.h"
+
+precision highp float;
+precision highp int;
+precision highp sampler2D;
+
+// Scene specialisation: #defines set by the backend (Vulkan: specialization constants). The
+// defaults are the Vulkan ones.
+#ifndef LIGHT_COUNT
+#define LIGHT_COUNT 0
+#endif
+#ifndef STACK_DEPTH
+#define STACK_DEPTH 4
+#endif
+#ifndef MAX_STEPS
+#define MAX_STEPS 4096
+#endif
+#ifndef PACKING
+#define PACKING MOBIRT_PACKING_24_8
+#endif
+#ifndef TEXTURE_COUNT
+#define TEXTURE_COUNT 0
+#endif
+
+// The pass's uniforms: one vec4 array (indices in layout.h).
+uniform vec4 u_params[MOBIRT_MAX_PARAM_VEC4S];
+#define PARAM(i) u_params[i]
+
+// Every sampler comes with the inverse of its texture's size (set by the backend from the bound
+// texture), because texture2D takes normalised coordinates: texel (x, y) is read at its centre
+// ((x + 0.5) / W, (y + 0.5) / H), with NEAREST filtering. The binding slot becomes a texture unit
+// by glUniform1i after linking (the backend parses the slot from the SAMPLER line).
+struct MobirtSampler {
+  sampler2D tex;
+  vec2 inv_size;
+};
+#define SAMPLER(slot, name) uniform MobirtSampler name
+
+// Data textures: element i at texel (i mod W, i div W). Indices arrive as exact floats below
+// 2^24; W is a power of two, so the division, floor and mod are exact in float arithmetic.
+#define DATA_TEXEL(s, index) texture2D((s).tex, vec2((mod((index), float(MOBIRT_DATA_WIDTH)) + 0.5) / float(MOBIRT_DATA_WIDTH), (floor((index) / float(MOBIRT_DATA_WIDTH)) + 0.5) * (s).inv_size.y))
+// Per-ray textures share the pass's layout: this fragment's own ray. gl_FragCoord.xy is already
+// the texel centre (x + 0.5, y + 0.5); window row 0 is texture row 0 and glReadPixels' first row.
+#define RAY_TEXEL(s) texture2D((s).tex, gl_FragCoord.xy * (s).inv_size)
+// Texture atlas (RGBA8, NEAREST): the texel at integer coordinates xy (exact floats).
+#define ATLAS_TEXEL(s, xy) texture2D((s).tex, ((xy) + 0.5) * (s).inv_size)
+
+#define OUTPUT(value) gl_FragColor = (value)

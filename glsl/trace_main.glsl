@@ -1,0 +1,24 @@
+// main() of the traversal pass, shared by glsl/trace.frag (Vulkan) and glsl/es/trace.frag (GLES).
+// One fragment per ray: closest hit, then one shadow ray per light; writes ONE RGBA8 texel: hit
+// index + 1 and the shadow mask (glsl/layout.h).
+#include "traverse.glsl"
+#include "packing.glsl"
+
+SAMPLER(MOBIRT_BIND_RAY_ORIGIN, u_ray_origin);
+SAMPLER(MOBIRT_BIND_RAY_DIRECTION, u_ray_direction);
+
+void main() {
+  vec4 origin = RAY_TEXEL(u_ray_origin);     // xyz, tmin
+  vec4 direction = RAY_TEXEL(u_ray_direction);  // xyz, tmax
+  vec3 hit = traverse(origin.xyz, direction.xyz, origin.w, direction.w, false);
+  if (hit.z > 0.5) {
+    OUTPUT(pack_capped());
+    return;
+  }
+  if (hit.x < 0.0) {
+    OUTPUT(pack_trace(0.0, 0.0));
+    return;
+  }
+  float mask = shadow_mask(hit.x, origin.xyz, direction.xyz, hit.y);
+  OUTPUT(mask < 0.0 ? pack_capped() : pack_trace(hit.x + 1.0, mask));
+}

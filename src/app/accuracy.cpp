@@ -1,0 +1,335 @@
+// mobirt accuracy: one frame through the GPU renderer and through the double-precision reference
+// tracer (src/reference/), compared pixel by pixel and primary ray by primary ray.
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "app/commands.h"
+#include "backend/backend.h"
+#include "core/error.h"
+#include "core/image.h"
+#include "reference/reference.h"
+#include "render/renderer.h"
+#include "scene/animation.h"
+#include "scene/loader.h"
+#include "scene/overrides.h"
+
+namespace mobirt {
+namespace {
+
+constexpr const char* kAccuracyUsage = R"(Usage: mobirt accuracy SCENE [options] [--json FILE] [--heatmap FILE.png]
+
+Renders SCENE with the GPU renderer under the given settings and with the reference tracer (the
+same Whitted model on the CPU in double precision: watertight intersection over a BVH, textures
+from the original images, no 8-bit quantisation), and reports:
+  psnr_db          PSNR of the GPU image against the reference (both clamped to [0, 1], as shown)
+  max_error        largest channel difference
+  share_over_2     share of pixels with a channel off by more than 2/255
+  hit_mismatch     share of primary rays whose hit triangle differs from the reference's
+  shadow_mismatch  share of primary hits on the same triangle whose shadow masks differ
+  frame_ms         GPU frame time (median of --repeat frames after a warm-up frame)
+
+Options (the render options, with the same meaning and defaults):
+  --size WxH, --depth N, --no-shadows, --min-weight W, --stack N, --max-steps N, --bins N,
+  --leaf-size N, --max-depth N, --epsilon E, --light SPEC, --camera SPEC, --background R,G,B,
+  --device D, --validation, --time T, --mtl FILE
+  --repeat N              frames timed (default 3)
+  --json FILE             write the numbers as JSON (- = standard output)
+  --csv FILE              append them as one CSV row (a header first when FILE is new), with
+                          --label TEXT in the first column
+  --heatmap FILE          the per-pixel error as a picture: black = exact, blue = 1/255,
+                          cyan = 2/255, green = 6/255, yellow = 15/255, red = 63/255, white >= 1
+  -o FILE                 also write the GPU image
+  --reference-out FILE    also write the reference image
+  --ref-epsilon E         the reference's ray-origin offset, times 1 + max|p| (default 1e-9)
+)";
+
+[[noreturn]] void usage_error(const std::string& message) {
+  throw Error(ErrorKind::BadInput, message + " (see mobirt accuracy --help)");
+}
+
+int parse_int(const std::string& option, const std::string& value, int lo, int hi) {
+  char* end = nullptr;
+  errno = 0;
+  const long v = std::strtol(value.c_str(), &end, 10);
+  if (value.empty() || *end != '\0' || errno != 0 || v < lo || v > hi) {
+    usage_error(option + " " + value + ": expected an integer in [" + std::to_string(lo) + ", " +
+                std::to_string(hi) + "]");
+  }
+  return int(v);
+}
+
+double parse_number(const std::string& option, const std::string& value, double lo, double hi) {
+  char* end = nullptr;
+  const double v = std::strtod(value.c_str(), &end);
+  if (value.empty() || *end != '\0' || !(v >= lo && v <= hi)) {
+    usage_error(option + " " + value + ": expected a number in [" + std::to_string(lo) + ", " +
+                std::to_string(hi) + "]");
+  }
+  return v;
+}
+
+Image clamped(const Image& image) {
+  Image out = image;
+  for (glm::vec3& p : out.pixels) p = glm::clamp(p, 0.0f, 1.0f);
+  return out;
+}
+
+glm::vec3 heat(float error) {
+  const float s = std::clamp(std::log2(1.0f + 255.0f * error) / 8.0f, 0.0f, 1.0f);
+  struct Stop {
+    float at;
+    glm::vec3 color;
+  };
+  static const Stop stops[] = {{0.0f, {0, 0, 0}},        {0.125f, {0, 0, 1}},  {0.198f, {0, 1, 1}},
+                               {0.351f, {0, 1, 0}},      {0.5f, {1, 1, 0}},    {0.75f, {1, 0, 0}},
+                               {1.0f, {1, 1, 1}}};
+  for (size_t i = 1; i < std::size(stops); ++i) {
+    if (s <= stops[i].at) {
+      const float f = (s - stops[i - 1].at) / (stops[i].at - stops[i - 1].at);
+      return glm::mix(stops[i - 1].color, stops[i].color, f);
+    }
+  }
+  return stops[std::size(stops) - 1].color;
+}
+
+}  // namespace
+
+int cmd_accuracy(const std::vector<std::string>& args) {
+  std::string scene_path, json_path, csv_path, label, heatmap_path, gpu_out, ref_out, mtl;
+  RenderSettings settings;
+  BackendOptions backend_options;
+  std::vector<Light> lights;
+  std::optional<Camera> camera;
+  std::optional<glm::vec3> background;
+  std::optional<double> time;
+  double ref_epsilon = 1e-9;
+  int repeat = 3;
+  for (size_t i = 0; i < args.size(); ++i) {
+    const std::string& a = args[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= args.size()) usage_error(a + " needs a value");
+      return args[++i];
+    };
+    if (a == "-h" || a == "--help") {
+      std::cout << kAccuracyUsage;
+      return 0;
+    } else if (a == "--size") {
+      const std::string v = value();
+      int w = 0, h = 0;
+      char extra = 0;
+      if (std::sscanf(v.c_str(), "%dx%d%c", &w, &h, &extra) != 2 || w < 1 || h < 1 || w > 16384 || h > 16384) {
+        usage_error("--size " + v + ": expected WxH with 1 <= W, H <= 16384, e.g. 400x240");
+      }
+      settings.width = w;
+      settings.height = h;
+    } else if (a == "--depth") {
+      settings.depth = parse_int(a, value(), 0, 64);
+    } else if (a == "--no-shadows") {
+      settings.shadows = false;
+    } else if (a == "--min-weight") {
+      settings.secondary.min_weight = float(parse_number(a, value(), 0.0, 1.0));
+    } else if (a == "--stack") {
+      settings.stack_depth = parse_int(a, value(), 0, MOBIRT_MAX_STACK_DEPTH);
+    } else if (a == "--max-steps") {
+      settings.max_steps = parse_int(a, value(), 1, 1 << 24);
+    } else if (a == "--bins") {
+      settings.kd.bins = parse_int(a, value(), 2, 1024);
+    } else if (a == "--leaf-size") {
+      settings.kd.max_leaf_prims = parse_int(a, value(), 1, 1 << 20);
+    } else if (a == "--max-depth") {
+      settings.kd.max_depth = parse_int(a, value(), -1, 128);
+    } else if (a == "--epsilon") {
+      settings.shadow_rays.epsilon = float(parse_number(a, value(), 0.0, 1.0));
+      settings.secondary.epsilon = settings.shadow_rays.epsilon;
+    } else if (a == "--ref-epsilon") {
+      ref_epsilon = parse_number(a, value(), 0.0, 1.0);
+    } else if (a == "--light") {
+      lights.push_back(parse_light(value()));
+    } else if (a == "--camera") {
+      camera = parse_camera(value());
+    } else if (a == "--background") {
+      const std::string v = value();
+      glm::vec3 c;
+      char extra = 0;
+      if (std::sscanf(v.c_str(), "%f,%f,%f%c", &c.x, &c.y, &c.z, &extra) != 3 || !(c.x >= 0 && c.y >= 0 && c.z >= 0)) {
+        usage_error("--background " + v + ": expected three non-negative numbers R,G,B");
+      }
+      background = c;
+    } else if (a == "--device") {
+      backend_options.device = value();
+    } else if (a == "--validation") {
+      backend_options.validation = true;
+    } else if (a == "--time") {
+      time = parse_number(a, value(), -1e6, 1e6);
+    } else if (a == "--mtl") {
+      mtl = value();
+    } else if (a == "--repeat") {
+      repeat = parse_int(a, value(), 1, 1000);
+    } else if (a == "--json") {
+      json_path = value();
+    } else if (a == "--csv") {
+      csv_path = value();
+    } else if (a == "--label") {
+      label = value();
+    } else if (a == "--heatmap") {
+      heatmap_path = value();
+    } else if (a == "-o" || a == "--output") {
+      gpu_out = value();
+    } else if (a == "--reference-out") {
+      ref_out = value();
+    } else if (!a.empty() && a[0] == '-') {
+      usage_error("accuracy: unknown option " + a);
+    } else if (scene_path.empty()) {
+      scene_path = a;
+    } else {
+      usage_error("accuracy: more than one scene given ('" + scene_path + "' and '" + a + "')");
+    }
+  }
+  if (scene_path.empty()) usage_error("accuracy: no scene given");
+  for (const std::string& out : {heatmap_path, gpu_out, ref_out}) {
+    if (!out.empty()) check_image_output(out);
+  }
+
+  LoadOptions load_options;
+  load_options.mtl = mtl;
+  const AnimatedScene animation = load_animated_scene(scene_path, load_options);
+  Scene scene = animation.rest();
+  const Camera fallback = frame_box(scene.bounds(), 0.7854f, float(settings.width) / float(settings.height));
+  if (animation.animated()) animation.evaluate(time ? *time : 0.0, scene);
+  apply_overrides(scene, lights, camera);
+  if (background) scene.background = *background;
+  const Camera view = scene.camera ? *scene.camera : fallback;
+
+  // The GPU frame: a warm-up frame (shader compilation), then the median of `repeat`.
+  auto backend = create_vulkan_backend(backend_options);
+  Renderer renderer(*backend, settings);
+  Image gpu = renderer.render(scene, view);
+  std::vector<double> times;
+  for (int r = 0; r < repeat; ++r) {
+    FrameTimings t;
+    gpu = renderer.render(scene, view, &t);
+    times.push_back(t.total_ms);
+  }
+  std::sort(times.begin(), times.end());
+  const double frame_ms = times[times.size() / 2];
+
+  // The GPU's primary hits and shadow masks: the traversal pass over the primary rays.
+  const FlatKdTree tree = build_kdtree(scene.mesh.positions, settings.kd);
+  const RayBatch primary = primary_rays(view, settings.width, settings.height);
+  const TraceResult traced = renderer.trace(scene, tree, primary);
+  const std::span<const Light> shadow_lights =
+      settings.shadows ? std::span<const Light>(scene.lights) : std::span<const Light>();
+  const std::vector<SurfaceHit> hits =
+      decode_hits(scene, tree, primary, traced.texels, traced.packing, shadow_lights, settings.shadow_rays);
+  for (const std::string& message : backend->take_debug_messages()) {
+    throw Error(ErrorKind::Internal, "validation: " + message);
+  }
+
+  ReferenceSettings ref_settings = reference_settings(settings);
+  ref_settings.epsilon = ref_epsilon;
+  const ReferenceResult ref = render_reference(scene, view, ref_settings);
+
+  const Image gpu_shown = clamped(gpu), ref_shown = clamped(ref.image);
+  const ImageDiff diff = compare_images(gpu_shown, ref_shown);
+  size_t prim_mismatch = 0, same_hits = 0, mask_mismatch = 0;
+  for (uint32_t i = 0; i < primary.count(); ++i) {
+    const uint32_t p = primary.pixel[i];
+    if (hits[i].prim != ref.primary_prim[p]) {
+      ++prim_mismatch;
+    } else if (hits[i].valid()) {
+      ++same_hits;
+      const uint32_t gpu_mask = settings.shadows ? hits[i].mask : ref.primary_mask[p];
+      if (gpu_mask != ref.primary_mask[p]) ++mask_mismatch;
+    }
+  }
+  const double pixels = double(std::max<uint32_t>(1, primary.count()));
+  const double hit_mismatch = double(prim_mismatch) / pixels;
+  const double shadow_mismatch = same_hits ? double(mask_mismatch) / double(same_hits) : 0.0;
+
+  nlohmann::json j;
+  j["scene"] = scene_path;
+  j["size"] = std::to_string(settings.width) + "x" + std::to_string(settings.height);
+  j["triangles"] = scene.mesh.triangle_count();
+  j["lights"] = scene.lights.size();
+  j["device"] = backend->device_info().device;
+  j["settings"] = {{"depth", settings.depth},
+                   {"shadows", settings.shadows},
+                   {"min_weight", settings.secondary.min_weight},
+                   {"stack", settings.stack_depth},
+                   {"max_steps", settings.max_steps},
+                   {"bins", settings.kd.bins},
+                   {"leaf_size", settings.kd.max_leaf_prims},
+                   {"max_depth", settings.kd.max_depth},
+                   {"epsilon", settings.shadow_rays.epsilon},
+                   {"ref_epsilon", ref_epsilon}};
+  j["psnr_db"] = std::isfinite(diff.psnr) ? nlohmann::json(diff.psnr) : nlohmann::json("inf");
+  j["max_error"] = diff.max_error;
+  j["share_over_2"] = diff.share_over;
+  j["hit_mismatch"] = hit_mismatch;
+  j["shadow_mismatch"] = shadow_mismatch;
+  j["frame_ms"] = frame_ms;
+  j["reference_ms"] = ref.elapsed_ms;
+
+  std::printf("%s: %zu triangles, %zu lights, %dx%d, depth %d on %s\n", scene_path.c_str(),
+              scene.mesh.triangle_count(), scene.lights.size(), settings.width, settings.height, settings.depth,
+              backend->device_info().device.c_str());
+  std::printf("psnr             %8.2f dB\n", diff.psnr);
+  std::printf("max error        %8.4f   (%.1f/255)\n", diff.max_error, diff.max_error * 255.0);
+  std::printf("pixels > 2/255   %8.4f %%\n", 100.0 * diff.share_over);
+  std::printf("hit mismatch     %8.4f %%  (%zu of %u primary rays)\n", 100.0 * hit_mismatch, prim_mismatch,
+              primary.count());
+  std::printf("shadow mismatch  %8.4f %%  (%zu of %zu hits on the same triangle)\n", 100.0 * shadow_mismatch,
+              mask_mismatch, same_hits);
+  std::printf("frame            %8.2f ms (median of %d)\n", frame_ms, repeat);
+  std::printf("reference        %8.2f ms\n", ref.elapsed_ms);
+
+  if (!json_path.empty()) {
+    if (json_path == "-") {
+      std::cout << j.dump(2) << "\n";
+    } else {
+      std::ofstream out(json_path);
+      out << j.dump(2) << "\n";
+      if (!out) throw input_error(json_path, "cannot write the JSON report");
+    }
+  }
+  if (!csv_path.empty()) {
+    const bool fresh = !std::filesystem::exists(csv_path);
+    std::ofstream out(csv_path, std::ios::app);
+    if (fresh) {
+      out << "label,scene,size,depth,stack,bins,leaf_size,max_depth,epsilon,frame_ms,psnr_db,max_error,"
+             "share_over_2,hit_mismatch,shadow_mismatch,reference_ms\n";
+    }
+    char row[512];
+    std::snprintf(row, sizeof(row), "%s,%s,%dx%d,%d,%d,%d,%d,%d,%g,%.3f,%.3f,%.5f,%.6f,%.6f,%.6f,%.1f\n",
+                  label.c_str(), scene_path.c_str(), settings.width, settings.height, settings.depth,
+                  settings.stack_depth, settings.kd.bins, settings.kd.max_leaf_prims, settings.kd.max_depth,
+                  double(settings.shadow_rays.epsilon), frame_ms, std::isfinite(diff.psnr) ? diff.psnr : 999.0,
+                  diff.max_error, diff.share_over, hit_mismatch, shadow_mismatch, ref.elapsed_ms);
+    out << row;
+    if (!out) throw input_error(csv_path, "cannot write the CSV row");
+  }
+  if (!heatmap_path.empty()) {
+    Image map(gpu.width, gpu.height);
+    for (size_t i = 0; i < map.pixels.size(); ++i) {
+      const glm::vec3 d = glm::abs(gpu_shown.pixels[i] - ref_shown.pixels[i]);
+      map.pixels[i] = heat(std::max(d.x, std::max(d.y, d.z)));
+    }
+    write_image(heatmap_path, map);
+  }
+  if (!gpu_out.empty()) write_image(gpu_out, gpu);
+  if (!ref_out.empty()) write_image(ref_out, ref.image);
+  return 0;
+}
+
+}  // namespace mobirt

@@ -1,0 +1,73 @@
+#include "render/scene_features.h"
+
+#include <sstream>
+
+#include "layout.h"
+
+namespace mobirt {
+
+namespace {
+std::string seconds(double s) {
+  std::ostringstream o;
+  o << s;
+  return o.str();
+}
+}  // namespace
+
+SceneFeatures analyze_scene(const AnimatedScene& animation, const RenderSettings& settings) {
+  const Scene& scene = animation.rest();
+  SceneFeatures f;
+  f.triangles = scene.mesh.triangle_count();
+  f.lights = int(scene.lights.size());
+  f.textures = int(scene.textures.size());
+  for (const Material& m : scene.materials) {
+    f.reflective = f.reflective || m.reflectance > 0.0f;
+    f.refractive = f.refractive || m.transmittance > 0.0f;
+  }
+  f.animated = animation.animated();
+  f.duration = animation.duration();
+  const int shadow_lights = settings.shadows ? f.lights : 0;
+  f.packing = choose_packing(f.triangles, shadow_lights, scene.source);
+  auto add = [&](std::string what, const std::string& why) { f.choices.push_back(what.append(": ").append(why)); };
+
+  if (f.packing == Packing::Bits24_8) {
+    add("packing 24/8", std::to_string(f.triangles) + " triangles fit 24 bits and " + std::to_string(shadow_lights) +
+                            " lights fit 8 shadow bits");
+  } else {
+    add("packing 16/16", std::to_string(shadow_lights) + " lights need more than 8 shadow bits and " +
+                             std::to_string(f.triangles) + " triangles fit 16 bits");
+  }
+  if (shadow_lights == 0) {
+    add("traversal pass: LIGHT_COUNT 0", f.lights == 0 ? "no lights: no shadow rays at all"
+                                                       : "--no-shadows: no shadow rays at all");
+  } else {
+    add("traversal pass: LIGHT_COUNT " + std::to_string(shadow_lights),
+        "the shadow loop is unrolled for exactly the scene's lights");
+  }
+  add("traversal pass: STACK_DEPTH " + std::to_string(settings.stack_depth) + ", MAX_STEPS " +
+          std::to_string(settings.max_steps),
+      "the settings (--stack, --max-steps)");
+  if (f.textures == 0) {
+    add("shading pass: TEXTURE_COUNT 0", "no textures: no atlas built or uploaded, no texture coordinates, "
+                                         "the atlas code folds away");
+  } else {
+    add("shading pass: TEXTURE_COUNT " + std::to_string(f.textures),
+        "one 2048x2048 atlas holding the scene's " + std::to_string(f.textures) + " textures");
+  }
+  if (!f.reflective && !f.refractive) {
+    add("one generation of rays", "no reflective or refractive material: --depth has nothing to bounce");
+  } else {
+    add("up to " + std::to_string(settings.depth + 1) + " generations of rays",
+        std::string(f.reflective ? "mirrors" : "") + (f.reflective && f.refractive ? " and " : "") +
+            (f.refractive ? "glass" : "") + ", --depth " + std::to_string(settings.depth));
+  }
+  if (f.animated) {
+    add("kd-tree rebuilt from scratch every frame",
+        "the triangles move (" + seconds(f.duration) + " s of animation)");
+  } else {
+    add("kd-tree built once", "a static scene: later frames keep it");
+  }
+  return f;
+}
+
+}  // namespace mobirt

@@ -1,0 +1,275 @@
+// Vulkan and OpenGL ES 2.0 side by side. The same kd-tree, texel layouts, ray-tree manager and hit
+// decoding feed both; only the backend differs. Per backend (one test body, parameterised over
+// {vulkan, gles}): the traversal pass agrees with the CPU traversal and the image with the CPU
+// expectation. Across backends, for every project scene and effect level: the same hit index and
+// shadow mask on >= 99.9% of rays, final images within 1/255 on >= 99.5% of pixels and PSNR >= 45
+// dB; a failing comparison writes its diff image and names it.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "backend/backend.h"
+#include "core/error.h"
+#include "raytree/hits.h"
+#include "render/cpu_render.h"
+#include "render/renderer.h"
+#include "scene/loader.h"
+#include "test_scenes.h"
+#include "test_support.h"
+#include "vulkan_fixture.h"
+
+namespace mobirt {
+namespace {
+
+enum class Api { Vulkan, Gles };
+
+const char* api_name(Api api) { return api == Api::Vulkan ? "vulkan" : "gles"; }
+
+// Validation on: the Khronos layer on Vulkan, a KHR_debug context on GLES.
+std::unique_ptr<Backend> make_backend(Api api) {
+  const BackendOptions options = test::validated_options();
+  return api == Api::Vulkan ? create_vulkan_backend(options) : create_gles_backend(options);
+}
+
+void expect_no_messages(Backend& backend, const char* what) {
+  const std::vector<std::string> messages = backend.take_debug_messages();
+  EXPECT_TRUE(messages.empty()) << what << " debug messages:\n" << test::join(messages);
+}
+
+Camera scene_camera(const Scene& scene, int width, int height) {
+  return scene.camera ? *scene.camera : frame_box(scene.bounds(), 0.8f, float(width) / float(height));
+}
+
+// ---- One test body per backend ----------------------------------------------------------------
+
+class PerBackend : public ::testing::TestWithParam<Api> {
+ protected:
+  void SetUp() override { backend = make_backend(GetParam()); }
+  void TearDown() override {
+    if (backend) expect_no_messages(*backend, api_name(GetParam()));
+  }
+  std::unique_ptr<Backend> backend;
+};
+
+// The traversal pass against the CPU traversal of the same tree: same primitive (or a tie at the
+// same distance, or a grazing edge) and the same shadow mask.
+void check_traversal_against_cpu(Backend& backend, const Scene& scene, int width, int height) {
+  RenderSettings settings;
+  settings.width = width;
+  settings.height = height;
+  Renderer renderer(backend, settings);
+  const FlatKdTree tree = build_kdtree(scene.mesh.positions, settings.kd);
+  const RayBatch rays = primary_rays(scene_camera(scene, width, height), width, height);
+  const TraceResult gpu = renderer.trace(scene, tree, rays);
+  size_t same = 0, tolerated = 0, capped = 0, masks = 0, masks_equal = 0;
+  for (uint32_t i = 0; i < rays.count(); ++i) {
+    const Ray ray = rays.ray(i);
+    const TraceTexel texel = unpack_trace(gpu.packing, gpu.texels[i]);
+    if (texel.capped) {
+      ++capped;
+      continue;
+    }
+    const Hit cpu = traverse(tree, ray, settings.stack_depth);
+    const int32_t prim = texel.hit() ? texel.prim() : -1;
+    if (prim == cpu.prim) {
+      ++same;
+      if (cpu.valid()) {
+        ++masks;
+        const uint32_t mask =
+            shadow_mask(tree, scene.lights, cpu.prim, ray, cpu.t, settings.shadow_rays, settings.stack_depth);
+        if (mask == texel.mask) ++masks_equal;
+      }
+      continue;
+    }
+    // A tie in t with another triangle, or a hit on one side and a miss on the other at an edge.
+    Ray open = ray;
+    open.tmin = -kInfinity;
+    open.tmax = kInfinity;
+    Hit h;
+    const int32_t other = prim >= 0 ? prim : cpu.prim;
+    if (intersect_triangle(tree, other, open, h) &&
+        ((prim >= 0 && cpu.valid() && std::abs(h.t - cpu.t) <= 1e-4f * std::max(1.0f, cpu.t)) ||
+         std::min({h.u, h.v, 1.0f - h.u - h.v}) < 1e-4f)) {
+      ++tolerated;
+    }
+  }
+  const size_t decided = rays.count() - capped;
+  EXPECT_EQ(capped, 0u);
+  EXPECT_GE(double(same), 0.999 * double(decided)) << same << " of " << decided << " rays agree";
+  EXPECT_EQ(same + tolerated, decided) << "disagreements that are neither ties nor grazing edges";
+  EXPECT_GT(masks, 0u);
+  EXPECT_GE(double(masks_equal), 0.999 * double(masks)) << masks_equal << " of " << masks << " masks agree";
+}
+
+TEST_P(PerBackend, TraversalMatchesCpuOnTheDefaultScene) {
+  check_traversal_against_cpu(*backend, load_scene(MOBIRT_SOURCE_DIR "/scenes/default.gltf"), 200, 120);
+}
+
+TEST_P(PerBackend, TraversalMatchesCpuOnABoxGrid) {
+  check_traversal_against_cpu(*backend, test::box_grid_scene(), 160, 120);
+}
+
+TEST_P(PerBackend, TraversalMatchesCpuOnTheToaster) {
+  check_traversal_against_cpu(*backend, load_scene(MOBIRT_SOURCE_DIR "/scenes/toaster.gltf"), 200, 120);
+}
+
+TEST_P(PerBackend, DefaultSceneImageMatchesCpuExpectation) {
+  const Scene scene = load_scene(MOBIRT_SOURCE_DIR "/scenes/default.gltf");
+  RenderSettings settings;
+  settings.width = 200;
+  settings.height = 120;
+  Renderer renderer(*backend, settings);
+  const Image gpu = renderer.render(scene, *scene.camera);
+  const Image cpu = render_on_cpu(scene, *scene.camera, settings);
+  const ImageDiff d = compare_images(gpu, cpu);
+  if (d.psnr < 40.0 || d.share_over > 0.005) {
+    const std::string diff = std::string("parity-") + api_name(GetParam()) + "-vs-cpu-diff.png";
+    write_image(test::output_path(diff).string(), difference_image(gpu, cpu));
+    ADD_FAILURE() << api_name(GetParam()) << " image differs from the CPU expectation: PSNR " << d.psnr << " dB, "
+                  << 100.0 * d.share_over << "% of pixels off by more than 2/255; see " << test::output_path(diff);
+  }
+}
+
+// A loop cap too small costs time, never pixels, on both backends.
+TEST_P(PerBackend, CappedRaysAreTracedOnTheCpu) {
+  const Scene scene = test::random_soup_scene(2000);
+  RenderSettings tight;
+  tight.width = 64;
+  tight.height = 48;
+  tight.max_steps = 24;
+  RenderSettings loose = tight;
+  loose.max_steps = 100000;
+  FrameTimings t_tight, t_loose;
+  Renderer r_tight(*backend, tight);
+  const Image a = r_tight.render(scene, *scene.camera, &t_tight);
+  Renderer r_loose(*backend, loose);
+  const Image b = r_loose.render(scene, *scene.camera, &t_loose);
+  EXPECT_GT(t_tight.sum.capped, 0u);
+  EXPECT_EQ(t_loose.sum.capped, 0u);
+  EXPECT_EQ(compare_images(a, b, 0.5f / 255.0f).max_error, 0.0);
+}
+
+INSTANTIATE_TEST_SUITE_P(Backends, PerBackend, ::testing::Values(Api::Vulkan, Api::Gles),
+                         [](const ::testing::TestParamInfo<Api>& p) { return std::string(api_name(p.param)); });
+
+// ---- Vulkan against GLES -----------------------------------------------------------------------
+
+struct ParityCase {
+  const char* scene;  // file under scenes/
+  int width, height;
+  const char* level;  // "cast", "shadows", "bounces"
+};
+
+std::string case_name(const ParityCase& c) {
+  std::string name = c.scene;
+  name = name.substr(0, name.find('.'));
+  return name + "_" + c.level;
+}
+
+RenderSettings case_settings(const ParityCase& c) {
+  RenderSettings s;
+  s.width = c.width;
+  s.height = c.height;
+  const std::string level = c.level;
+  s.shadows = level != "cast";
+  s.depth = level == "bounces" ? 2 : 0;
+  return s;
+}
+
+class CrossBackend : public ::testing::TestWithParam<ParityCase> {
+ protected:
+  void SetUp() override {
+    vulkan = make_backend(Api::Vulkan);
+    gles = make_backend(Api::Gles);
+  }
+  void TearDown() override {
+    if (vulkan) expect_no_messages(*vulkan, "vulkan");
+    if (gles) expect_no_messages(*gles, "gles");
+  }
+  std::unique_ptr<Backend> vulkan, gles;
+};
+
+// The traversal passes: the same packed texel (hit index + 1 and shadow mask) for the same rays.
+TEST_P(CrossBackend, SameHitsAndShadowMasks) {
+  const ParityCase& c = GetParam();
+  const Scene scene = load_scene(std::string(MOBIRT_SOURCE_DIR "/scenes/") + c.scene);
+  const RenderSettings settings = case_settings(c);
+  const FlatKdTree tree = build_kdtree(scene.mesh.positions, settings.kd);
+  const RayBatch rays = primary_rays(scene_camera(scene, c.width, c.height), c.width, c.height);
+  Renderer on_vulkan(*vulkan, settings);
+  Renderer on_gles(*gles, settings);
+  const TraceResult a = on_vulkan.trace(scene, tree, rays);
+  const TraceResult b = on_gles.trace(scene, tree, rays);
+  ASSERT_EQ(a.packing, b.packing);
+  ASSERT_EQ(a.texels.size(), b.texels.size());
+  size_t same_hit = 0, same_mask = 0, hits = 0;
+  std::string first;
+  for (size_t i = 0; i < a.texels.size(); ++i) {
+    const TraceTexel ta = unpack_trace(a.packing, a.texels[i]);
+    const TraceTexel tb = unpack_trace(b.packing, b.texels[i]);
+    const bool hit_equal = ta.capped == tb.capped && ta.hit() == tb.hit() && (!ta.hit() || ta.prim() == tb.prim());
+    if (hit_equal) ++same_hit;
+    if (hit_equal && ta.hit()) {
+      ++hits;
+      if (ta.mask == tb.mask) ++same_mask;
+    }
+    if ((!hit_equal || ta.mask != tb.mask) && first.empty()) {
+      std::ostringstream s;
+      s << "ray " << i << ": vulkan texel " << std::hex << a.texels[i] << ", gles texel " << b.texels[i];
+      first = s.str();
+    }
+  }
+  const double n = double(a.texels.size());
+  std::printf("[ parity ] %s: hits %zu/%zu (%.4f%%), masks %zu/%zu\n", case_name(c).c_str(), same_hit,
+              a.texels.size(), 100.0 * double(same_hit) / n, same_mask, hits);
+  EXPECT_GE(double(same_hit), 0.999 * n) << same_hit << " of " << a.texels.size() << " hits agree; first: " << first;
+  EXPECT_GE(double(same_mask), 0.999 * double(hits)) << same_mask << " of " << hits << " masks agree; first: " << first;
+}
+
+// The final images: within 1/255 on >= 99.5% of pixels, PSNR >= 45 dB.
+TEST_P(CrossBackend, SameImage) {
+  const ParityCase& c = GetParam();
+  const Scene scene = load_scene(std::string(MOBIRT_SOURCE_DIR "/scenes/") + c.scene);
+  const RenderSettings settings = case_settings(c);
+  const Camera camera = scene_camera(scene, c.width, c.height);
+  Renderer on_vulkan(*vulkan, settings);
+  Renderer on_gles(*gles, settings);
+  const Image a = on_vulkan.render(scene, camera);
+  const Image b = on_gles.render(scene, camera);
+  // Accumulated float colours: one 8-bit step is 1/255, plus float rounding of the weights.
+  const ImageDiff d = compare_images(a, b, 1.0f / 255.0f + 1e-5f);
+  std::printf("[ parity ] %s image: PSNR %.2f dB, max error %.4f (%.1f/255), %.4f%% of pixels beyond 1/255\n",
+              case_name(c).c_str(), d.psnr, d.max_error, 255.0 * d.max_error, 100.0 * d.share_over);
+  if (d.psnr < 45.0 || d.share_over > 0.005) {
+    const std::string diff = "parity-" + case_name(c) + "-diff.png";
+    write_image(test::output_path(diff).string(), difference_image(a, b));
+    write_image(test::output_path("parity-" + case_name(c) + "-vulkan.png").string(), a);
+    write_image(test::output_path("parity-" + case_name(c) + "-gles.png").string(), b);
+    ADD_FAILURE() << "Vulkan and GLES images differ: PSNR " << d.psnr << " dB, " << 100.0 * d.share_over
+                  << "% of pixels beyond 1/255; see " << test::output_path(diff);
+  }
+}
+
+std::vector<ParityCase> parity_cases() {
+  std::vector<ParityCase> cases;
+  const ParityCase scenes[] = {{"default.gltf", 200, 120, ""},
+                               {"toaster.gltf", 200, 120, ""},
+                               {"marbles.gltf", 240, 400, ""},
+                               {"fish.gltf", 200, 120, ""}};
+  for (const ParityCase& s : scenes) {
+    for (const char* level : {"cast", "shadows", "bounces"}) cases.push_back({s.scene, s.width, s.height, level});
+  }
+  return cases;
+}
+
+INSTANTIATE_TEST_SUITE_P(Scenes, CrossBackend, ::testing::ValuesIn(parity_cases()),
+                         [](const ::testing::TestParamInfo<ParityCase>& p) { return case_name(p.param); });
+
+}  // namespace
+}  // namespace mobirt
