@@ -11,13 +11,14 @@
 #include <vector>
 
 #include "backend/backend.h"
+#include "copy_pass.h"
 #include "core/error.h"
 #include "vulkan_fixture.h"
 
 namespace mobirt {
 namespace {
 
-uint32_t pack_rgba8(uint32_t r, uint32_t g, uint32_t b, uint32_t a) { return r | (g << 8) | (b << 16) | (a << 24); }
+using test::pack_rgba8;
 
 class GlesBackendTest : public ::testing::Test {
  protected:
@@ -110,14 +111,8 @@ TEST_F(GlesBackendTest, CopyInputRoundTripsEveryFormat) {
     } else {
       backend->upload(input, floats.data(), floats.size() * sizeof(float));
     }
-    PassDesc desc;
-    desc.shader = ShaderId::TestCopyInput;
-    desc.uniform_vec4s = 1;
-    desc.texture_bindings = {1};
-    const PassHandle pass = backend->create_pass(desc);
-    const float scale[4] = {1.0f, 1.0f, 1.0f, 1.0f};
     std::vector<uint32_t> out(count + 3, 0xdeadbeefu);
-    const PassTiming timing = backend->run_pass(pass, std::span(&input, 1), scale, width, count, out);
+    const PassTiming timing = test::run_copy_pass(*backend, input, width, count, out);
     EXPECT_EQ(timing.bytes_read, uint64_t(count) * 4);
     EXPECT_GT(timing.wall_ms, 0.0);
     for (uint32_t i = 0; i < count; ++i) {
@@ -128,34 +123,12 @@ TEST_F(GlesBackendTest, CopyInputRoundTripsEveryFormat) {
       }
     }
     for (uint32_t i = count; i < out.size(); ++i) EXPECT_EQ(out[i], 0xdeadbeefu) << "written past count";
-    backend->destroy(pass);
     backend->destroy(input);
   }
 }
 
 // Uniforms change between runs, and unused ones read as zero.
-TEST_F(GlesBackendTest, UniformsChangeBetweenRuns) {
-  const uint32_t width = 4, count = 12;
-  const TextureHandle input = backend->create_texture(width, 3, TexelFormat::RGBA32F);
-  const std::vector<float> ones(count * 4, 1.0f);
-  backend->upload(input, ones.data(), ones.size() * sizeof(float));
-  PassDesc desc;
-  desc.shader = ShaderId::TestCopyInput;
-  desc.uniform_vec4s = 4;
-  desc.texture_bindings = {1};
-  const PassHandle pass = backend->create_pass(desc);
-  std::vector<uint32_t> out(count);
-  const float first[4] = {51.0f / 255.0f, 102.0f / 255.0f, 1.0f, 0.0f};
-  backend->run_pass(pass, std::span(&input, 1), first, width, count, out);
-  for (uint32_t i = 0; i < count; ++i) ASSERT_EQ(out[i], pack_rgba8(51, 102, 255, 0)) << "ray " << i;
-  const float second[8] = {3.0f / 255.0f, 0.0f, 200.0f / 255.0f, 17.0f / 255.0f, 9, 9, 9, 9};
-  backend->run_pass(pass, std::span(&input, 1), second, width, count, out);
-  for (uint32_t i = 0; i < count; ++i) ASSERT_EQ(out[i], pack_rgba8(3, 0, 200, 17)) << "ray " << i;
-  const std::vector<float> too_many(4 * 5, 0.0f);
-  EXPECT_THROW(backend->run_pass(pass, std::span(&input, 1), too_many, width, count, out), Error);
-  backend->destroy(pass);
-  backend->destroy(input);
-}
+TEST_F(GlesBackendTest, UniformsChangeBetweenRuns) { test::expect_uniforms_reach_the_shader(*backend, 4, 12); }
 
 // Two GLES backends alive at once each keep their own context.
 TEST_F(GlesBackendTest, TwoBackendsCoexist) {
@@ -166,12 +139,8 @@ TEST_F(GlesBackendTest, TwoBackendsCoexist) {
   const uint32_t pb[2] = {pack_rgba8(9, 9, 9, 9), pack_rgba8(7, 7, 7, 7)};
   backend->upload(a, pa, sizeof(pa));
   other->upload(b, pb, sizeof(pb));
-  PassDesc desc;
-  desc.shader = ShaderId::TestCopyInput;
-  desc.uniform_vec4s = 1;
-  desc.texture_bindings = {1};
-  const PassHandle pass_a = backend->create_pass(desc);
-  const PassHandle pass_b = other->create_pass(desc);
+  const PassHandle pass_a = test::create_copy_pass(*backend);
+  const PassHandle pass_b = test::create_copy_pass(*other);
   const float scale[4] = {1.0f, 1.0f, 1.0f, 1.0f};
   std::vector<uint32_t> out(2);
   backend->run_pass(pass_a, std::span(&a, 1), scale, 2, 2, out);

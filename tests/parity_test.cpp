@@ -19,6 +19,7 @@
 #include "raytree/hits.h"
 #include "render/cpu_render.h"
 #include "render/renderer.h"
+#include "render_checks.h"
 #include "scene/loader.h"
 #include "test_scenes.h"
 #include "test_support.h"
@@ -120,13 +121,7 @@ TEST_P(PerBackend, TraversalMatchesCpuOnTheToaster) {
 }
 
 TEST_P(PerBackend, DefaultSceneImageMatchesCpuExpectation) {
-  const Scene scene = load_scene(MOBIRT_SOURCE_DIR "/scenes/default.gltf");
-  RenderSettings settings;
-  settings.width = 200;
-  settings.height = 120;
-  Renderer renderer(*backend, settings);
-  const Image gpu = renderer.render(scene, *scene.camera);
-  const Image cpu = render_on_cpu(scene, *scene.camera, settings);
+  const auto [gpu, cpu] = test::render_default_scene(*backend);
   const ImageDiff d = compare_images(gpu, cpu);
   if (d.psnr < 40.0 || d.share_over > 0.005) {
     const std::string diff = std::string("parity-") + api_name(GetParam()) + "-vs-cpu-diff.png";
@@ -138,21 +133,7 @@ TEST_P(PerBackend, DefaultSceneImageMatchesCpuExpectation) {
 
 // A loop cap too small costs time, never pixels, on both backends.
 TEST_P(PerBackend, CappedRaysAreTracedOnTheCpu) {
-  const Scene scene = test::random_soup_scene(2000);
-  RenderSettings tight;
-  tight.width = 64;
-  tight.height = 48;
-  tight.max_steps = 24;
-  RenderSettings loose = tight;
-  loose.max_steps = 100000;
-  FrameTimings t_tight, t_loose;
-  Renderer r_tight(*backend, tight);
-  const Image a = r_tight.render(scene, *scene.camera, &t_tight);
-  Renderer r_loose(*backend, loose);
-  const Image b = r_loose.render(scene, *scene.camera, &t_loose);
-  EXPECT_GT(t_tight.sum.capped, 0u);
-  EXPECT_EQ(t_loose.sum.capped, 0u);
-  EXPECT_EQ(compare_images(a, b, 0.5f / 255.0f).max_error, 0.0);
+  test::expect_capped_rays_traced_on_the_cpu(*backend, 2000, 64, 48);
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, PerBackend, ::testing::Values(Api::Vulkan, Api::Gles),

@@ -12,6 +12,7 @@
 #include "raytree/hits.h"
 #include "render/cpu_render.h"
 #include "render/renderer.h"
+#include "render_checks.h"
 #include "scene/loader.h"
 #include "test_scenes.h"
 #include "test_support.h"
@@ -154,37 +155,15 @@ TEST_F(VulkanRender, EveryStackDepthMatchesCpu) {
   for (int depth : {0, 1, 2, 8, 32}) check_scene(*backend, scene, 96, 64, depth);
 }
 
-// A loop cap too small for the scene costs time, never pixels: capped rays come back flagged and
-// the CPU traces them, so the image equals the one rendered with a generous cap.
+// A loop cap too small for the scene costs time, never pixels (see render_checks.h).
 TEST_F(VulkanRender, CappedRaysAreTracedOnTheCpu) {
-  const Scene scene = test::random_soup_scene(5000);
-  RenderSettings tight;
-  tight.width = 96;
-  tight.height = 64;
-  tight.max_steps = 24;
-  RenderSettings loose = tight;
-  loose.max_steps = 100000;
-  FrameTimings t_tight, t_loose;
-  Renderer r_tight(*backend, tight);
-  const Image a = r_tight.render(scene, *scene.camera, &t_tight);
-  Renderer r_loose(*backend, loose);
-  const Image b = r_loose.render(scene, *scene.camera, &t_loose);
-  EXPECT_GT(t_tight.sum.capped, 0u);
-  EXPECT_EQ(t_loose.sum.capped, 0u);
-  const ImageDiff d = compare_images(a, b, 0.5f / 255.0f);
-  EXPECT_EQ(d.max_error, 0.0) << "capped rays changed the image";
+  test::expect_capped_rays_traced_on_the_cpu(*backend, 5000, 96, 64);
 }
 
 // The GPU image against the CPU expectation (same tree and hits, shading transcribed to C++).
 TEST_F(VulkanRender, DefaultSceneImageMatchesCpuExpectation) {
-  const Scene scene = load_scene(MOBIRT_SOURCE_DIR "/scenes/default.gltf");
-  RenderSettings settings;
-  settings.width = 200;
-  settings.height = 120;
-  Renderer renderer(*backend, settings);
   FrameTimings timings;
-  const Image gpu = renderer.render(scene, *scene.camera, &timings);
-  const Image cpu = render_on_cpu(scene, *scene.camera, settings);
+  const auto [gpu, cpu] = test::render_default_scene(*backend, &timings);
   const ImageDiff d = compare_images(gpu, cpu);
   // Lit pixels exist and shadows exist: the image is not blank or uniformly lit.
   size_t bright = 0, dark_floor = 0;

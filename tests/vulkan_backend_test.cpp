@@ -11,6 +11,7 @@
 
 #include "backend/backend.h"
 #include "backend/vulkan/vulkan_backend.h"
+#include "copy_pass.h"
 #include "core/error.h"
 #include "layout.h"
 #include "vulkan_fixture.h"
@@ -20,7 +21,7 @@ namespace {
 
 using test::join;
 
-uint32_t pack_rgba8(uint32_t r, uint32_t g, uint32_t b, uint32_t a) { return r | (g << 8) | (b << 16) | (a << 24); }
+using test::pack_rgba8;
 
 double median(std::vector<double> values) {
   std::sort(values.begin(), values.end());
@@ -53,14 +54,8 @@ class VulkanBackendTest : public test::VulkanTest {
     }
     const TextureHandle input = backend->create_texture(width, height, TexelFormat::RGBA32F);
     backend->upload(input, texels.data(), texels.size() * sizeof(float));
-    PassDesc desc;
-    desc.shader = ShaderId::TestCopyInput;
-    desc.uniform_vec4s = 1;
-    desc.texture_bindings = {1};
-    const PassHandle pass = backend->create_pass(desc);
-    const float scale[4] = {1.0f, 1.0f, 1.0f, 1.0f};
     std::vector<uint32_t> out(count + 5, 0xdeadbeefu);
-    const PassTiming timing = backend->run_pass(pass, std::span(&input, 1), scale, width, count, out);
+    const PassTiming timing = test::run_copy_pass(*backend, input, width, count, out);
     EXPECT_EQ(timing.bytes_read, uint64_t(count) * 4);
     EXPECT_GT(timing.upload_ms, 0.0);
     size_t wrong = 0;
@@ -71,7 +66,6 @@ class VulkanBackendTest : public test::VulkanTest {
     }
     EXPECT_EQ(wrong, 0u);
     for (uint32_t i = count; i < out.size(); ++i) EXPECT_EQ(out[i], 0xdeadbeefu) << "written past count";
-    backend->destroy(pass);
     backend->destroy(input);
   }
 };
@@ -103,35 +97,7 @@ TEST_F(VulkanBackendTest, CopyRoundTripIsExact) {
 }
 
 TEST_F(VulkanBackendTest, UniformsReachTheShader) {
-  const uint32_t width = 16, count = 40;
-  std::vector<float> ones(size_t(width) * 3 * 4, 1.0f);
-  const TextureHandle input = backend->create_texture(width, 3, TexelFormat::RGBA32F);
-  backend->upload(input, ones.data(), ones.size() * sizeof(float));
-  PassDesc desc;
-  desc.shader = ShaderId::TestCopyInput;
-  desc.uniform_vec4s = 4;
-  desc.texture_bindings = {1};
-  const PassHandle pass = backend->create_pass(desc);
-  std::vector<uint32_t> out(count);
-
-  const float first[4] = {51.0f / 255.0f, 102.0f / 255.0f, 1.0f, 0.0f};
-  backend->run_pass(pass, std::span(&input, 1), first, width, count, out);
-  for (uint32_t i = 0; i < count; ++i) ASSERT_EQ(out[i], pack_rgba8(51, 102, 255, 0)) << "ray " << i;
-
-  const float second[8] = {3.0f / 255.0f, 0.0f, 200.0f / 255.0f, 17.0f / 255.0f, 9, 9, 9, 9};
-  backend->run_pass(pass, std::span(&input, 1), second, width, count, out);
-  for (uint32_t i = 0; i < count; ++i) ASSERT_EQ(out[i], pack_rgba8(3, 0, 200, 17)) << "ray " << i;
-
-  // More uniforms than the pass declared: refused.
-  const std::vector<float> too_many(4 * 5, 0.0f);
-  try {
-    backend->run_pass(pass, std::span(&input, 1), too_many, width, count, out);
-    ADD_FAILURE() << "expected Error";
-  } catch (const Error& e) {
-    EXPECT_EQ(e.kind(), ErrorKind::Internal);
-  }
-  backend->destroy(pass);
-  backend->destroy(input);
+  test::expect_uniforms_reach_the_shader(*backend, 16, 40, ErrorKind::Internal);
 }
 
 TEST_F(VulkanBackendTest, PartialUploadKeepsTheRest) {
@@ -141,11 +107,7 @@ TEST_F(VulkanBackendTest, PartialUploadKeepsTheRest) {
   const TextureHandle input = backend->create_texture(width, height, TexelFormat::RGBA32F);
   backend->upload(input, first.data(), first.size() * sizeof(float));
   backend->upload(input, second.data(), second.size() * sizeof(float));
-  PassDesc desc;
-  desc.shader = ShaderId::TestCopyInput;
-  desc.uniform_vec4s = 1;
-  desc.texture_bindings = {1};
-  const PassHandle pass = backend->create_pass(desc);
+  const PassHandle pass = test::create_copy_pass(*backend);
   const float scale[4] = {1, 1, 1, 1};
   std::vector<uint32_t> out(width * height);
   backend->run_pass(pass, std::span(&input, 1), scale, width, width * height, out);
@@ -168,11 +130,7 @@ TEST_F(VulkanBackendTest, OtherTexelFormats) {
   for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = uint8_t(i * 9);
   const TextureHandle rgba8 = backend->create_texture(width, 1, TexelFormat::RGBA8);
   backend->upload(rgba8, bytes.data(), bytes.size());
-  PassDesc desc;
-  desc.shader = ShaderId::TestCopyInput;
-  desc.uniform_vec4s = 1;
-  desc.texture_bindings = {1};
-  const PassHandle pass = backend->create_pass(desc);
+  const PassHandle pass = test::create_copy_pass(*backend);
   const float scale[4] = {1, 1, 1, 1};
   std::vector<uint32_t> out(count);
   backend->run_pass(pass, std::span(&rgba8, 1), scale, width, count, out);
@@ -326,11 +284,7 @@ TEST_F(VulkanBackendTest, CyclesDoNotLeak) {
   auto cycle = [&] {
     const TextureHandle input = backend->create_texture(width, 3, TexelFormat::RGBA32F);
     backend->upload(input, texels.data(), texels.size() * sizeof(float));
-    PassDesc desc;
-    desc.shader = ShaderId::TestCopyInput;
-    desc.uniform_vec4s = 1;
-    desc.texture_bindings = {1};
-    const PassHandle pass = backend->create_pass(desc);
+    const PassHandle pass = test::create_copy_pass(*backend);
     backend->run_pass(pass, std::span(&input, 1), scale, width, count, out);
     backend->destroy(pass);
     backend->destroy(input);
@@ -356,11 +310,7 @@ TEST_F(VulkanBackendTest, CopyPassTiming400x240) {
   std::vector<float> texels(size_t(count) * 4, 0.25f);
   const TextureHandle input = backend->create_texture(width, 240, TexelFormat::RGBA32F);
   backend->upload(input, texels.data(), texels.size() * sizeof(float));
-  PassDesc desc;
-  desc.shader = ShaderId::TestCopyInput;
-  desc.uniform_vec4s = 1;
-  desc.texture_bindings = {1};
-  const PassHandle pass = backend->create_pass(desc);
+  const PassHandle pass = test::create_copy_pass(*backend);
   const float scale[4] = {1, 1, 1, 1};
   std::vector<uint32_t> out(count);
   const PassTiming first = backend->run_pass(pass, std::span(&input, 1), scale, width, count, out);

@@ -13,6 +13,7 @@ PACKAGES=(
   libopenimageio-dev libgtest-dev libbenchmark-dev
   libegl-dev libgles-dev libegl-mesa0
   clang libclang-rt-14-dev    # the scene fuzzer (tools/fuzz.sh): clang 14's libFuzzer, ASan, UBSan
+  python3                     # tools/bad_inputs/, tests/fuzz/make_corpus.py
 )
 
 missing=()

@@ -1,7 +1,6 @@
 // mobirt accuracy: one frame through the GPU renderer and through the double-precision reference
 // tracer (src/reference/), compared pixel by pixel and primary ray by primary ray.
 #include <algorithm>
-#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -15,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/commands.h"
+#include "app/options.h"
 #include "backend/backend.h"
 #include "core/error.h"
 #include "core/image.h"
@@ -54,29 +54,11 @@ Options (the render options, with the same meaning and defaults):
   --ref-epsilon E         the reference's ray-origin offset, times 1 + max|p| (default 1e-9)
 )";
 
-[[noreturn]] void usage_error(const std::string& message) {
-  throw Error(ErrorKind::BadInput, message + " (see mobirt accuracy --help)");
-}
-
-int parse_int(const std::string& option, const std::string& value, int lo, int hi) {
-  char* end = nullptr;
-  errno = 0;
-  const long v = std::strtol(value.c_str(), &end, 10);
-  if (value.empty() || *end != '\0' || errno != 0 || v < lo || v > hi) {
-    usage_error(option + " " + value + ": expected an integer in [" + std::to_string(lo) + ", " +
-                std::to_string(hi) + "]");
-  }
-  return int(v);
-}
-
-double parse_number(const std::string& option, const std::string& value, double lo, double hi) {
-  char* end = nullptr;
-  const double v = std::strtod(value.c_str(), &end);
-  if (value.empty() || *end != '\0' || !(v >= lo && v <= hi)) {
-    usage_error(option + " " + value + ": expected a number in [" + std::to_string(lo) + ", " +
-                std::to_string(hi) + "]");
-  }
-  return v;
+constexpr const char* kHelp = "mobirt accuracy --help";
+[[noreturn]] void usage_error(const std::string& message) { cli::usage_error(message, kHelp); }
+int parse_int(const std::string& o, const std::string& v, int lo, int hi) { return cli::parse_int(o, v, lo, hi, kHelp); }
+double parse_number(const std::string& o, const std::string& v, double lo, double hi) {
+  return cli::parse_number(o, v, lo, hi, kHelp);
 }
 
 Image clamped(const Image& image) {

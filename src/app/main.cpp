@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "app/commands.h"
+#include "app/options.h"
 #include "backend/backend.h"
 #include "core/error.h"
 #include "core/image.h"
@@ -127,29 +128,11 @@ int write_output(const std::string& path, const Image& image) {
   return g_signal ? 128 + int(g_signal) : 0;
 }
 
-[[noreturn]] void usage_error(const std::string& message) {
-  throw Error(ErrorKind::BadInput, message + " (see mobirt --help)");
-}
-
-int parse_int(const std::string& option, const std::string& value, int lo, int hi) {
-  char* end = nullptr;
-  errno = 0;
-  const long v = std::strtol(value.c_str(), &end, 10);
-  if (value.empty() || *end != '\0' || errno != 0 || v < lo || v > hi) {
-    usage_error(option + " " + value + ": expected an integer in [" + std::to_string(lo) + ", " +
-                std::to_string(hi) + "]");
-  }
-  return int(v);
-}
-
-float parse_float(const std::string& option, const std::string& value, float lo, float hi) {
-  char* end = nullptr;
-  const float v = std::strtof(value.c_str(), &end);
-  if (value.empty() || *end != '\0' || !(v >= lo && v <= hi)) {
-    usage_error(option + " " + value + ": expected a number in [" + std::to_string(lo) + ", " +
-                std::to_string(hi) + "]");
-  }
-  return v;
+constexpr const char* kHelp = "mobirt --help";
+[[noreturn]] void usage_error(const std::string& message) { cli::usage_error(message, kHelp); }
+int parse_int(const std::string& o, const std::string& v, int lo, int hi) { return cli::parse_int(o, v, lo, hi, kHelp); }
+float parse_float(const std::string& o, const std::string& v, float lo, float hi) {
+  return cli::parse_float(o, v, lo, hi, kHelp);
 }
 
 glm::vec3 parse_color(const std::string& option, const std::string& value) {
