@@ -24,6 +24,7 @@ cmake --build "$BUILD" --target scene_fuzzer -j "$JOBS"
 rm -rf "$BUILD/corpus" && mkdir -p "$BUILD/corpus" "$BUILD/findings"
 cp tests/fuzz/corpus/* "$BUILD/corpus/"
 export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1:symbolize=1}"
+export LSAN_OPTIONS="${LSAN_OPTIONS:-suppressions=$PWD/tests/sanitizers/lsan.supp:print_suppressions=0}"
 export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}"
 set +e
 "$BUILD/tests/fuzz/scene_fuzzer" "$BUILD/corpus" -max_total_time="$SECONDS_TO_RUN" -timeout=10 \
