@@ -42,7 +42,7 @@ SceneFeatures analyze_scene(const AnimatedScene& animation, const RenderSettings
                                                        : "--no-shadows: no shadow rays at all");
   } else {
     add("traversal pass: LIGHT_COUNT " + std::to_string(shadow_lights),
-        "the shadow loop is unrolled for exactly the scene's lights");
+        "the shadow loop runs exactly the scene's lights (a constant trip count)");
   }
   add("traversal pass: STACK_DEPTH " + std::to_string(settings.stack_depth) + ", MAX_STEPS " +
           std::to_string(settings.max_steps),
