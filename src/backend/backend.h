@@ -97,6 +97,12 @@ class Backend {
   virtual std::vector<std::string> take_debug_messages() = 0;
 };
 
+// The arguments of Backend::run_pass checked against the pass, the same way by every backend:
+// throws Error(Internal) naming the pass when the texture count, the uniform size (at most the
+// pass's uniform_vec4s and MOBIRT_MAX_PARAM_VEC4S), the width or the output size is wrong.
+void check_run_pass_arguments(const PassDesc& desc, size_t textures, size_t uniform_floats, uint32_t width,
+                              uint32_t count, size_t out_texels);
+
 struct BackendOptions {
   std::string device;        // Vulkan: index or a substring of the device name; empty = lavapipe
   bool validation = false;   // Khronos validation layer; messages make the backend throw

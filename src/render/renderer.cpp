@@ -336,6 +336,23 @@ std::vector<uint32_t> Renderer::shade(const Scene& scene, const RayBatch& rays,
   return colors;
 }
 
+GenerationTimings& GenerationTimings::operator+=(const GenerationTimings& g) {
+  rays += g.rays;
+  hits += g.hits;
+  capped += g.capped;
+  shadow_rays += g.shadow_rays;
+  upload_ms += g.upload_ms;
+  trace_ms += g.trace_ms;
+  trace_readback_ms += g.trace_readback_ms;
+  decode_ms += g.decode_ms;
+  shade_ms += g.shade_ms;
+  shade_readback_ms += g.shade_readback_ms;
+  accumulate_ms += g.accumulate_ms;
+  secondary_ms += g.secondary_ms;
+  bytes_read += g.bytes_read;
+  return *this;
+}
+
 Image Renderer::render(const Scene& scene, const Camera& camera, FrameTimings* timings) {
   FrameTimings t;
   const auto frame_start = Clock::now();
@@ -403,21 +420,7 @@ Image Renderer::render(const Scene& scene, const Camera& camera, FrameTimings* t
     }
     t.generations.push_back(g);
   }
-  for (const GenerationTimings& g : t.generations) {
-    t.sum.rays += g.rays;
-    t.sum.hits += g.hits;
-    t.sum.capped += g.capped;
-    t.sum.shadow_rays += g.shadow_rays;
-    t.sum.upload_ms += g.upload_ms;
-    t.sum.trace_ms += g.trace_ms;
-    t.sum.trace_readback_ms += g.trace_readback_ms;
-    t.sum.decode_ms += g.decode_ms;
-    t.sum.shade_ms += g.shade_ms;
-    t.sum.shade_readback_ms += g.shade_readback_ms;
-    t.sum.accumulate_ms += g.accumulate_ms;
-    t.sum.secondary_ms += g.secondary_ms;
-    t.sum.bytes_read += g.bytes_read;
-  }
+  for (const GenerationTimings& g : t.generations) t.sum += g;
   t.total_ms = elapsed_ms(frame_start);
   if (timings) *timings = t;
   return image;

@@ -54,6 +54,8 @@ struct GenerationTimings {
   double accumulate_ms = 0;     // RGBA8 colours into the float frame with the rays' weights (CPU)
   double secondary_ms = 0;      // the next generation's rays (CPU)
   uint64_t bytes_read = 0;      // bytes that left the GPU: 4 per ray and pass
+
+  GenerationTimings& operator+=(const GenerationTimings& g);
 };
 
 // Where one frame's time went, stage by stage (milliseconds); the per-generation stages summed.

@@ -1232,21 +1232,7 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
   PassTiming timing;
   timing.upload_ms = pending_upload_ms_;
 
-  if (textures.size() != pass.desc.texture_bindings.size()) {
-    throw Error(ErrorKind::Internal, "pass " + name + " takes " + std::to_string(pass.desc.texture_bindings.size()) +
-                                         " textures, got " + std::to_string(textures.size()));
-  }
-  if (uniforms.size() * sizeof(float) > size_t(MOBIRT_MAX_PARAM_VEC4S) * 16 ||
-      uniforms.size() > size_t(pass.desc.uniform_vec4s) * 4) {
-    throw Error(ErrorKind::Internal, "pass " + name + ": " + std::to_string(uniforms.size()) +
-                                         " uniform floats, more than the pass's " +
-                                         std::to_string(pass.desc.uniform_vec4s) + " vec4");
-  }
-  if (width == 0) throw Error(ErrorKind::Internal, "pass " + name + ": width 0");
-  if (out.size() < count) {
-    throw Error(ErrorKind::Internal, "pass " + name + ": output holds " + std::to_string(out.size()) +
-                                         " texels, the pass writes " + std::to_string(count));
-  }
+  check_run_pass_arguments(pass.desc, textures.size(), uniforms.size(), width, count, out.size());
   std::vector<Texture*> bound;
   for (const TextureHandle t : textures) bound.push_back(&texture_ref(t));
   if (count == 0) {
