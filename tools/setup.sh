@@ -14,6 +14,9 @@ PACKAGES=(
   libegl-dev libgles-dev libegl-mesa0
   clang libclang-rt-14-dev    # the scene fuzzer (tools/fuzz.sh): clang 14's libFuzzer, ASan, UBSan
   python3                     # tools/bad_inputs/, tests/fuzz/make_corpus.py
+  python3-matplotlib          # the PNG plots of tools/accuracy_sweep.sh and tools/profile/
+  libembree-dev               # the baseline of `mobirt bench`: Embree 3, what a user would pick instead
+  libtbb-dev                  # parallel kd-tree build (TBB is also what Embree runs on)
 )
 
 missing=()
