@@ -73,6 +73,17 @@ uint32_t shadow_mask(const FlatKdTree& tree, std::span<const Light> lights, int3
   return mask;
 }
 
+uint32_t shadow_mask_with(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim, const Ray& ray,
+                          float t, const ShadowSettings& settings,
+                          const std::function<bool(const Ray&)>& is_occluded) {
+  uint32_t mask = 0;
+  if (prim < 0) return mask;
+  for_each_shadow_ray(tree, lights, prim, ray, t, settings, [&](size_t l, const Ray& shadow) {
+    if (!is_occluded(shadow)) mask |= 1u << l;
+  });
+  return mask;
+}
+
 uint32_t shadow_ray_count(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
                           const Ray& ray, float t, const ShadowSettings& settings) {
   uint32_t count = 0;
@@ -82,7 +93,6 @@ uint32_t shadow_ray_count(const FlatKdTree& tree, std::span<const Light> lights,
 }
 
 SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ray, int32_t prim) {
-  SurfaceHit hit;
   Hit h;
   h.t = kInfinity;
   // Recompute on this one triangle; the range is opened so that a hit the GPU accepted at the edge
@@ -101,6 +111,13 @@ SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ra
     h.u = h.v = 1.0f / 3.0f;
     h.prim = prim;
   }
+  h.prim = prim;
+  return surface_from_hit(scene, ray, h);
+}
+
+SurfaceHit surface_from_hit(const Scene& scene, const Ray& ray, const Hit& h) {
+  SurfaceHit hit;
+  const int32_t prim = h.prim;
   hit.prim = prim;
   hit.t = h.t;
   hit.u = h.u;

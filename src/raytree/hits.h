@@ -6,6 +6,7 @@
 #include <glm/glm.hpp>
 
 #include <cstdint>
+#include <functional>
 #include <span>
 #include <vector>
 
@@ -47,6 +48,12 @@ float scene_offset(const Aabb& bounds, float epsilon);  // epsilon x the box's l
 uint32_t shadow_mask(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
                      const Ray& ray, float t, const ShadowSettings& settings, int stack_depth);
 
+// The same shadow rays answered by another occlusion test (a CPU ray engine such as the Embree
+// baseline). Only tree.triangles and tree.bounds are read, so a tree without nodes will do.
+uint32_t shadow_mask_with(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim, const Ray& ray,
+                          float t, const ShadowSettings& settings,
+                          const std::function<bool(const Ray&)>& is_occluded);
+
 // How many shadow rays the traversal pass cast for this hit (for rays-per-second figures).
 uint32_t shadow_ray_count(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
                           const Ray& ray, float t, const ShadowSettings& settings);
@@ -64,6 +71,9 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
                                     std::span<const uint32_t> texels, Packing packing,
                                     std::span<const Light> lights, const ShadowSettings& shadows,
                                     DecodeStats* stats = nullptr);
+
+// The surface record of a hit whose t and barycentrics are known (hit.prim >= 0).
+SurfaceHit surface_from_hit(const Scene& scene, const Ray& ray, const Hit& hit);
 
 // The full surface record of a known hit (t and barycentrics recomputed on that one triangle).
 SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ray, int32_t prim);

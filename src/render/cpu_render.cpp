@@ -1,6 +1,8 @@
 #include "render/cpu_render.h"
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <thread>
 
@@ -56,45 +58,119 @@ glm::vec3 shade_phong(const Scene& scene, const SurfaceHit& hit, const glm::vec3
   return color;
 }
 
-Image render_on_cpu(const Scene& scene, const Camera& camera, const RenderSettings& settings, bool quantize) {
-  const FlatKdTree tree = build_kdtree(scene.mesh.positions, settings.kd);
+void KdTreeEngine::build(const Scene& scene) { tree_ = build_kdtree(scene.mesh.positions, options_); }
+
+Hit KdTreeEngine::closest(const Ray& ray) const { return traverse(tree_, ray, -1); }
+
+bool KdTreeEngine::occluded(const Ray& ray) const { return mobirt::occluded(tree_, ray, -1); }
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double ms_since(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+// Runs f(i) for i in [0, n) on `threads` threads, in chunks taken in turn (rays differ a lot in
+// cost, so a static split would leave one thread idle).
+template <class F>
+void parallel_for(uint32_t n, unsigned threads, F&& f) {
+  constexpr uint32_t kChunk = 64;
+  std::atomic<uint32_t> next{0};
+  auto work = [&] {
+    for (uint32_t begin; (begin = next.fetch_add(kChunk)) < n;) {
+      const uint32_t end = std::min(n, begin + kChunk);
+      for (uint32_t i = begin; i < end; ++i) f(i);
+    }
+  };
+  std::vector<std::thread> pool;
+  for (unsigned t = 1; t < threads; ++t) pool.emplace_back(work);
+  work();
+  for (std::thread& t : pool) t.join();
+}
+
+}  // namespace
+
+Image render_whitted_cpu(const Scene& scene, const Camera& camera, const RenderSettings& settings,
+                         CpuRayEngine& engine, unsigned threads, CpuFrameTimings* timings, bool quantize) {
+  CpuFrameTimings t;
+  const Clock::time_point frame_start = Clock::now();
+  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
+
+  Clock::time_point start = Clock::now();
+  engine.build(scene);
+  t.build_ms = ms_since(start);
+  const FlatKdTree& triangles = engine.triangles();
   const Atlas atlas = build_atlas(scene);
+
+  start = Clock::now();
   RayBatch rays = primary_rays(camera, settings.width, settings.height);
+  t.rays_ms = ms_since(start);
+  t.primary_rays = rays.count();
+
   Image image(settings.width, settings.height);
   const std::span<const Light> lights = settings.shadows ? std::span<const Light>(scene.lights)
                                                          : std::span<const Light>();
   const uint32_t all_lights = scene.lights.empty() ? 0u : (2u << (scene.lights.size() - 1)) - 1u;
   const int depth = scene_has_secondary_rays(scene) ? settings.depth : 0;
-  const unsigned threads = std::max(1u, std::thread::hardware_concurrency());
+  std::atomic<uint64_t> shadow_rays{0};
   for (int generation = 0; generation <= depth && rays.count() > 0; ++generation) {
     const uint32_t n = rays.count();
+    t.rays += n;
+    ++t.generations;
+    std::vector<Hit> closest(n);
+    start = Clock::now();
+    parallel_for(n, threads, [&](uint32_t i) { closest[i] = engine.closest(rays.ray(i)); });
+    t.trace_ms += ms_since(start);
+
     std::vector<SurfaceHit> hits(n);
+    start = Clock::now();
+    parallel_for(n, threads, [&](uint32_t i) {
+      if (!closest[i].valid()) return;
+      const Ray ray = rays.ray(i);
+      hits[i] = surface_from_hit(scene, ray, closest[i]);
+      if (!settings.shadows) {
+        hits[i].mask = all_lights;
+        return;
+      }
+      uint64_t cast = 0;
+      hits[i].mask = shadow_mask_with(triangles, lights, closest[i].prim, ray, closest[i].t,
+                                      settings.shadow_rays, [&](const Ray& shadow) {
+                                        ++cast;
+                                        return engine.occluded(shadow);
+                                      });
+      shadow_rays.fetch_add(cast, std::memory_order_relaxed);
+    });
+    t.shadow_ms += ms_since(start);
+
+    start = Clock::now();
     std::vector<glm::vec3> colors(n);
-    std::vector<std::thread> pool;
-    for (unsigned w = 0; w < threads; ++w) {
-      pool.emplace_back([&, w] {
-        for (uint32_t i = w; i < n; i += threads) {
-          const Ray ray = rays.ray(i);
-          const Hit h = traverse(tree, ray, -1);
-          glm::vec3 c = scene.background;
-          if (h.valid()) {
-            hits[i] = surface_hit(scene, tree, ray, h.prim);
-            hits[i].mask = settings.shadows
-                               ? shadow_mask(tree, lights, h.prim, ray, h.t, settings.shadow_rays, -1)
-                               : all_lights;
-            c = shade_phong(scene, hits[i], -glm::normalize(ray.direction), atlas);
-          }
-          c = glm::clamp(c, 0.0f, 1.0f);
-          if (quantize) c = glm::round(c * 255.0f) / 255.0f;  // the RGBA8 shading pass
-          colors[i] = c;
-        }
-      });
-    }
-    for (std::thread& t : pool) t.join();
+    parallel_for(n, threads, [&](uint32_t i) {
+      glm::vec3 c = scene.background;
+      if (hits[i].valid()) c = shade_phong(scene, hits[i], -glm::normalize(rays.ray(i).direction), atlas);
+      c = glm::clamp(c, 0.0f, 1.0f);
+      if (quantize) c = glm::round(c * 255.0f) / 255.0f;  // the RGBA8 shading pass
+      colors[i] = c;
+    });
     for (uint32_t i = 0; i < n; ++i) image.pixels[rays.pixel[i]] += rays.weight[i] * colors[i];
-    if (generation < depth) rays = next_generation(scene, tree.bounds, rays, hits, settings.secondary);
+    t.shade_ms += ms_since(start);
+
+    if (generation < depth) {
+      start = Clock::now();
+      rays = next_generation(scene, triangles.bounds, rays, hits, settings.secondary);
+      t.secondary_ms += ms_since(start);
+    }
   }
+  t.shadow_rays = shadow_rays.load();
+  t.total_ms = ms_since(frame_start);
+  if (timings) *timings = t;
   return image;
+}
+
+Image render_on_cpu(const Scene& scene, const Camera& camera, const RenderSettings& settings, bool quantize) {
+  KdTreeEngine engine(settings.kd);
+  return render_whitted_cpu(scene, camera, settings, engine, 0, nullptr, quantize);
 }
 
 }  // namespace mobirt

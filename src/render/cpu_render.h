@@ -4,6 +4,9 @@
 // the ray tree but none of the shaders), and the CPU column of the benchmarks.
 #pragma once
 
+#include <cstdint>
+
+#include "accel/kdtree.h"
 #include "core/camera.h"
 #include "core/image.h"
 #include "raytree/hits.h"
@@ -17,8 +20,62 @@ namespace mobirt {
 // `atlas` gives the textures (may be empty).
 glm::vec3 shade_phong(const Scene& scene, const SurfaceHit& hit, const glm::vec3& view, const Atlas& atlas);
 
-// Ray casting with shadows on the CPU (no quantisation to 8 bits unless quantize is set, which
-// mimics the RGBA8 shading pass).
+// What traces the rays of a CPU frame: mobirt's own kd-tree traversal (KdTreeEngine), or the
+// baseline a user would pick instead (the Embree engine in src/baseline/). closest() and
+// occluded() are called from several threads at once.
+class CpuRayEngine {
+ public:
+  virtual ~CpuRayEngine() = default;
+  virtual const char* name() const = 0;
+  // (Re)builds the acceleration structure over scene.mesh, as it is now. Once per frame.
+  virtual void build(const Scene& scene) = 0;
+  virtual Hit closest(const Ray& ray) const = 0;  // in [ray.tmin, ray.tmax]; prim -1 = miss
+  virtual bool occluded(const Ray& ray) const = 0;
+  // The triangle texels and the scene box of the last build: the shadow rays and the secondary
+  // rays are made from them exactly as for the GPU passes (the box sizes the origin offset).
+  virtual const FlatKdTree& triangles() const = 0;
+};
+
+// mobirt's binned-SAH kd-tree, traversed with a full stack (src/accel).
+class KdTreeEngine final : public CpuRayEngine {
+ public:
+  explicit KdTreeEngine(const KdBuildOptions& options = {}) : options_(options) {}
+  const char* name() const override { return "mobirt kd-tree (CPU)"; }
+  void build(const Scene& scene) override;
+  Hit closest(const Ray& ray) const override;
+  bool occluded(const Ray& ray) const override;
+  const FlatKdTree& triangles() const override { return tree_; }
+  const FlatKdTree& tree() const { return tree_; }
+
+ private:
+  KdBuildOptions options_;
+  FlatKdTree tree_;
+};
+
+// Where a CPU frame's time went (milliseconds, wall clock; each stage runs on all the threads).
+struct CpuFrameTimings {
+  double build_ms = 0;      // engine build over the frame's triangles
+  double rays_ms = 0;       // primary rays
+  double trace_ms = 0;      // closest hits, all generations
+  double shadow_ms = 0;     // surface records and shadow rays, all generations
+  double shade_ms = 0;      // Phong and accumulation into the frame
+  double secondary_ms = 0;  // the next generations' rays
+  double total_ms = 0;
+  uint64_t rays = 0;        // rays traced for closest hits, all generations
+  uint64_t primary_rays = 0;
+  uint64_t shadow_rays = 0;
+  int generations = 0;
+};
+
+// The whole Whitted frame on the CPU with `engine`: the same primary rays, shadow rays, Phong
+// (shade_phong) and ray tree as the GPU renderer; width x height; threads 0 = all cores. With
+// quantize, each generation's colours are rounded to 8 bits as the RGBA8 shading pass does.
+Image render_whitted_cpu(const Scene& scene, const Camera& camera, const RenderSettings& settings,
+                         CpuRayEngine& engine, unsigned threads = 0, CpuFrameTimings* timings = nullptr,
+                         bool quantize = true);
+
+// render_whitted_cpu with a KdTreeEngine built with settings.kd: the expectation GPU images are
+// tested against.
 Image render_on_cpu(const Scene& scene, const Camera& camera, const RenderSettings& settings,
                     bool quantize = true);
 
