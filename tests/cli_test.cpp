@@ -22,23 +22,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct CommandResult {
-  int exit_code = -1;
-  std::string output;  // stdout and stderr together
-};
-
-CommandResult run(const std::string& args) {
-  const std::string command = std::string(MOBIRT_EXE) + " " + args + " 2>&1";
-  CommandResult r;
-  FILE* pipe = popen(command.c_str(), "r");
-  if (!pipe) return r;
-  std::array<char, 4096> buffer;
-  size_t n;
-  while ((n = fread(buffer.data(), 1, buffer.size(), pipe)) > 0) r.output.append(buffer.data(), n);
-  const int status = pclose(pipe);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+using test::CommandResult;
+CommandResult run(const std::string& args) { return test::run_mobirt(args); }
 
 std::string quoted(const fs::path& p) {
   std::string q(1, '\'');  // appended: GCC 12 warns falsely (-Wrestrict) on "'" + s

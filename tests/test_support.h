@@ -22,6 +22,13 @@ std::filesystem::path output_path(const std::string& name);
 // A fresh empty temporary folder for this test.
 std::filesystem::path temp_dir();
 
+// The mobirt command line run with `args` (a shell command line after the executable's name).
+struct CommandResult {
+  int exit_code = -1;
+  std::string output;  // stdout and stderr together
+};
+CommandResult run_mobirt(const std::string& args);
+
 // Runs `action`, expects a BadInput error whose message contains every string of `parts`.
 template <class F>
 void expect_bad_input(F&& action, const std::vector<std::string>& parts) {

@@ -2,10 +2,24 @@
 // after the command's name and returns the exit code; errors are thrown as mobirt::Error.
 #pragma once
 
+#include <memory>
 #include <string>
 #include <vector>
 
+#include "backend/backend.h"
+
 namespace mobirt {
+
+// Where compiled pipelines are kept between runs: $MOBIRT_PIPELINE_CACHE ("off" for none), else
+// $XDG_CACHE_HOME/mobirt, else ~/.cache/mobirt.
+std::string default_pipeline_cache_dir();
+
+// --backend gles|vulkan: the API the passes run on; `help` names where the option is described.
+std::unique_ptr<Backend> create_backend(const std::string& name, const BackendOptions& options,
+                                        const std::string& help = "mobirt --help");
+
+// mobirt bench [SCENE...] [options]: the paper's Table 1 with the Embree baseline beside it.
+int cmd_bench(const std::vector<std::string>& args);
 
 // mobirt accuracy SCENE [render options] [--json FILE] [--heatmap FILE.png]: the GPU renderer
 // against the double-precision reference tracer (src/reference/).

@@ -36,6 +36,7 @@ Usage:
                                          a folder or a pattern like doll_%02d.obj) to OUT
   mobirt info [--device D]               print the Vulkan device and the limits that matter here
   mobirt accuracy SCENE [options]        the GPU image against the double-precision reference
+  mobirt bench [SCENE...] [options]      the paper's Table 1 with Embree 3 beside it, stage by stage
   mobirt COMMAND --help                  help on one command
 )";
 
@@ -195,23 +196,7 @@ std::string frame_path(const std::string& pattern, int frame) {
   return result;
 }
 
-// Where compiled pipelines are kept between runs: $MOBIRT_PIPELINE_CACHE ("off" for none), else
-// $XDG_CACHE_HOME/mobirt, else ~/.cache/mobirt.
-std::string default_pipeline_cache_dir() {
-  if (const char* dir = std::getenv("MOBIRT_PIPELINE_CACHE")) return std::string(dir) == "off" ? "" : dir;
-  if (const char* xdg = std::getenv("XDG_CACHE_HOME"); xdg && *xdg) return std::string(xdg) + "/mobirt";
-  if (const char* home = std::getenv("HOME"); home && *home) return std::string(home) + "/.cache/mobirt";
-  return "";
-}
-
 bool is_help(const std::string& a) { return a == "-h" || a == "--help"; }
-
-// --backend gles|vulkan: the API the passes run on (default vulkan).
-std::unique_ptr<Backend> create_backend(const std::string& name, const BackendOptions& options) {
-  if (name == "gles") return create_gles_backend(options);
-  if (name == "vulkan") return create_vulkan_backend(options);
-  usage_error("--backend " + name + ": expected gles or vulkan");
-}
 
 int cmd_info(Args args) {
   BackendOptions options;
@@ -506,6 +491,7 @@ int run(int argc, char** argv) {
   if (command == "render") return cmd_render(Args(argc, argv, 2));
   if (command == "info") return cmd_info(Args(argc, argv, 2));
   if (command == "accuracy") return cmd_accuracy(std::vector<std::string>(argv + 2, argv + argc));
+  if (command == "bench") return cmd_bench(std::vector<std::string>(argv + 2, argv + argc));
   usage_error("unknown command '" + command + "'");
 }
 

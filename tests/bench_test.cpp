@@ -1,0 +1,76 @@
+// mobirt bench: the harness runs every column on the same frames and writes every number; a bad
+// option or output is refused before the long run.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include <nlohmann/json.hpp>
+
+#include "test_support.h"
+
+namespace mobirt {
+namespace {
+
+namespace fs = std::filesystem;
+
+TEST(Bench, OneSmallCellWithEveryColumn) {
+  const fs::path dir = test::temp_dir();
+  const fs::path json = dir / "bench.json";
+  const test::CommandResult r =
+      test::run_mobirt("bench " MOBIRT_SOURCE_DIR "/scenes/fish.gltf --size 64x40 --frames 2 --warmup 1 "
+                       "--levels shadow,bounce2 --json '" + json.string() + "'");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("Table 1"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("Embree 3."), std::string::npos) << r.output;
+  std::ifstream in(json);
+  const nlohmann::json j = nlohmann::json::parse(in);
+  ASSERT_EQ(j["cells"].size(), 2u);
+  for (const nlohmann::json& c : j["cells"]) {
+    SCOPED_TRACE(c["level"].get<std::string>());
+    EXPECT_EQ(c["triangles"].get<int>(), 1392);
+    for (const char* column : {"mobirt", "embree", "cpu_kd"}) {
+      SCOPED_TRACE(column);
+      const nlohmann::json& fps = c[column]["fps"];
+      EXPECT_GT(fps["median"].get<double>(), 0.0);
+      EXPECT_LE(fps["min"].get<double>(), fps["median"].get<double>());
+      EXPECT_GE(fps["max"].get<double>(), fps["median"].get<double>());
+      const nlohmann::json& s = c[column]["stages_ms"];
+      EXPECT_GT(s["build"].get<double>(), 0.0);
+      EXPECT_GT(s["trace"].get<double>(), 0.0);
+      EXPECT_GT(s["trace_mrays"].get<double>(), 0.0);
+      EXPECT_GT(s["shadow_rays"].get<double>(), 0.0);  // both levels cast shadow rays
+    }
+    const nlohmann::json& gpu = c["mobirt"]["stages_ms"];
+    // The paper's bandwidth model: 4 bytes per ray and pass (traversal and shading).
+    EXPECT_EQ(gpu["bytes_read"].get<double>(), 8.0 * gpu["traced_rays"].get<double>());
+    EXPECT_EQ(gpu["pass0_rays"].get<double>(), 64.0 * 40.0);
+    // The same primary rays in every column; the bounces give the fish's glass more rays.
+    EXPECT_EQ(c["embree"]["stages_ms"]["traced_rays"].get<double>() >= 64.0 * 40.0, true);
+    EXPECT_GT(c["ratios"]["traversal_mobirt_over_embree"].get<double>(), 0.0);
+    EXPECT_GT(c["kd_tree"]["sah_cost"].get<double>(), 0.0);
+  }
+  const nlohmann::json& bounce = j["cells"][1];
+  EXPECT_GT(bounce["mobirt"]["stages_ms"]["traced_rays"].get<double>(), 64.0 * 40.0);
+  EXPECT_NEAR(bounce["embree"]["stages_ms"]["traced_rays"].get<double>(),
+              bounce["mobirt"]["stages_ms"]["traced_rays"].get<double>(),
+              0.01 * bounce["mobirt"]["stages_ms"]["traced_rays"].get<double>());
+  EXPECT_TRUE(bounce["paper_fps"].is_null());  // a scene given on the command line: no paper figure
+}
+
+TEST(Bench, BadOptionsAreRefusedBeforeTheRun) {
+  const fs::path dir = test::temp_dir();
+  for (const std::string& args :
+       {std::string("--levels cast,bogus"), std::string("--frames 0"),
+        "--json '" + (dir / "no-such-folder" / "b.json").string() + "'",
+        std::string("--scenes '") + (dir / "empty").string() + "'"}) {
+    SCOPED_TRACE(args);
+    const test::CommandResult r = test::run_mobirt("bench " + args);
+    EXPECT_EQ(r.exit_code, 2) << r.output;
+    EXPECT_NE(r.output.find("mobirt: error: "), std::string::npos) << r.output;
+  }
+  EXPECT_FALSE(fs::exists(dir / "no-such-folder"));
+}
+
+}  // namespace
+}  // namespace mobirt
