@@ -1,10 +1,12 @@
 #include "raytree/hits.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <string>
 
 #include "core/error.h"
+#include "core/parallel.h"
 
 namespace mobirt {
 
@@ -158,14 +160,16 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
   if (texels.size() < n) throw Error(ErrorKind::Internal, "decode_hits: fewer texels than rays");
   const uint32_t prims = uint32_t(scene.mesh.triangle_count());
   std::vector<SurfaceHit> hits(n);
-  DecodeStats local;
-  for (uint32_t i = 0; i < n; ++i) {
+  std::atomic<uint32_t> hit_count{0}, capped_count{0};
+  std::atomic<uint64_t> shadow_count{0};
+  // Rays are independent: decoded on all cores (a capped ray's CPU retrace is the slow case).
+  parallel_for(n, 0, [&](uint32_t i) {
     const TraceTexel texel = unpack_trace(packing, texels[i]);
     const Ray ray = rays.ray(i);
     int32_t prim = -1;
     uint32_t mask = 0;
     if (texel.capped) {
-      ++local.capped;
+      capped_count.fetch_add(1, std::memory_order_relaxed);
       TraversalStats steps;
       const Hit h = traverse(tree, ray, -1, steps, fallback_step_bound(tree));
       if (steps.capped) corrupt_tree(fallback_step_bound(tree));
@@ -179,14 +183,19 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
                                              " of a scene with " + std::to_string(prims));
       }
     }
-    if (prim < 0) continue;
-    ++local.hits;
+    if (prim < 0) return;
+    hit_count.fetch_add(1, std::memory_order_relaxed);
     hits[i] = surface_hit(scene, tree, ray, prim);
     hits[i].mask = mask;
     if (!texel.capped) {
-      local.shadow_rays += shadow_ray_count(tree, lights, prim, ray, hits[i].t, shadows);
+      shadow_count.fetch_add(shadow_ray_count(tree, lights, prim, ray, hits[i].t, shadows),
+                             std::memory_order_relaxed);
     }
-  }
+  }, 256);
+  DecodeStats local;
+  local.hits = hit_count.load();
+  local.capped = capped_count.load();
+  local.shadow_rays = shadow_count.load();
   if (stats) *stats = local;
   return hits;
 }

@@ -7,6 +7,7 @@
 #include <thread>
 
 #include "accel/kdtree.h"
+#include "core/parallel.h"
 #include "layout.h"
 #include "raytree/secondary.h"
 
@@ -70,24 +71,6 @@ using Clock = std::chrono::steady_clock;
 
 double ms_since(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
-
-// Runs f(i) for i in [0, n) on `threads` threads, in chunks taken in turn (rays differ a lot in
-// cost, so a static split would leave one thread idle).
-template <class F>
-void parallel_for(uint32_t n, unsigned threads, F&& f) {
-  constexpr uint32_t kChunk = 64;
-  std::atomic<uint32_t> next{0};
-  auto work = [&] {
-    for (uint32_t begin; (begin = next.fetch_add(kChunk)) < n;) {
-      const uint32_t end = std::min(n, begin + kChunk);
-      for (uint32_t i = begin; i < end; ++i) f(i);
-    }
-  };
-  std::vector<std::thread> pool;
-  for (unsigned t = 1; t < threads; ++t) pool.emplace_back(work);
-  work();
-  for (std::thread& t : pool) t.join();
 }
 
 }  // namespace
