@@ -55,7 +55,9 @@ Options:
   --json FILE       every number as JSON (- = standard output)
   --scenes DIR      the project's scenes (default: ./scenes, else the source tree's)
   --shared DIR      the shared real scenes (default: ../shared/scenes beside that folder's parent)
-  --backend gles|vulkan, --device D, --bins N, --stack N, --max-steps N: as for render
+  --backend B       the GPU columns: vulkan, gles or both (default both: Vulkan and OpenGL ES 2.0
+                    on the same frames)
+  --device D, --bins N, --stack N, --max-steps N: as for render
 )";
 
 constexpr const char* kHelp = "mobirt bench --help";
@@ -201,7 +203,7 @@ struct BenchOptions {
   unsigned threads = 0;
   bool baseline = true;
   bool cpu = true;
-  std::string backend = "vulkan";
+  std::vector<std::string> backends = {"vulkan", "gles"};
   BackendOptions backend_options;
   RenderSettings settings;  // kd, stack, max_steps
 };
@@ -217,7 +219,13 @@ std::string cell_fps(const nlohmann::json& fps) {
   return buf;
 }
 
-nlohmann::json run_cell(Backend& backend, const BenchScene& bs, const AnimatedScene& animation, const Level& level,
+// The GPU columns: one backend each, under the JSON key "mobirt" (Vulkan) or "mobirt_gles".
+struct GpuColumn {
+  std::string key;
+  std::unique_ptr<Backend> backend;
+};
+
+nlohmann::json run_cell(std::vector<GpuColumn>& columns, const BenchScene& bs, const AnimatedScene& animation, const Level& level,
                         const BenchOptions& o) {
   RenderSettings settings = o.settings;
   settings.width = bs.width;
@@ -225,7 +233,8 @@ nlohmann::json run_cell(Backend& backend, const BenchScene& bs, const AnimatedSc
   settings.depth = level.depth;
   settings.shadows = level.shadows;
   settings.always_rebuild = true;  // the paper's model: a new kd-tree every frame
-  Renderer renderer(backend, settings);
+  std::vector<std::unique_ptr<Renderer>> renderers;
+  for (GpuColumn& c : columns) renderers.push_back(std::make_unique<Renderer>(*c.backend, settings));
   std::optional<EmbreeEngine> embree;
   std::optional<KdTreeEngine> kd;
   if (o.baseline) embree.emplace(EmbreeOptions{o.threads, true});
@@ -233,7 +242,8 @@ nlohmann::json run_cell(Backend& backend, const BenchScene& bs, const AnimatedSc
 
   Scene scene = animation.rest();
   const Camera fallback = frame_box(scene.bounds(), 0.7854f, float(bs.width) / float(bs.height));
-  Samples gpu, emb, cpu;
+  std::vector<Samples> gpu(columns.size());
+  Samples emb, cpu;
   const double fps = animation.fps() > 0 ? animation.fps() : 24.0;
   KdBuildStats kd_stats;
   for (int f = 0; f < o.warmup + o.frames; ++f) {
@@ -245,10 +255,14 @@ nlohmann::json run_cell(Backend& backend, const BenchScene& bs, const AnimatedSc
     const double animate_ms = elapsed_ms(start);
     const Camera view = scene.camera ? *scene.camera : fallback;
 
-    FrameTimings ft;
-    renderer.render(scene, view, &ft);
-    for (const std::string& m : backend.take_debug_messages()) throw Error(ErrorKind::Internal, "validation: " + m);
-    if (timed) add_gpu_frame(gpu, animate_ms, ft);
+    for (size_t c = 0; c < columns.size(); ++c) {
+      FrameTimings ft;
+      renderers[c]->render(scene, view, &ft);
+      for (const std::string& m : columns[c].backend->take_debug_messages()) {
+        throw Error(ErrorKind::Internal, "validation: " + m);
+      }
+      if (timed) add_gpu_frame(gpu[c], animate_ms, ft);
+    }
     if (embree) {
       CpuFrameTimings ct;
       render_whitted_cpu(scene, view, settings, *embree, o.threads, &ct);
@@ -276,16 +290,21 @@ nlohmann::json run_cell(Backend& backend, const BenchScene& bs, const AnimatedSc
   const double paper = bs.paper[&level - kLevels];
   cell["paper_fps"] = std::isnan(paper) ? nlohmann::json(nullptr) : nlohmann::json(paper);
   cell["target_fps"] = std::isnan(paper) ? nlohmann::json(nullptr) : nlohmann::json(2 * paper);
-  cell["mobirt"] = {{"fps", fps_json(gpu.all("frame"))}, {"stages_ms", gpu.medians()}};
-  const double gpu_fps = cell["mobirt"]["fps"]["median"];
-  cell["meets_target"] = std::isnan(paper) ? nlohmann::json(nullptr) : nlohmann::json(gpu_fps >= 2 * paper);
-  if (embree) {
-    cell["embree"] = {{"fps", fps_json(emb.all("frame"))}, {"stages_ms", emb.medians()}};
-    cell["ratios"] = {
-        {"fps_mobirt_over_embree", gpu_fps / cell["embree"]["fps"]["median"].get<double>()},
-        {"traversal_mobirt_over_embree", gpu.med("trace_mrays") / std::max(emb.med("trace_mrays"), 1e-9)},
-        {"build_kd_over_embree", gpu.med("build") / std::max(emb.med("build"), 1e-9)}};
+  double best_fps = 0;
+  for (size_t c = 0; c < columns.size(); ++c) {
+    const std::string& key = columns[c].key;
+    cell[key] = {{"fps", fps_json(gpu[c].all("frame"))}, {"stages_ms", gpu[c].medians()}};
+    const double gpu_fps = cell[key]["fps"]["median"];
+    best_fps = std::max(best_fps, gpu_fps);
+    if (embree) {
+      cell["ratios"][key] = {
+          {"fps_over_embree", gpu_fps / (1000.0 / std::max(median(emb.all("frame")), 1e-9))},
+          {"traversal_over_embree", gpu[c].med("trace_mrays") / std::max(emb.med("trace_mrays"), 1e-9)},
+          {"build_over_embree", gpu[c].med("build") / std::max(emb.med("build"), 1e-9)}};
+    }
   }
+  cell["meets_target"] = std::isnan(paper) ? nlohmann::json(nullptr) : nlohmann::json(best_fps >= 2 * paper);
+  if (embree) cell["embree"] = {{"fps", fps_json(emb.all("frame"))}, {"stages_ms", emb.medians()}};
   if (kd) {
     cell["cpu_kd"] = {{"fps", fps_json(cpu.all("frame"))}, {"stages_ms", cpu.medians()}};
     cell["kd_tree"] = {{"sah_cost", kd_stats.sah_cost},
@@ -305,73 +324,100 @@ std::string opt(const nlohmann::json& j, const char* key, const char* fmt) {
   return buf;
 }
 
+const char* column_title(const std::string& key) { return key == "mobirt" ? "Vulkan" : "GLES 2.0"; }
+
 void print_tables(const nlohmann::json& result) {
   const nlohmann::json& cells = result["cells"];
-  const bool baseline = !cells.empty() && cells[0].contains("embree");
-  const bool cpu = !cells.empty() && cells[0].contains("cpu_kd");
+  if (cells.empty()) return;
+  std::vector<std::string> gpus;
+  for (const char* key : {"mobirt", "mobirt_gles"}) {
+    if (cells[0].contains(key)) gpus.push_back(key);
+  }
+  const bool baseline = cells[0].contains("embree");
+  const bool cpu = cells[0].contains("cpu_kd");
+  auto label = [](const nlohmann::json& c) {
+    return c["scene"].get<std::string>() + ", " + c["level_name"].get<std::string>();
+  };
+
   std::printf("\nTable 1: frames per second, median [min-max]; paper = the MobiRT paper, target = 2x paper\n");
-  std::printf("%-15s %-8s %-12s %6s %6s  %-20s", "scene", "size", "level", "paper", "target", "mobirt");
-  if (baseline) std::printf(" %-20s %8s", "Embree", "mob/Emb");
-  if (cpu) std::printf("  %-20s", "CPU kd-tree");
+  std::printf("%-28s %-8s %5s %6s", "scene, level", "size", "paper", "target");
+  for (const std::string& g : gpus) std::printf("  %-18s", (std::string("mobirt ") + column_title(g)).c_str());
+  if (baseline) std::printf("  %-18s", "Embree 3");
+  if (cpu) std::printf("  %-18s", "CPU kd-tree");
   std::printf("\n");
   for (const nlohmann::json& c : cells) {
-    std::printf("%-15s %-8s %-12s %6s %6s  %-20s", c["scene"].get<std::string>().c_str(),
-                c["size"].get<std::string>().c_str(), c["level_name"].get<std::string>().c_str(),
-                opt(c, "paper_fps", "%.0f").c_str(), opt(c, "target_fps", "%.0f").c_str(),
-                cell_fps(c["mobirt"]["fps"]).c_str());
-    if (baseline) {
-      std::printf(" %-20s %7.2fx", cell_fps(c["embree"]["fps"]).c_str(),
-                  c["ratios"]["fps_mobirt_over_embree"].get<double>());
-    }
-    if (cpu) std::printf("  %-20s", cell_fps(c["cpu_kd"]["fps"]).c_str());
+    std::printf("%-28s %-8s %5s %6s", label(c).c_str(), c["size"].get<std::string>().c_str(),
+                opt(c, "paper_fps", "%.0f").c_str(), opt(c, "target_fps", "%.0f").c_str());
+    for (const std::string& g : gpus) std::printf("  %-18s", cell_fps(c[g]["fps"]).c_str());
+    if (baseline) std::printf("  %-18s", cell_fps(c["embree"]["fps"]).c_str());
+    if (cpu) std::printf("  %-18s", cell_fps(c["cpu_kd"]["fps"]).c_str());
     std::printf("\n");
   }
 
-  std::printf("\nmobirt per stage, ms (median): animate, kd-tree build, primary rays, upload, traversal passes,\n"
-              "read-back, hit decoding, shading passes, accumulate, secondary rays; traversal Mrays/s counts\n"
-              "closest-hit and shadow rays; KB = bytes that left the GPU per frame (4 per ray and pass)\n");
-  std::printf("%-15s %-12s %7s %7s %6s %6s %7s %6s %6s %6s %6s %6s %7s %8s %7s\n", "scene", "level", "anim",
-              "build", "rays", "upload", "trace", "rdback", "decode", "shade", "accum", "second", "frame",
-              "Mrays/s", "KB");
-  for (const nlohmann::json& c : cells) {
-    const nlohmann::json& s = c["mobirt"]["stages_ms"];
-    std::printf("%-15s %-12s %7.2f %7.2f %6.2f %6.2f %7.2f %6.2f %6.2f %6.2f %6.2f %6.2f %7.2f %8.2f %7.1f\n",
-                c["scene"].get<std::string>().c_str(), c["level_name"].get<std::string>().c_str(),
-                s["animate"].get<double>(), s["build"].get<double>(), s["rays"].get<double>(),
-                s["upload"].get<double>(), s["trace"].get<double>(), s["readback"].get<double>(),
-                s["decode"].get<double>(), s["shade"].get<double>(), s["accumulate"].get<double>(),
-                s["secondary"].get<double>(), s["frame"].get<double>(), s["trace_mrays"].get<double>(),
-                s["bytes_read"].get<double>() / 1024.0);
-  }
-  std::printf("\nmobirt traversal passes (median per pass): rays + shadow rays, ms, Mrays/s, KB read back\n");
-  for (const nlohmann::json& c : cells) {
-    const nlohmann::json& s = c["mobirt"]["stages_ms"];
-    std::printf("%-15s %-12s", c["scene"].get<std::string>().c_str(), c["level_name"].get<std::string>().c_str());
-    for (int k = 0; s.contains("pass" + std::to_string(k) + "_rays"); ++k) {
-      const std::string p = "pass" + std::to_string(k) + "_";
-      std::printf("  [%d] %.0f+%.0f %.2f ms %.2f %.0f", k, s[p + "rays"].get<double>(),
-                  s[p + "shadow_rays"].get<double>(), s[p + "trace_ms"].get<double>(), s[p + "mrays"].get<double>(),
-                  s[p + "bytes_read"].get<double>() / 1024.0);
+  for (const std::string& g : gpus) {
+    std::printf("\nmobirt on %s, per stage, ms (median): animate, kd-tree build, primary rays, upload, traversal\n"
+                "passes, read-back, hit decoding, shading passes, accumulate, secondary rays, frame; Mrays/s of\n"
+                "the traversal passes (closest-hit + shadow rays); KB that left the GPU (4 bytes per ray and pass)\n",
+                column_title(g));
+    std::printf("%-28s %6s %6s %5s %6s %7s %6s %6s %6s %5s %6s %7s %7s %6s\n", "scene, level", "anim", "build",
+                "rays", "upload", "trace", "rdback", "decode", "shade", "accum", "second", "frame", "Mrays/s", "KB");
+    for (const nlohmann::json& c : cells) {
+      const nlohmann::json& s = c[g]["stages_ms"];
+      std::printf("%-28s %6.2f %6.2f %5.2f %6.2f %7.2f %6.2f %6.2f %6.2f %5.2f %6.2f %7.2f %7.2f %6.0f\n",
+                  label(c).c_str(), s["animate"].get<double>(), s["build"].get<double>(), s["rays"].get<double>(),
+                  s["upload"].get<double>(), s["trace"].get<double>(), s["readback"].get<double>(),
+                  s["decode"].get<double>(), s["shade"].get<double>(), s["accumulate"].get<double>(),
+                  s["secondary"].get<double>(), s["frame"].get<double>(), s["trace_mrays"].get<double>(),
+                  s["bytes_read"].get<double>() / 1024.0);
     }
-    std::printf("\n");
+    std::printf("traversal passes, median per pass [generation] rays+shadow rays, ms, Mrays/s, KB read back:\n");
+    for (const nlohmann::json& c : cells) {
+      const nlohmann::json& s = c[g]["stages_ms"];
+      std::printf("%-28s", label(c).c_str());
+      for (int k = 0; s.contains("pass" + std::to_string(k) + "_rays"); ++k) {
+        const std::string p = "pass" + std::to_string(k) + "_";
+        std::printf("  [%d] %.0f+%.0f %.1f ms %.2f %.0f", k, s[p + "rays"].get<double>(),
+                    s[p + "shadow_rays"].get<double>(), s[p + "trace_ms"].get<double>(),
+                    s[p + "mrays"].get<double>(), s[p + "bytes_read"].get<double>() / 1024.0);
+      }
+      std::printf("\n");
+    }
   }
   if (!baseline) return;
 
-  std::printf("\nmobirt on %s / Embree on %u CPU threads, the same frames:\n",
-              result["machine"]["device"].get<std::string>().c_str(), result["machine"]["threads"].get<unsigned>());
-  std::printf("%-15s %-12s %8s | %9s %9s %9s %7s | %9s %9s %7s %9s\n", "scene", "level", "fps", "trace Mr/s",
-              "Embree", "CPU kd", "ratio", "build ms", "Embree", "ratio", "SAH");
+  std::printf("\nEmbree 3 and the CPU kd-tree on %u threads, per stage, ms (median): build, primary rays, closest\n"
+              "hits, shadow rays, shading + accumulate, secondary rays, frame; Mrays/s of closest + shadow rays\n",
+              result["machine"]["threads"].get<unsigned>());
+  std::printf("%-28s %-7s %6s %5s %7s %7s %6s %6s %7s %7s\n", "scene, level", "engine", "build", "rays", "closest",
+              "shadow", "shade", "second", "frame", "Mrays/s");
   for (const nlohmann::json& c : cells) {
-    const nlohmann::json& g = c["mobirt"]["stages_ms"];
-    const nlohmann::json& e = c["embree"]["stages_ms"];
-    std::printf("%-15s %-12s %7.2fx | %9.2f %9.2f %9s %6.2fx | %9.2f %9.2f %6.1fx %9s\n",
-                c["scene"].get<std::string>().c_str(), c["level_name"].get<std::string>().c_str(),
-                c["ratios"]["fps_mobirt_over_embree"].get<double>(), g["trace_mrays"].get<double>(),
-                e["trace_mrays"].get<double>(),
-                cpu ? opt(c["cpu_kd"]["stages_ms"], "trace_mrays", "%.2f").c_str() : "-",
-                c["ratios"]["traversal_mobirt_over_embree"].get<double>(), g["build"].get<double>(),
-                e["build"].get<double>(), c["ratios"]["build_kd_over_embree"].get<double>(),
-                cpu ? opt(c["kd_tree"], "sah_cost", "%.1f").c_str() : "-");
+    for (const char* key : {"embree", "cpu_kd"}) {
+      if (!c.contains(key)) continue;
+      const nlohmann::json& s = c[key]["stages_ms"];
+      std::printf("%-28s %-7s %6.2f %5.2f %7.2f %7.2f %6.2f %6.2f %7.2f %7.2f\n", label(c).c_str(),
+                  std::string(key) == "embree" ? "Embree" : "CPU kd", s["build"].get<double>(),
+                  s["rays"].get<double>(), s["trace"].get<double>(), s["shadow"].get<double>(),
+                  s["shade"].get<double>(), s["secondary"].get<double>(), s["frame"].get<double>(),
+                  s["trace_mrays"].get<double>());
+    }
+  }
+
+  std::printf("\nRatios mobirt / Embree, the same frames: fps; traversal alone (Mrays/s on the same rays: GPU\n"
+              "traversal passes vs rtcIntersect1 + rtcOccluded1); build alone (kd-tree build ms / Embree BVH\n"
+              "build ms, >1 = slower); SAH cost of the kd-tree built\n");
+  std::printf("%-28s", "scene, level");
+  for (const std::string& g : gpus) {
+    std::printf(" | %-8s %7s %7s %7s", column_title(g), "fps", "trace", "build");
+  }
+  std::printf(" | %8s\n", "SAH");
+  for (const nlohmann::json& c : cells) {
+    std::printf("%-28s", label(c).c_str());
+    for (const std::string& g : gpus) {
+      const nlohmann::json& r = c["ratios"][g];
+      std::printf(" | %-8s %6.2fx %6.2fx %6.1fx", "", r["fps_over_embree"].get<double>(),
+                  r["traversal_over_embree"].get<double>(), r["build_over_embree"].get<double>());
+    }
+    std::printf(" | %8s\n", cpu ? opt(c["kd_tree"], "sah_cost", "%.1f").c_str() : "-");
   }
 }
 
@@ -438,7 +484,11 @@ int cmd_bench(const std::vector<std::string>& args) {
     } else if (a == "--shared") {
       shared_dir = value();
     } else if (a == "--backend") {
-      o.backend = value();
+      const std::string b = value();
+      if (b != "vulkan" && b != "gles" && b != "both") {
+        cli::usage_error("--backend " + b + ": expected vulkan, gles or both", kHelp);
+      }
+      o.backends = b == "both" ? std::vector<std::string>{"vulkan", "gles"} : std::vector<std::string>{b};
     } else if (a == "--device") {
       o.backend_options.device = value();
     } else if (a == "--bins") {
@@ -484,15 +534,18 @@ int cmd_bench(const std::vector<std::string>& args) {
   }
 
   o.backend_options.pipeline_cache_dir = default_pipeline_cache_dir();
-  auto backend = create_backend(o.backend, o.backend_options, kHelp);
-  const DeviceInfo info = backend->device_info();
+  std::vector<GpuColumn> columns;
+  for (const std::string& b : o.backends) {
+    columns.push_back({b == "vulkan" ? "mobirt" : "mobirt_gles", create_backend(b, o.backend_options, kHelp)});
+  }
+  const DeviceInfo info = columns[0].backend->device_info();
   const char* lp = std::getenv("LP_NUM_THREADS");
   nlohmann::json result;
   result["machine"] = {{"cores", std::thread::hardware_concurrency()},
                        {"api", info.api},
                        {"device", info.device},
                        {"driver", info.driver},
-                       {"backend", o.backend},
+                       {"backends", o.backends},
                        {"lp_num_threads", lp ? std::string(lp) : std::string("default (all cores)")},
                        {"embree", EmbreeEngine::version()},
                        {"threads", o.threads}};
@@ -516,7 +569,7 @@ int cmd_bench(const std::vector<std::string>& args) {
     const AnimatedScene animation = load_animated_scene(bs.path, load);
     for (int k : o.levels) {
       if (isatty(2)) std::fprintf(stderr, "  %s, %s...\n", bs.name.c_str(), kLevels[k].name);
-      cells.push_back(run_cell(*backend, bs, animation, kLevels[k], o));
+      cells.push_back(run_cell(columns, bs, animation, kLevels[k], o));
     }
   }
   result["cells"] = cells;
