@@ -20,6 +20,7 @@
 #include "backend/backend.h"
 #include "core/error.h"
 #include "core/image.h"
+#include "core/memory.h"
 #include "render/renderer.h"
 #include "render/scene_features.h"
 #include "scene/animation.h"
@@ -499,6 +500,7 @@ int run(int argc, char** argv) {
 }  // namespace mobirt
 
 int main(int argc, char** argv) {
+  mobirt::retain_freed_memory();
   mobirt::install_interrupt_handlers();
   try {
     return mobirt::run(argc, argv);

@@ -4,19 +4,30 @@
 
 namespace mobirt {
 
+CameraBasis::CameraBasis(const Camera& camera, int width_px, int height_px)
+    : eye(camera.eye),
+      forward(glm::normalize(camera.target - camera.eye)),
+      right(glm::normalize(glm::cross(forward, camera.up))),
+      up(glm::cross(right, forward)),
+      tan_half(std::tan(0.5f * camera.yfov)),
+      aspect(float(width_px) / float(height_px)),
+      width(float(width_px)),
+      height(float(height_px)),
+      znear(camera.znear) {}
+
+Ray CameraBasis::ray(float x, float y) const {
+  // The operations of the per-ray formula this replaced, so every primary ray keeps its floats.
+  const float sx = (2.0f * x / width - 1.0f) * tan_half * aspect;
+  const float sy = (1.0f - 2.0f * y / height) * tan_half;
+  Ray r;
+  r.origin = eye;
+  r.direction = glm::normalize(forward + sx * right + sy * up);
+  r.tmin = znear;
+  return r;
+}
+
 Ray camera_ray(const Camera& camera, int width, int height, float x, float y) {
-  const glm::vec3 forward = glm::normalize(camera.target - camera.eye);
-  const glm::vec3 right = glm::normalize(glm::cross(forward, camera.up));
-  const glm::vec3 up = glm::cross(right, forward);
-  const float tan_half = std::tan(0.5f * camera.yfov);
-  const float aspect = float(width) / float(height);
-  const float sx = (2.0f * x / float(width) - 1.0f) * tan_half * aspect;
-  const float sy = (1.0f - 2.0f * y / float(height)) * tan_half;
-  Ray ray;
-  ray.origin = camera.eye;
-  ray.direction = glm::normalize(forward + sx * right + sy * up);
-  ray.tmin = camera.znear;
-  return ray;
+  return CameraBasis(camera, width, height).ray(x, y);
 }
 
 Camera frame_box(const Aabb& box, float yfov, float aspect) {

@@ -15,7 +15,18 @@ struct Camera {
   float znear = 0.0f;    // rays start this far along the view axis (0: at the eye)
 };
 
+// The camera's frame for one image size, computed once per frame instead of once per ray.
+struct CameraBasis {
+  CameraBasis(const Camera& camera, int width, int height);
+  // Primary ray through image point (x, y) (pixel centres at + 0.5); y = 0 is the top row.
+  Ray ray(float x, float y) const;
+
+  glm::vec3 eye, forward, right, up;
+  float tan_half, aspect, width, height, znear;
+};
+
 // Primary ray through the centre of pixel (x, y) of a width x height image; y = 0 is the top row.
+// The same floats as CameraBasis(camera, width, height).ray(x, y).
 Ray camera_ray(const Camera& camera, int width, int height, float x, float y);
 
 // A camera that frames a box from the front-above, for scenes without one.

@@ -1,5 +1,7 @@
 #include "raytree/rays.h"
 
+#include "core/parallel.h"
+
 namespace mobirt {
 
 void RayBatch::push(const Ray& ray, uint32_t pixel_index, const glm::vec3& ray_weight) {
@@ -19,17 +21,20 @@ void RayBatch::clear() {
 RayBatch primary_rays(const Camera& camera, int width, int height) {
   RayBatch batch;
   batch.width = uint32_t(width);
-  const size_t n = size_t(width) * size_t(height);
-  batch.origin.reserve(n);
-  batch.direction.reserve(n);
-  batch.pixel.reserve(n);
-  batch.weight.reserve(n);
-  for (int y = 0; y < height; ++y) {
-    for (int x = 0; x < width; ++x) {
-      batch.push(camera_ray(camera, width, height, float(x) + 0.5f, float(y) + 0.5f),
-                 uint32_t(y) * uint32_t(width) + uint32_t(x), glm::vec3(1.0f));
+  const uint32_t n = uint32_t(width) * uint32_t(height);
+  batch.origin.resize(n);
+  batch.direction.resize(n);
+  batch.pixel.resize(n);
+  batch.weight.assign(n, glm::vec3(1.0f));
+  const CameraBasis basis(camera, width, height);
+  parallel_for(uint32_t(height), 0, [&](uint32_t y) {
+    for (uint32_t x = 0, i = y * uint32_t(width); x < uint32_t(width); ++x, ++i) {
+      const Ray ray = basis.ray(float(x) + 0.5f, float(y) + 0.5f);
+      batch.origin[i] = glm::vec4(ray.origin, ray.tmin);
+      batch.direction[i] = glm::vec4(ray.direction, ray.tmax);
+      batch.pixel[i] = i;
     }
-  }
+  }, 16);
   return batch;
 }
 
