@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "accel/kdtree.h"
+#include "layout.h"
 #include "raytree/packing.h"
 #include "raytree/rays.h"
 #include "scene/scene.h"
@@ -30,18 +31,42 @@ struct SurfaceHit {
   bool valid() const { return prim >= 0; }
 };
 
-// The traversal pass's lights as the shadow rays see them (shared by the GPU uniforms and the
-// CPU fallback so that both test the same rays).
-struct ShadowSettings {
-  float epsilon = 1e-6f;  // origin offset along the geometric normal, as a share of the scene's size
+// Self-intersection offset of a ray that leaves a surface (shadow, mirror and refracted rays),
+// along the geometric normal (glsl/layout.h, MOBIRT_OFFSET_*; --offset and --epsilon).
+enum class OffsetMode {
+  Fixed = MOBIRT_OFFSET_FIXED,          // epsilon in scene units
+  Scaled = MOBIRT_OFFSET_SCALED,        // epsilon x the scene's size, at least 2 ulps of the point
+  NormalUlp = MOBIRT_OFFSET_NORMAL_ULP  // Wachter and Binder 2019; epsilon unused
+};
+struct SurfaceOffset {
+  OffsetMode mode = OffsetMode::Scaled;
+  float epsilon = 1e-6f;
 };
 
-// The self-intersection offset of a new ray's origin at p, along the geometric normal: `absolute`
-// (epsilon x the scene box's largest side), but never below 2 float ulps of p (MOBIRT_OFFSET_ULPS
-// x max |p|). Relative to the scene, so it holds from 1e-4 to 1e5; floored by float precision,
-// so it holds 1e5 away from the origin. glsl/traverse.glsl computes the same.
-float ray_offset(const glm::vec3& p, float absolute);
+// How the traversal pass treats its rays: the shadow rays' origin offset, and the ray/triangle
+// test of every ray it traces (shared by the GPU specialisation and uniforms and the CPU fallback,
+// so that both test the same rays).
+struct ShadowSettings {
+  SurfaceOffset offset;
+  RayTest ray_test;  // the ray/triangle test and its precision (--intersect, --precision)
+};
+
+// The absolute part of the offset, the traversal pass's uniform: epsilon (fixed), epsilon x the
+// scene box's largest side (scaled, scene_offset), 0 (normal-ulp has none).
+float absolute_offset(const Aabb& bounds, const SurfaceOffset& offset);
 float scene_offset(const Aabb& bounds, float epsilon);  // epsilon x the box's largest side
+
+// The origin of a ray leaving the surface at p on the side of the unit normal n; `absolute` from
+// absolute_offset(). Scaled: p + max(absolute, 2 ulps of max |p|) n (fp16 ulps under mediump), so
+// that it holds from scale 1e-4 to 1e5 and 1e5 away from the origin. glsl/offset.glsl computes
+// the same.
+glm::vec3 offset_origin(const glm::vec3& p, const glm::vec3& n, OffsetMode mode, float absolute,
+                        Precision precision = Precision::High);
+
+// Wachter and Binder 2019 (Ray Tracing Gems, ch. 6): each component of p moved along n by
+// int(256 n) units in the last place of its float representation (an integer added to its bits),
+// or by n / 65536 where |p| < 1/32, where ulps get too small to clear the surface.
+glm::vec3 offset_normal_ulp(const glm::vec3& p, const glm::vec3& n);
 
 // Shadow mask of a hit on the CPU, the same rays as glsl/traverse.glsl's shadow_mask().
 uint32_t shadow_mask(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
@@ -65,7 +90,9 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
                                     std::span<const Light> lights, const ShadowSettings& shadows,
                                     DecodeStats* stats = nullptr);
 
-// The full surface record of a known hit (t and barycentrics recomputed on that one triangle).
-SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ray, int32_t prim);
+// The full surface record of a known hit (t and barycentrics recomputed on that one triangle with
+// `test` in single precision).
+SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ray, int32_t prim,
+                       IntersectTest test = IntersectTest::MollerTrumbore);
 
 }  // namespace mobirt

@@ -75,17 +75,16 @@ Image render_on_cpu(const Scene& scene, const Camera& camera, const RenderSettin
       pool.emplace_back([&, w] {
         for (uint32_t i = w; i < n; i += threads) {
           const Ray ray = rays.ray(i);
-          const Hit h = traverse(tree, ray, -1);
+          const Hit h = traverse(tree, ray, -1, settings.shadow_rays.ray_test);
           glm::vec3 c = scene.background;
           if (h.valid()) {
-            hits[i] = surface_hit(scene, tree, ray, h.prim);
+            hits[i] = surface_hit(scene, tree, ray, h.prim, settings.shadow_rays.ray_test.test);
             hits[i].mask = settings.shadows
                                ? shadow_mask(tree, lights, h.prim, ray, h.t, settings.shadow_rays, -1)
                                : all_lights;
             c = shade_phong(scene, hits[i], -glm::normalize(ray.direction), atlas);
           }
-          c = glm::clamp(c, 0.0f, 1.0f);
-          if (quantize) c = glm::round(c * 255.0f) / 255.0f;  // the RGBA8 shading pass
+          c = quantize ? quantize_colour(c, settings.colour) : glm::clamp(c, 0.0f, 1.0f);  // the shading pass
           colors[i] = c;
         }
       });

@@ -17,8 +17,8 @@ namespace mobirt {
 // `atlas` gives the textures (may be empty).
 glm::vec3 shade_phong(const Scene& scene, const SurfaceHit& hit, const glm::vec3& view, const Atlas& atlas);
 
-// Ray casting with shadows on the CPU (no quantisation to 8 bits unless quantize is set, which
-// mimics the RGBA8 shading pass).
+// The renderer's frame on the CPU: the same ray/triangle test, offsets and ray tree; each shaded
+// colour quantised to settings.colour as the shading pass writes it (unless quantize is false).
 Image render_on_cpu(const Scene& scene, const Camera& camera, const RenderSettings& settings,
                     bool quantize = true);
 
