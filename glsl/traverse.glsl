@@ -236,9 +236,10 @@ float shadow_mask(float prim, vec3 o, vec3 d, float t) {
   if (LIGHT_COUNT == 0) return mask;
   float base = prim * float(MOBIRT_TEXELS_PER_TRIANGLE);
   vec3 v0 = DATA_TEXEL(u_triangles, base).xyz;
-  vec3 ng = cross(DATA_TEXEL(u_triangles, base + 1.0).xyz - v0,
-                  DATA_TEXEL(u_triangles, base + 2.0).xyz - v0);
-  vec3 p = mp(o + t * d);
+  vec3 e1 = DATA_TEXEL(u_triangles, base + 1.0).xyz - v0;
+  vec3 e2 = DATA_TEXEL(u_triangles, base + 2.0).xyz - v0;
+  vec3 ng = cross(e1, e2);
+  vec3 p = mp(OFFSET_MODE == MOBIRT_OFFSET_NORMAL_ULP ? point_on_triangle(v0, e1, e2, o, d) : o + t * d);
   float view_side = dot(ng, d) < 0.0 ? 1.0 : -1.0;
   // The origin off the surface, on the viewer's side (offset.glsl); under mediump the shadow ray
   // is rounded as the primary rays are.

@@ -37,6 +37,16 @@ glm::vec3 offset_normal_ulp(const glm::vec3& p, const glm::vec3& n) {
   return out;
 }
 
+glm::vec3 point_on_triangle(const glm::vec3& v0, const glm::vec3& e1, const glm::vec3& e2, const glm::vec3& o,
+                            const glm::vec3& d) {
+  const glm::vec3 p = glm::cross(d, e2);
+  const float inv_det = 1.0f / glm::dot(e1, p);
+  const glm::vec3 s = o - v0;
+  const float u = glm::dot(s, p) * inv_det;
+  const float v = glm::dot(d, glm::cross(s, e1)) * inv_det;
+  return v0 + u * e1 + v * e2;
+}
+
 glm::vec3 offset_origin(const glm::vec3& p, const glm::vec3& n, OffsetMode mode, float absolute,
                         Precision precision) {
   if (mode == OffsetMode::NormalUlp) return offset_normal_ulp(p, n);
@@ -59,14 +69,15 @@ void for_each_shadow_ray(const FlatKdTree& tree, std::span<const Light> lights, 
                          const Ray& ray, float t, const ShadowSettings& settings, F&& f) {
   const size_t base = size_t(prim) * MOBIRT_TEXELS_PER_TRIANGLE;
   const glm::vec3 v0(tree.triangles[base]);
-  const glm::vec3 ng = glm::cross(glm::vec3(tree.triangles[base + 1]) - v0,
-                                  glm::vec3(tree.triangles[base + 2]) - v0);
+  const glm::vec3 e1 = glm::vec3(tree.triangles[base + 1]) - v0;
+  const glm::vec3 e2 = glm::vec3(tree.triangles[base + 2]) - v0;
+  const glm::vec3 ng = glm::cross(e1, e2);
   // Under mediump the pass sees its ray rounded to fp16, and rounds the hit point and the shadow
   // ray too.
   const bool half = settings.ray_test.precision == Precision::Medium;
   const glm::vec3 o = half ? round_to_half(ray.origin) : ray.origin;
   const glm::vec3 d = half ? round_to_half(ray.direction) : ray.direction;
-  glm::vec3 p = o + t * d;
+  glm::vec3 p = settings.offset.mode == OffsetMode::NormalUlp ? point_on_triangle(v0, e1, e2, o, d) : o + t * d;
   if (half) p = round_to_half(p);
   const float view_side = glm::dot(ng, d) < 0.0f ? 1.0f : -1.0f;
   const glm::vec3 n = (view_side / std::max(glm::length(ng), 1e-30f)) * ng;

@@ -63,6 +63,12 @@ float scene_offset(const Aabb& bounds, float epsilon);  // epsilon x the box's l
 glm::vec3 offset_origin(const glm::vec3& p, const glm::vec3& n, OffsetMode mode, float absolute,
                         Precision precision = Precision::High);
 
+// The hit point of the ray (o, d) on the triangle (v0, v0 + e1, v0 + e2) from its barycentric
+// coordinates, which normal-ulp offsets start from (as Wachter and Binder do): its error is
+// relative to the vertices, where o + t d carries one relative to the ray's length.
+glm::vec3 point_on_triangle(const glm::vec3& v0, const glm::vec3& e1, const glm::vec3& e2, const glm::vec3& o,
+                            const glm::vec3& d);
+
 // Wachter and Binder 2019 (Ray Tracing Gems, ch. 6): each component of p moved along n by
 // int(256 n) units in the last place of its float representation (an integer added to its bits),
 // or by n / 65536 where |p| < 1/32, where ulps get too small to clear the surface.

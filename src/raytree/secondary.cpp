@@ -62,8 +62,14 @@ RayBatch next_generation(const Scene& scene, const Aabb& scene_bounds, const Ray
     // geometric one decides which side of the surface each new ray starts on.
     const glm::vec3& ng = h.geometric;
     const glm::vec3& ns = h.normal;
-    const glm::vec3 above = offset_origin(h.position, ng, settings.offset.mode, absolute);
-    const glm::vec3 below = offset_origin(h.position, -ng, settings.offset.mode, absolute);
+    // Wachter and Binder's offset starts from the point on the triangle (point_on_triangle()).
+    glm::vec3 p = h.position;
+    if (settings.offset.mode == OffsetMode::NormalUlp) {
+      const glm::vec3* v = &scene.mesh.positions[3 * size_t(h.prim)];
+      p = v[0] + h.u * (v[1] - v[0]) + h.v * (v[2] - v[0]);
+    }
+    const glm::vec3 above = offset_origin(p, ng, settings.offset.mode, absolute);
+    const glm::vec3 below = offset_origin(p, -ng, settings.offset.mode, absolute);
 
     float reflect_share = m.reflectance;
     float refract_share = m.transmittance;
