@@ -83,20 +83,33 @@ def plot(scenes, out):
         panels = [("psnr_db", "PSNR against the reference (dB, higher is better)", lambda r: r["psnr_db"], False),
                   ("hit_mismatch", "primary rays hitting another triangle than the reference (%)",
                    lambda r: -r["hit_mismatch"], True)]
+        defaults = next((r for r in rows if r["label"] == "defaults"), rows[0])
         for ax, (key, label, better, percent) in zip(axes, panels):
             value = (lambda r: 100 * r[key]) if percent else (lambda r: r[key])
             front = pareto(rows, better)
             ax.plot([r["frame_min_ms"] for r in front], [value(r) for r in front], "-", color="0.6", lw=1,
                     zorder=1, label="Pareto front")
             on_front = {id(r) for r in front}
+            quiet = labelled = 0
             for r in rows:
                 mark = id(r) in on_front
                 ax.scatter(r["frame_min_ms"], value(r), s=36 if mark else 18, zorder=2,
                            color="tab:red" if mark else "tab:blue", edgecolors="black" if mark else "none")
-                ax.annotate(r["label"], (r["frame_min_ms"], value(r)), fontsize=6, xytext=(3, 2),
-                            textcoords="offset points")
+                # Labels for the front, the defaults and the settings whose error differs from the
+                # defaults'; the others (same error, other time) are counted in the legend.
+                same = abs(value(r) - value(defaults)) <= (0.2 * abs(value(defaults)) if percent else 0.5)
+                if mark or r is defaults or not same:
+                    # Alternately above and below the point, so that neighbours' labels do not overlap.
+                    ax.annotate(r["label"], (r["frame_min_ms"], value(r)), fontsize=6,
+                                xytext=(3, 2 if labelled % 2 == 0 else -8), textcoords="offset points")
+                    labelled += 1
+                else:
+                    quiet += 1
+            ax.scatter([], [], s=18, color="tab:blue",
+                       label=f"{quiet} unlabelled: the defaults' error, another time (see the table)")
             ax.set_xscale("log")
             ax.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
+            ax.xaxis.set_minor_locator(matplotlib.ticker.LogLocator(subs=(2.0, 3.0, 5.0)))
             ax.xaxis.set_minor_formatter(matplotlib.ticker.FormatStrFormatter("%.0f"))
             ax.tick_params(axis="x", which="minor", labelsize=6)
             if percent:
