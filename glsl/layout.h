@@ -114,6 +114,41 @@
 #define MOBIRT_SPEC_PACKING 3      // MOBIRT_PACKING_24_8 or MOBIRT_PACKING_16_16
 #define MOBIRT_SPEC_TEXTURE_COUNT 4  // shade: textures in the atlas, 0 = no atlas code at all
 #define MOBIRT_MAX_STACK_DEPTH 32  // the short stack's array size; depth beyond it is refused
+#define MOBIRT_SPEC_INTERSECT 5    // trace: MOBIRT_INTERSECT_* (--intersect)
+#define MOBIRT_SPEC_PRECISION 6    // trace: MOBIRT_PRECISION_* (--precision)
+#define MOBIRT_SPEC_OFFSET 7       // trace: MOBIRT_OFFSET_* (--offset), the shadow-ray origins
+#define MOBIRT_SPEC_COLOUR 8       // shade: MOBIRT_COLOUR_* (--colour), what the RGBA8 texel holds
+
+// Ray/triangle test: Moller-Trumbore (1997), or the watertight test of Woop, Benthin and Wald
+// (JCGT 2013), which never lets a ray slip between two triangles that share an edge.
+#define MOBIRT_INTERSECT_MT 0
+#define MOBIRT_INTERSECT_WATERTIGHT 1
+// Float precision of the intersection arithmetic: highp (fp32), or mediump emulated by rounding
+// the ray, the triangle's vertices and every intermediate result of the test to fp16 (drivers
+// that compute mediump in fp32, as lavapipe does, would otherwise show no difference). The
+// traversal's own arithmetic (node indices, split distances) stays highp: its indices need 24 bits.
+#define MOBIRT_PRECISION_HIGH 0
+#define MOBIRT_PRECISION_MEDIUM 1
+// Self-intersection offset of a ray leaving a surface, along the geometric normal:
+//   FIXED: epsilon in scene units; SCALED: epsilon x the scene box's largest side, never below 2
+//   ulps of the hit point (fp32 ulps, or fp16 ulps under mediump); NORMAL_ULP: Wachter and Binder
+//   2019 (Ray Tracing Gems, ch. 6): the point moved by an integer number of ulps per component,
+//   MOBIRT_WB_INT_SCALE x the normal, with a float offset of MOBIRT_WB_FLOAT_SCALE x the normal for
+//   components within MOBIRT_WB_ORIGIN of 0.
+#define MOBIRT_OFFSET_FIXED 0
+#define MOBIRT_OFFSET_SCALED 1
+#define MOBIRT_OFFSET_NORMAL_ULP 2
+#define MOBIRT_WB_ORIGIN 0.03125           // 1 / 32
+#define MOBIRT_WB_FLOAT_SCALE 1.52587890625e-05  // 1 / 65536
+#define MOBIRT_WB_INT_SCALE 256.0
+// The least SCALED offset under mediump: 2 fp16 ulps of max |p| (2^-9).
+#define MOBIRT_OFFSET_HALF_ULPS 0.001953125
+// Shading output: 8 bits per channel in one pass, or 16 bits per channel in two passes (the same
+// shading twice; one writes the high bytes, the other the low bytes of round(c x 65535)), so
+// that every pass still writes one RGBA8 texel per ray.
+#define MOBIRT_COLOUR_8 0
+#define MOBIRT_COLOUR_16_HIGH 1
+#define MOBIRT_COLOUR_16_LOW 2
 
 // Light types as stored in the light uniforms
 #define MOBIRT_LIGHT_POINT 0.0

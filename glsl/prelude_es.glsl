@@ -27,6 +27,44 @@ precision highp sampler2D;
 #ifndef TEXTURE_COUNT
 #define TEXTURE_COUNT 0
 #endif
+#ifndef INTERSECT
+#define INTERSECT MOBIRT_INTERSECT_MT
+#endif
+#ifndef PRECISION
+#define PRECISION MOBIRT_PRECISION_HIGH
+#endif
+#ifndef OFFSET_MODE
+#define OFFSET_MODE MOBIRT_OFFSET_SCALED
+#endif
+#ifndef COLOUR
+#define COLOUR MOBIRT_COLOUR_8
+#endif
+
+#define PRECISE
+#include "precision.glsl"
+
+// The numeric primitive of prelude_vk.glsl that GLSL ES 1.00 lacks (no floatBitsToInt, no bit
+// operations), emulated with float arithmetic that is exact as long as exp2 of an integer is
+// exact (it is on llvmpipe; tests/numerics_test.cpp checks it against the CPU on both backends,
+// bit for bit).
+// The float whose bits, read as a signed integer, are x's plus k (an integer value): x moved by k
+// units in the last place, away from zero for k > 0, across a power of two where the ulp doubles
+// (or halves). Exact for normal x and |k| < 2^23; Wachter and Binder's offset (offset.glsl) calls it
+// only for |x| >= 1/32.
+float add_float_bits(float x, float k) {
+  float m = abs(x);
+  float e = float_binade(m);
+  float low = exp2(e);
+  float ulp = exp2(e - 23.0);
+  float steps = (m - low) * exp2(23.0 - e) + k;  // ulps above 2^e after the move
+  float r = low + steps * ulp;
+  if (steps >= 8388608.0) {
+    r = 2.0 * low + (steps - 8388608.0) * 2.0 * ulp;
+  } else if (steps < 0.0) {
+    r = low + steps * 0.5 * ulp;
+  }
+  return x < 0.0 ? -r : r;
+}
 
 // The pass's uniforms: one vec4 array (indices in layout.h).
 uniform vec4 u_params[MOBIRT_MAX_PARAM_VEC4S];

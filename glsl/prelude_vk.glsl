@@ -12,6 +12,23 @@ layout(constant_id = MOBIRT_SPEC_STACK_DEPTH) const int STACK_DEPTH = 4;
 layout(constant_id = MOBIRT_SPEC_MAX_STEPS) const int MAX_STEPS = 4096;
 layout(constant_id = MOBIRT_SPEC_PACKING) const int PACKING = MOBIRT_PACKING_24_8;
 layout(constant_id = MOBIRT_SPEC_TEXTURE_COUNT) const int TEXTURE_COUNT = 0;
+layout(constant_id = MOBIRT_SPEC_INTERSECT) const int INTERSECT = MOBIRT_INTERSECT_MT;
+layout(constant_id = MOBIRT_SPEC_PRECISION) const int PRECISION = MOBIRT_PRECISION_HIGH;
+layout(constant_id = MOBIRT_SPEC_OFFSET) const int OFFSET_MODE = MOBIRT_OFFSET_SCALED;
+layout(constant_id = MOBIRT_SPEC_COLOUR) const int COLOUR = MOBIRT_COLOUR_8;
+
+// No contraction into fused multiply-adds where an expression must round as the CPU's does
+// (precision.glsl) or the same way in every triangle that computes it (the watertight test).
+#define PRECISE precise
+#include "precision.glsl"
+
+// The numeric primitive that GLSL ES 1.00 lacks (prelude_es.glsl emulates it arithmetically, to
+// the same bits).
+// The float whose bits, read as a signed integer, are x's plus k (an integer value): x moved by k
+// units in the last place, away from zero for k > 0. Wachter and Binder's offset (offset.glsl).
+float add_float_bits(float x, float k) {
+  return intBitsToFloat(floatBitsToInt(x) + int(k));
+}
 
 // The pass's uniforms: one vec4 array (indices in layout.h).
 layout(set = 0, binding = 0, std140) uniform Params {

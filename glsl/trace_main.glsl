@@ -10,6 +10,9 @@ SAMPLER(MOBIRT_BIND_RAY_DIRECTION, u_ray_direction);
 void main() {
   vec4 origin = RAY_TEXEL(u_ray_origin);     // xyz, tmin
   vec4 direction = RAY_TEXEL(u_ray_direction);  // xyz, tmax
+  // Under mediump the ray is rounded to fp16 once, before the walk (precision.glsl).
+  origin.xyz = mp(origin.xyz);
+  direction.xyz = mp(direction.xyz);
   vec3 hit = traverse(origin.xyz, direction.xyz, origin.w, direction.w, false);
   if (hit.z > 0.5) {
     OUTPUT(pack_capped());

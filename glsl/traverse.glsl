@@ -1,35 +1,101 @@
 // kd-tree traversal with a short stack (Horn et al. 2007) that falls back to kd-restart (Foley and
-// Sugerman 2005) when the stack runs dry, Möller-Trumbore intersection, shadow rays.
+// Sugerman 2005) when the stack runs dry, Möller-Trumbore or watertight intersection, shadow rays.
 //
 // The same algorithm as src/accel/kdtree_traverse.cpp, step for step, so that the CPU traversal
 // is an oracle for this shader. Written in the common subset of GLSL 450 and GLSL ES 1.00: no
 // integer bit operations, no `%`, loops with constant bounds (the cap MAX_STEPS).
 //
-// Needs from the prelude: DATA_TEXEL, PARAM, STACK_DEPTH, MAX_STEPS, LIGHT_COUNT.
+// Needs from the prelude: DATA_TEXEL, PARAM, STACK_DEPTH, MAX_STEPS, LIGHT_COUNT, INTERSECT,
+// PRECISION, OFFSET_MODE, PRECISE, add_float_bits and precision.glsl (mp, mp_cross, mp_dot).
+#include "offset.glsl"
 
 SAMPLER(MOBIRT_BIND_NODES, u_nodes);
 SAMPLER(MOBIRT_BIND_PRIM_LIST, u_prim_list);
 SAMPLER(MOBIRT_BIND_TRIANGLES, u_triangles);
 
-// Möller-Trumbore. Returns t of a hit in [tmin, tmax], else -1. Comparisons are written so that
-// NaN rejects, as on the CPU.
-float intersect_triangle(float prim, vec3 o, vec3 d, float tmin, float tmax) {
+// The ray/triangle test, by INTERSECT and PRECISION (specialization constants, glsl/layout.h):
+// the CPU mirror, operation for operation, is src/accel/kdtree_traverse.cpp. Each returns t of a
+// hit in [tmin, tmax], else -1; comparisons are written so that NaN rejects. Under mediump mp()
+// rounds the vertices and every intermediate result to fp16; the ray arrives rounded.
+
+// Möller-Trumbore (1997).
+float intersect_mt(float prim, vec3 o, vec3 d, float tmin, float tmax) {
   float base = prim * float(MOBIRT_TEXELS_PER_TRIANGLE);
-  vec3 v0 = DATA_TEXEL(u_triangles, base).xyz;
-  vec3 e1 = DATA_TEXEL(u_triangles, base + 1.0).xyz - v0;
-  vec3 e2 = DATA_TEXEL(u_triangles, base + 2.0).xyz - v0;
-  vec3 p = cross(d, e2);
-  float det = dot(e1, p);
+  vec3 v0 = mp(DATA_TEXEL(u_triangles, base).xyz);
+  vec3 e1 = mp(mp(DATA_TEXEL(u_triangles, base + 1.0).xyz) - v0);
+  vec3 e2 = mp(mp(DATA_TEXEL(u_triangles, base + 2.0).xyz) - v0);
+  vec3 p = mp(mp_cross(d, e2));
+  float det = mp(mp_dot(e1, p));
   if (!(det != 0.0)) return -1.0;
-  float inv_det = 1.0 / det;
-  vec3 s = o - v0;
-  float u = dot(s, p) * inv_det;
+  float inv_det = mp(1.0 / det);
+  vec3 s = mp(o - v0);
+  float u = mp(mp(mp_dot(s, p)) * inv_det);
   if (!(u >= 0.0 && u <= 1.0)) return -1.0;
-  vec3 q = cross(s, e1);
-  float v = dot(d, q) * inv_det;
-  if (!(v >= 0.0 && u + v <= 1.0)) return -1.0;
-  float t = dot(e2, q) * inv_det;
+  vec3 q = mp(mp_cross(s, e1));
+  float v = mp(mp(mp_dot(d, q)) * inv_det);
+  if (!(v >= 0.0 && mp(u + v) <= 1.0)) return -1.0;
+  float t = mp(mp(mp_dot(e2, q)) * inv_det);
   return (t >= tmin && t <= tmax) ? t : -1.0;
+}
+
+// The axis permutation (kx, ky, kz) of the watertight test, applied to v: kz is the largest
+// component of |d|, and kx, ky swap when d points down kz, to keep the winding.
+vec3 watertight_permute(vec3 v, vec3 d) {
+  vec3 ad = abs(d);
+  vec3 r = v;  // kz = z: (x, y, z)
+  if (ad.x >= ad.y && ad.x >= ad.z) {
+    r = v.yzx;  // kz = x
+  } else if (ad.y >= ad.z) {
+    r = v.zxy;  // kz = y
+  }
+  return r;
+}
+
+// Woop, Benthin and Wald, "Watertight Ray/Triangle Intersection" (JCGT 2013), in single precision:
+// the vertices relative to the origin, sheared so that the ray runs along +z, then 2D edge
+// functions. Each edge function depends only on its edge's two vertices and the triangle across a
+// shared edge computes exactly its negation, so a ray through an edge or a vertex meets at least
+// one triangle there. The paper's retry in double for edge functions of exactly 0 is left out: 0 is accepted on both
+// sides instead.
+float intersect_watertight(float prim, vec3 o, vec3 d, float tmin, float tmax) {
+  float base = prim * float(MOBIRT_TEXELS_PER_TRIANGLE);
+  vec3 pd = watertight_permute(d, d);
+  bool flip = pd.z < 0.0;
+  if (flip) pd = pd.yxz;
+  float sx = mp(pd.x / pd.z);
+  float sy = mp(pd.y / pd.z);
+  float sz = mp(1.0 / pd.z);
+  vec3 a = watertight_permute(mp(mp(DATA_TEXEL(u_triangles, base).xyz) - o), d);
+  vec3 b = watertight_permute(mp(mp(DATA_TEXEL(u_triangles, base + 1.0).xyz) - o), d);
+  vec3 c = watertight_permute(mp(mp(DATA_TEXEL(u_triangles, base + 2.0).xyz) - o), d);
+  if (flip) {
+    a = a.yxz;
+    b = b.yxz;
+    c = c.yxz;
+  }
+  // Columns: x, y and z of the three vertices; then sheared. The products are PRECISE: a product
+  // fused into the subtraction that follows would round differently from the CPU's, and, in the
+  // edge functions, differently from the neighbouring triangle's.
+  vec3 pz = vec3(a.z, b.z, c.z);
+  PRECISE vec3 shear_x = sx * pz;
+  PRECISE vec3 shear_y = sy * pz;
+  vec3 x = mp(vec3(a.x, b.x, c.x) - mp(shear_x));
+  vec3 y = mp(vec3(a.y, b.y, c.y) - mp(shear_y));
+  // The edge functions of edges bc, ca, ab: the weights of a, b, c times det.
+  PRECISE vec3 edge_plus = x.zxy * y.yzx;
+  PRECISE vec3 edge_minus = y.zxy * x.yzx;
+  vec3 uvw = mp(mp(edge_plus) - mp(edge_minus));
+  if ((uvw.x < 0.0 || uvw.y < 0.0 || uvw.z < 0.0) && (uvw.x > 0.0 || uvw.y > 0.0 || uvw.z > 0.0)) return -1.0;
+  float det = mp(mp(uvw.x + uvw.y) + uvw.z);
+  if (!(det != 0.0)) return -1.0;
+  float big_t = mp(mp_dot(uvw, mp(sz * pz)));
+  float t = mp(big_t * mp(1.0 / det));
+  return (t >= tmin && t <= tmax) ? t : -1.0;
+}
+
+float intersect_triangle(float prim, vec3 o, vec3 d, float tmin, float tmax) {
+  if (INTERSECT == MOBIRT_INTERSECT_WATERTIGHT) return intersect_watertight(prim, o, d, tmin, tmax);
+  return intersect_mt(prim, o, d, tmin, tmax);
 }
 
 // Slab test against the scene box; returns (t0, t1), empty when t0 > t1.
@@ -170,15 +236,15 @@ float shadow_mask(float prim, vec3 o, vec3 d, float t) {
   if (LIGHT_COUNT == 0) return mask;
   float base = prim * float(MOBIRT_TEXELS_PER_TRIANGLE);
   vec3 v0 = DATA_TEXEL(u_triangles, base).xyz;
-  vec3 ng = cross(DATA_TEXEL(u_triangles, base + 1.0).xyz - v0,
-                  DATA_TEXEL(u_triangles, base + 2.0).xyz - v0);
-  vec3 p = o + t * d;
+  vec3 e1 = DATA_TEXEL(u_triangles, base + 1.0).xyz - v0;
+  vec3 e2 = DATA_TEXEL(u_triangles, base + 2.0).xyz - v0;
+  vec3 ng = cross(e1, e2);
+  vec3 p = mp(OFFSET_MODE == MOBIRT_OFFSET_NORMAL_ULP ? point_on_triangle(v0, e1, e2, o, d) : o + t * d);
   float view_side = dot(ng, d) < 0.0 ? 1.0 : -1.0;
-  // Offset the origin off the surface, on the viewer's side: a share of the scene's size (uniform),
-  // never below 2 float ulps of p, so that it holds at any scale and far from the origin.
-  vec3 ap = abs(p);
-  float offset = max(PARAM(MOBIRT_TP_BOUNDS_LO).w, max(ap.x, max(ap.y, ap.z)) * MOBIRT_OFFSET_ULPS);
-  vec3 origin = p + (view_side * offset / max(length(ng), 1e-30)) * ng;
+  // The origin off the surface, on the viewer's side (offset.glsl); under mediump the shadow ray
+  // is rounded as the primary rays are.
+  vec3 n = (view_side / max(length(ng), 1e-30)) * ng;
+  vec3 origin = mp(offset_origin(p, n, PARAM(MOBIRT_TP_BOUNDS_LO).w));
   float bit = 1.0;
   // lavapipe ends a shader's loops silently once they ran 65,535 iterations in all (llvmpipe's
   // LP_MAX_TGSI_LOOP_ITERATIONS), so completion is counted rather than assumed: a light loop that
@@ -195,7 +261,7 @@ float shadow_mask(float prim, vec3 o, vec3 d, float t) {
       lit = dot(normalize(-to_light), spot.xyz) > spot.w;
     }
     if (lit) {
-      vec3 r = traverse(origin, to_light, 0.0, tmax, true);
+      vec3 r = traverse(origin, mp(to_light), 0.0, tmax, true);
       if (r.z > 0.5) return -1.0;
       if (r.x < 0.0) mask = mask + bit;
     }

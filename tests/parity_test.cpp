@@ -60,10 +60,11 @@ class PerBackend : public ::testing::TestWithParam<Api> {
 
 // The traversal pass against the CPU traversal of the same tree: same primitive (or a tie at the
 // same distance, or a grazing edge) and the same shadow mask.
-void check_traversal_against_cpu(Backend& backend, const Scene& scene, int width, int height) {
-  RenderSettings settings;
+void check_traversal_against_cpu(Backend& backend, const Scene& scene, int width, int height,
+                                 RenderSettings settings = {}) {
   settings.width = width;
   settings.height = height;
+  const RayTest& test = settings.shadow_rays.ray_test;
   Renderer renderer(backend, settings);
   const FlatKdTree tree = build_kdtree(scene.mesh.positions, settings.kd);
   const RayBatch rays = primary_rays(scene_camera(scene, width, height), width, height);
@@ -76,7 +77,7 @@ void check_traversal_against_cpu(Backend& backend, const Scene& scene, int width
       ++capped;
       continue;
     }
-    const Hit cpu = traverse(tree, ray, settings.stack_depth);
+    const Hit cpu = traverse(tree, ray, settings.stack_depth, test);
     const int32_t prim = texel.hit() ? texel.prim() : -1;
     if (prim == cpu.prim) {
       ++same;
@@ -94,7 +95,7 @@ void check_traversal_against_cpu(Backend& backend, const Scene& scene, int width
     open.tmax = kInfinity;
     Hit h;
     const int32_t other = prim >= 0 ? prim : cpu.prim;
-    if (intersect_triangle(tree, other, open, h) &&
+    if (intersect_triangle(tree, other, open, h, test) &&
         ((prim >= 0 && cpu.valid() && std::abs(h.t - cpu.t) <= 1e-4f * std::max(1.0f, cpu.t)) ||
          std::min({h.u, h.v, 1.0f - h.u - h.v}) < 1e-4f)) {
       ++tolerated;
@@ -120,6 +121,29 @@ TEST_P(PerBackend, TraversalMatchesCpuOnTheToaster) {
   check_traversal_against_cpu(*backend, load_scene(MOBIRT_SOURCE_DIR "/scenes/toaster.gltf"), 200, 120);
 }
 
+// Every accuracy knob of the traversal pass has its CPU twin: the intersection tests, the emulated
+// mediump, the offsets.
+TEST_P(PerBackend, TraversalMatchesCpuUnderEveryAccuracyKnob) {
+  const Scene scene = load_scene(MOBIRT_SOURCE_DIR "/scenes/default.gltf");
+  struct Knob {
+    IntersectTest test;
+    Precision precision;
+    OffsetMode offset;
+  };
+  for (const Knob& k : {Knob{IntersectTest::Watertight, Precision::High, OffsetMode::Scaled},
+                        Knob{IntersectTest::MollerTrumbore, Precision::Medium, OffsetMode::Scaled},
+                        Knob{IntersectTest::Watertight, Precision::Medium, OffsetMode::Fixed},
+                        Knob{IntersectTest::MollerTrumbore, Precision::High, OffsetMode::NormalUlp}}) {
+    SCOPED_TRACE(::testing::Message() << "intersect " << int(k.test) << ", precision " << int(k.precision)
+                                      << ", offset " << int(k.offset));
+    RenderSettings settings;
+    settings.shadow_rays.ray_test = {k.test, k.precision};
+    settings.shadow_rays.offset.mode = k.offset;
+    settings.shadow_rays.offset.epsilon = k.offset == OffsetMode::Fixed ? 1e-4f : 1e-6f;
+    check_traversal_against_cpu(*backend, scene, 200, 120, settings);
+  }
+}
+
 TEST_P(PerBackend, DefaultSceneImageMatchesCpuExpectation) {
   const auto [gpu, cpu] = test::render_default_scene(*backend);
   const ImageDiff d = compare_images(gpu, cpu);
@@ -129,6 +153,36 @@ TEST_P(PerBackend, DefaultSceneImageMatchesCpuExpectation) {
     ADD_FAILURE() << api_name(GetParam()) << " image differs from the CPU expectation: PSNR " << d.psnr << " dB, "
                   << 100.0 * d.share_over << "% of pixels off by more than 2/255; see " << test::output_path(diff);
   }
+}
+
+// 16-bit colour: two shading passes (high and low bytes) of the same shading. Each 8-bit colour
+// is that colour rounded to 8 bits (ray casting, so one shaded colour per pixel): within half an
+// 8-bit step of the 16-bit one (Vulkan's UNORM conversion rounds to nearest; llvmpipe's OpenGL ES
+// conversion strays up to 0.56 of a step), and the 16-bit image equals the CPU expectation
+// quantised to 16 bits far more closely than 8 bits can.
+TEST_P(PerBackend, SixteenBitColourRefinesTheEightBitImage) {
+  const Scene scene = load_scene(MOBIRT_SOURCE_DIR "/scenes/default.gltf");
+  RenderSettings settings;
+  settings.width = 200;
+  settings.height = 120;
+  settings.depth = 0;
+  const Image eight = Renderer(*backend, settings).render(scene, *scene.camera);
+  settings.colour = ColourDepth::Bits16;
+  const Image sixteen = Renderer(*backend, settings).render(scene, *scene.camera);
+  float worst = 0.0f;
+  for (size_t i = 0; i < eight.pixels.size(); ++i) {
+    const glm::vec3 steps = glm::abs(sixteen.pixels[i] - eight.pixels[i]) * 255.0f;
+    worst = std::max({worst, steps.x, steps.y, steps.z});
+  }
+  EXPECT_LE(worst, GetParam() == Api::Vulkan ? 0.5f + 255.0f / 65535.0f : 0.6f) << "8-bit steps";
+  const ImageDiff d16 = compare_images(sixteen, render_on_cpu(scene, *scene.camera, settings));
+  settings.colour = ColourDepth::Bits8;
+  const ImageDiff d8 = compare_images(eight, render_on_cpu(scene, *scene.camera, settings, false));
+  std::printf("[ colour ] %s: 16-bit against the CPU's 16-bit colours %.2f dB, 8-bit against unquantised "
+              "%.2f dB; 8-bit within %.3f steps of 16-bit\n",
+              api_name(GetParam()), d16.psnr, d8.psnr, worst);
+  EXPECT_GE(d16.psnr, 80.0);
+  EXPECT_LT(d8.psnr, 65.0);
 }
 
 // A loop cap too small costs time, never pixels, on both backends.

@@ -68,9 +68,9 @@ TEST(RayTree, GlassSlabShiftsTheRayWithoutTurningIt) {
     // Distance between the leaving ray's line and the incoming ray's line.
     const glm::vec3 w = leaving.origin - in.origin;
     const float distance = glm::length(w - glm::dot(w, d) * d);
-    // The two origins are offset off the surfaces (ray_offset(): epsilon x the scene's size) each,
+    // The two origins are offset off the surfaces (offset_origin(): epsilon x the scene's size) each,
     // which moves the line sideways by up to that much over cos(a) per surface.
-    const float offset = scene_offset(tree.bounds, SecondarySettings{}.epsilon);
+    const float offset = scene_offset(tree.bounds, SecondarySettings{}.offset.epsilon);
     EXPECT_NEAR(distance, shift, 1e-4f + 2.0f * offset / std::cos(a));
   }
 }

@@ -1,14 +1,18 @@
 #!/usr/bin/env bash
-# The speed-for-accuracy sweep: every knob that exists, one at a time from the defaults, over the
-# project's scenes, each run through `mobirt accuracy` (the GPU renderer against the
-# double-precision reference tracer). Writes OUT/accuracy.csv, OUT/accuracy.md (a table per
-# scene: time, PSNR, max error, hit mismatch) and, when python3 can import matplotlib, a Pareto
-# plot per scene (OUT/pareto_SCENE.png: frame time against error).
+# The speed-for-accuracy sweep: every knob, one at a time from the defaults (and two combinations),
+# over the project's scenes, each run through `mobirt accuracy` (the GPU renderer against the
+# double-precision reference tracer). Writes OUT/accuracy.csv, then tools/accuracy_report.py
+# writes OUT/accuracy.md (a table per scene: time, PSNR, max error, hit mismatch, Pareto front)
+# and a Pareto plot per scene (OUT/pareto_SCENE.png: frame time against error) when python3 can
+# import matplotlib.
 #
 #   tools/accuracy_sweep.sh [OUT] [--quick]       (default OUT: build/accuracy)
 #
 # MOBIRT: the mobirt binary (default build/mobirt). SCENES: the scenes to sweep (default: the
-# project's four). --quick sweeps fewer values (for a smoke run).
+# project's four). REPEAT: frames timed per setting (default 5). ROUNDS: times the whole sweep is
+# run (default 1); on a machine shared with other work, 2 rounds minutes apart let the report keep
+# each setting's fastest frame over both. --quick sweeps a few settings (a smoke run). One round
+# takes about 5 minutes on 2 cores.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=build/accuracy
@@ -21,86 +25,64 @@ for a in "$@"; do
 done
 MOBIRT=${MOBIRT:-build/mobirt}
 SCENES=${SCENES:-"scenes/default.gltf scenes/toaster.gltf scenes/marbles.gltf scenes/fish.gltf"}
+REPEAT=${REPEAT:-5}
+ROUNDS=${ROUNDS:-1}
 mkdir -p "$OUT"
 CSV="$OUT/accuracy.csv"
 rm -f "$CSV"
 
+# label|options. SIZE, HALF and DOUBLE stand for the scene's resolution, half and twice it.
 if ((QUICK)); then
-  KNOBS=("defaults:" "--bins:4" "--stack:0" "--epsilon:1e-6" "--depth:0")
+  SETTINGS=("defaults|" "--intersect watertight|--intersect watertight" "--precision mediump|--precision mediump"
+            "--colour 16|--colour 16" "--depth 0|--depth 0")
 else
-  KNOBS=("defaults:"
-         "--bins:4" "--bins:8" "--bins:128"
-         "--max-depth:4" "--max-depth:10"
-         "--leaf-size:4" "--leaf-size:16"
-         "--stack:0" "--stack:1" "--stack:16"
-         "--epsilon:1e-6" "--epsilon:1e-5" "--epsilon:1e-3"
-         "--depth:0" "--depth:1" "--depth:3"
-         "--size:half")
+  SETTINGS=("defaults|"
+            "--bins 8|--bins 8" "--bins 128|--bins 128"
+            "--max-depth 10|--max-depth 10"
+            "--leaf-size 4|--leaf-size 4" "--leaf-size 16|--leaf-size 16"
+            "--stack 0|--stack 0" "--stack 1|--stack 1" "--stack 16|--stack 16"
+            "--intersect watertight|--intersect watertight"
+            "--precision mediump|--precision mediump"
+            "--precision mediump --intersect watertight|--precision mediump --intersect watertight"
+            "--epsilon 1e-5|--epsilon 1e-5" "--epsilon 1e-3|--epsilon 1e-3"
+            "--offset fixed --epsilon 1e-4|--offset fixed --epsilon 1e-4"
+            "--offset fixed --epsilon 1e-2|--offset fixed --epsilon 1e-2"
+            "--offset normal-ulp|--offset normal-ulp"
+            "--colour 16|--colour 16"
+            "--colour 16 --intersect watertight|--colour 16 --intersect watertight"
+            "--depth 0|--depth 0" "--depth 1|--depth 1" "--depth 3|--depth 3"
+            "--size HALF|--size HALF" "--size DOUBLE|--size DOUBLE"
+            "defaults (again: timing noise)|")
 fi
 
+for round in $(seq "$ROUNDS"); do
 for scene in $SCENES; do
   name=$(basename "$scene" .gltf)
-  size=400x240
-  half=200x120
-  if [ "$name" = marbles ]; then size=240x400; half=120x200; fi
-  for knob in "${KNOBS[@]}"; do
-    opt=${knob%%:*}
-    val=${knob#*:}
-    args=(--size "$size")
-    label="defaults"
-    if [ "$opt" = "--size" ]; then
-      args=(--size "$half"); label="--size $half"
-    elif [ "$opt" != defaults ]; then
-      args+=("$opt" "$val"); label="$opt $val"
-    fi
-    echo "sweep: $name $label" >&2
-    "$MOBIRT" accuracy "$scene" "${args[@]}" --repeat 3 --csv "$CSV" --label "$label" >/dev/null
+  size=400x240 half=200x120 double=800x480
+  if [ "$name" = marbles ]; then size=240x400 half=120x200 double=480x800; fi
+  for setting in "${SETTINGS[@]}"; do
+    label=${setting%%|*}
+    options=${setting#*|}
+    label=${label/HALF/$half}
+    label=${label/DOUBLE/$double}
+    options=${options/HALF/$half}
+    options=${options/DOUBLE/$double}
+    # shellcheck disable=SC2086 # options are words
+    if [[ "$options" == *--size* ]]; then args=($options); else args=(--size "$size" $options); fi
+    echo "sweep: round $round, $name: $label" >&2
+    "$MOBIRT" accuracy "$scene" "${args[@]}" --repeat "$REPEAT" --csv "$CSV" --label "$label" >/dev/null
   done
 done
+done
 
-# The markdown table, one section per scene.
-MD="$OUT/accuracy.md"
-{
-  echo "Command: \`tools/accuracy_sweep.sh $*\` ($(date -u +%Y-%m-%d), $("$MOBIRT" info | sed -n 's/^device: *//p'))"
-  echo
-  awk -F, 'NR > 1 {
-      if ($2 != scene) {
-        scene = $2
-        printf "\n### %s (%s)\n\n| setting | frame ms | PSNR dB | max error | > 2/255 | hit mismatch | shadow mismatch |\n|---|---:|---:|---:|---:|---:|---:|\n", $2, $3
-      }
-      printf "| %s | %.1f | %.2f | %.1f/255 | %.3f%% | %.3f%% | %.3f%% |\n", $1, $10, $11, $12 * 255, 100 * $13, 100 * $14, 100 * $15
-    }' "$CSV"
-} >"$MD"
-cat "$MD"
-
-if python3 -c 'import matplotlib' 2>/dev/null; then
-  python3 - "$CSV" "$OUT" <<'PY'
-import csv, sys, collections
-import matplotlib
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
-rows = collections.defaultdict(list)
-for r in csv.DictReader(open(sys.argv[1])):
-    rows[r["scene"]].append(r)
-for scene, rs in rows.items():
-    fig, ax = plt.subplots(figsize=(6, 4))
-    pts = [(float(r["frame_ms"]), float(r["psnr_db"]), r["label"]) for r in rs]
-    for t, p, l in pts:
-        ax.scatter(t, p)
-        ax.annotate(l, (t, p), fontsize=6)
-    front = []
-    for t, p, l in sorted(pts):
-        if not front or p > front[-1][1]:
-            front.append((t, p))
-    ax.plot([f[0] for f in front], [f[1] for f in front], "k--", lw=0.8)
-    ax.set_xlabel("frame time (ms)")
-    ax.set_ylabel("PSNR against the reference (dB)")
-    ax.set_title(scene)
-    name = scene.rsplit("/", 1)[-1].rsplit(".", 1)[0]
-    fig.tight_layout()
-    fig.savefig(f"{sys.argv[2]}/pareto_{name}.png", dpi=120)
-PY
-  echo "sweep: Pareto plots in $OUT/pareto_*.png" >&2
-else
-  echo "sweep: python3 cannot import matplotlib: no Pareto plot (the CSV has the numbers)" >&2
-fi
+DEVICE=$("$MOBIRT" info | sed -n 's/^device: *//p')
+# The first python3 that imports matplotlib (a pyenv or venv python3 on PATH may lack Debian's).
+PYTHON=python3
+for candidate in python3 /usr/bin/python3; do
+  if command -v "$candidate" >/dev/null && "$candidate" -c 'import matplotlib' 2>/dev/null; then
+    PYTHON=$candidate
+    break
+  fi
+done
+"$PYTHON" tools/accuracy_report.py "$CSV" "$OUT" \
+  --command "MOBIRT=$MOBIRT REPEAT=$REPEAT ROUNDS=$ROUNDS tools/accuracy_sweep.sh $*" --device "$DEVICE"

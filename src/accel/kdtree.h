@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "core/geometry.h"
+#include "layout.h"
 
 namespace mobirt {
 
@@ -76,16 +77,29 @@ struct Hit {
   bool valid() const { return prim >= 0; }
 };
 
+// The ray/triangle test and the float precision of its arithmetic (glsl/layout.h: --intersect and
+// --precision); the traversal pass is specialised to the same choice, so that the CPU traversal
+// stays its oracle.
+enum class IntersectTest { MollerTrumbore = MOBIRT_INTERSECT_MT, Watertight = MOBIRT_INTERSECT_WATERTIGHT };
+enum class Precision { High = MOBIRT_PRECISION_HIGH, Medium = MOBIRT_PRECISION_MEDIUM };
+struct RayTest {
+  IntersectTest test = IntersectTest::MollerTrumbore;
+  // Medium: the ray, the vertices and every intermediate result of the test rounded to fp16
+  // (round_to_half, src/core/half.h); the traversal rounds the ray once at its start.
+  Precision precision = Precision::High;
+};
+
 // The order of hits: smaller t first; at equal t the lower primitive index wins. Every CPU path
 // (traversal, occlusion, brute force) uses it, so results do not depend on the order of tests.
 inline bool closer_hit(float t, int32_t prim, const Hit& best) {
   return t < best.t || (t == best.t && best.prim >= 0 && prim < best.prim);
 }
 
-// Möller-Trumbore (single precision) on the triangle texels of prim. Accepts t in
+// The ray/triangle test `test` (Möller-Trumbore by default, single precision) on the triangle
+// texels of prim, the same arithmetic as glsl/traverse.glsl's intersect_triangle(). Accepts t in
 // [ray.tmin, ray.tmax] that is closer_hit() than hit; then fills hit and returns true.
 // A degenerate triangle (det == 0) or NaN anywhere is never a hit.
-bool intersect_triangle(const FlatKdTree& tree, int32_t prim, const Ray& ray, Hit& hit);
+bool intersect_triangle(const FlatKdTree& tree, int32_t prim, const Ray& ray, Hit& hit, const RayTest& test = {});
 
 // Cost counters of one traversal call (reset by each call; sum them with +=).
 // steps = the GPU loop's unit: one per interior node, one per triangle test, and one for an empty
@@ -118,22 +132,22 @@ struct TraversalStats {
 // stack_depth < 0: a full stack; 0: pure kd-restart; N > 0: a short stack of N entries that drops
 // its oldest entry on overflow and restarts from the root when it runs dry (Horn et al. 2007),
 // the same algorithm as glsl/traverse.glsl.
-Hit traverse(const FlatKdTree& tree, const Ray& ray, int stack_depth = -1);
+Hit traverse(const FlatKdTree& tree, const Ray& ray, int stack_depth = -1, const RayTest& test = {});
 
 // The same, with counters and the GPU's loop cap: max_steps < 0 is unlimited; a ray that needs
 // more than max_steps steps stops with a miss and stats.capped = 1 (the GPU then reports "capped"
 // and the CPU traces that ray without a cap).
 Hit traverse(const FlatKdTree& tree, const Ray& ray, int stack_depth, TraversalStats& stats,
-             int64_t max_steps = -1);
+             int64_t max_steps = -1, const RayTest& test = {});
 
 // Any hit in [ray.tmin, ray.tmax]: shadow rays.
-bool occluded(const FlatKdTree& tree, const Ray& ray, int stack_depth = -1);
+bool occluded(const FlatKdTree& tree, const Ray& ray, int stack_depth = -1, const RayTest& test = {});
 
 // The same, with counters and the loop cap (a capped call returns false with stats.capped = 1).
 bool occluded(const FlatKdTree& tree, const Ray& ray, int stack_depth, TraversalStats& stats,
-              int64_t max_steps = -1);
+              int64_t max_steps = -1, const RayTest& test = {});
 
 // Closest hit by testing every triangle: the oracle for the kd-tree tests.
-Hit brute_force(const FlatKdTree& tree, const Ray& ray);
+Hit brute_force(const FlatKdTree& tree, const Ray& ray, const RayTest& test = {});
 
 }  // namespace mobirt

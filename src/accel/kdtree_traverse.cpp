@@ -52,26 +52,24 @@
 
 #include "accel/kdtree.h"
 #include "core/error.h"
+#include "core/half.h"
 #include "layout.h"
 
 namespace mobirt {
 
-bool intersect_triangle(const FlatKdTree& tree, int32_t prim, const Ray& ray, Hit& hit) {
-  const size_t base = static_cast<size_t>(prim) * MOBIRT_TEXELS_PER_TRIANGLE;
-  const glm::vec3 v0(tree.triangles[base]);
-  const glm::vec3 e1 = glm::vec3(tree.triangles[base + 1]) - v0;
-  const glm::vec3 e2 = glm::vec3(tree.triangles[base + 2]) - v0;
-  const glm::vec3 p = glm::cross(ray.direction, e2);
-  const float det = glm::dot(e1, p);
-  if (det == 0.0f || std::isnan(det)) return false;
-  const float inv_det = 1.0f / det;
-  const glm::vec3 s = ray.origin - v0;
-  const float u = glm::dot(s, p) * inv_det;
-  if (!(u >= 0.0f && u <= 1.0f)) return false;
-  const glm::vec3 q = glm::cross(s, e1);
-  const float v = glm::dot(ray.direction, q) * inv_det;
-  if (!(v >= 0.0f && u + v <= 1.0f)) return false;
-  const float t = glm::dot(e2, q) * inv_det;
+namespace {
+
+// The precision of the intersection arithmetic: every intermediate result passes through R.
+struct Exact {
+  static float r(float x) { return x; }
+  static glm::vec3 r(const glm::vec3& v) { return v; }
+};
+struct Half {
+  static float r(float x) { return round_to_half(x); }
+  static glm::vec3 r(const glm::vec3& v) { return round_to_half(v); }
+};
+
+bool accept(float t, float u, float v, int32_t prim, const Ray& ray, Hit& hit) {
   if (!(t >= ray.tmin && t <= ray.tmax)) return false;
   if (!closer_hit(t, prim, hit)) return false;
   hit.prim = prim;
@@ -79,6 +77,77 @@ bool intersect_triangle(const FlatKdTree& tree, int32_t prim, const Ray& ray, Hi
   hit.u = u;
   hit.v = v;
   return true;
+}
+
+// Möller-Trumbore, as glsl/traverse.glsl's intersect_mt().
+template <class R>
+bool intersect_mt(const glm::vec4* texels, int32_t prim, const Ray& ray, Hit& hit) {
+  const glm::vec3 o = R::r(ray.origin), d = R::r(ray.direction);
+  const glm::vec3 v0 = R::r(glm::vec3(texels[0]));
+  const glm::vec3 e1 = R::r(R::r(glm::vec3(texels[1])) - v0);
+  const glm::vec3 e2 = R::r(R::r(glm::vec3(texels[2])) - v0);
+  const glm::vec3 p = R::r(glm::cross(d, e2));
+  const float det = R::r(glm::dot(e1, p));
+  if (det == 0.0f || std::isnan(det)) return false;
+  const float inv_det = R::r(1.0f / det);
+  const glm::vec3 s = R::r(o - v0);
+  const float u = R::r(R::r(glm::dot(s, p)) * inv_det);
+  if (!(u >= 0.0f && u <= 1.0f)) return false;
+  const glm::vec3 q = R::r(glm::cross(s, e1));
+  const float v = R::r(R::r(glm::dot(d, q)) * inv_det);
+  if (!(v >= 0.0f && R::r(u + v) <= 1.0f)) return false;
+  return accept(R::r(R::r(glm::dot(e2, q)) * inv_det), u, v, prim, ray, hit);
+}
+
+// The watertight test of Woop, Benthin and Wald (JCGT 2013) in single precision, as
+// glsl/traverse.glsl's intersect_watertight(): the vertices relative to the origin, sheared so that
+// the ray runs along +z, then 2D edge functions. Each edge function depends only on its edge's two
+// vertices, and the triangle across a shared edge computes exactly its negation (products commute,
+// a - b = -(b - a) in floats), so a ray through an edge or a vertex meets at least one of the
+// triangles there. The paper's retry in double for edge functions of exactly 0 is left out: an
+// edge test of exactly 0 is accepted on both sides instead (the test is inclusive), and the GPU
+// has no double.
+template <class R>
+bool intersect_wt(const glm::vec4* texels, int32_t prim, const Ray& ray, Hit& hit) {
+  const glm::vec3 o = R::r(ray.origin), d = R::r(ray.direction);
+  const glm::vec3 ad = glm::abs(d);
+  const int kz = ad.x >= ad.y && ad.x >= ad.z ? 0 : (ad.y >= ad.z ? 1 : 2);
+  int kx = kz == 2 ? 0 : kz + 1;
+  int ky = kx == 2 ? 0 : kx + 1;
+  if (d[kz] < 0.0f) std::swap(kx, ky);  // keep the winding, so that det keeps its sign
+  const float sx = R::r(d[kx] / d[kz]);
+  const float sy = R::r(d[ky] / d[kz]);
+  const float sz = R::r(1.0f / d[kz]);
+  // Columns: the three vertices relative to the origin, then sheared.
+  const glm::vec3 a = R::r(R::r(glm::vec3(texels[0])) - o);
+  const glm::vec3 b = R::r(R::r(glm::vec3(texels[1])) - o);
+  const glm::vec3 c = R::r(R::r(glm::vec3(texels[2])) - o);
+  const glm::vec3 px(a[kx], b[kx], c[kx]), py(a[ky], b[ky], c[ky]), pz(a[kz], b[kz], c[kz]);
+  const glm::vec3 x = R::r(px - R::r(sx * pz));
+  const glm::vec3 y = R::r(py - R::r(sy * pz));
+  // (U, V, W): the edge functions of edges bc, ca, ab, i.e. the weights of a, b, c times det.
+  const glm::vec3 uvw = R::r(R::r(glm::vec3(x.z, x.x, x.y) * glm::vec3(y.y, y.z, y.x)) -
+                             R::r(glm::vec3(y.z, y.x, y.y) * glm::vec3(x.y, x.z, x.x)));
+  if ((uvw.x < 0.0f || uvw.y < 0.0f || uvw.z < 0.0f) && (uvw.x > 0.0f || uvw.y > 0.0f || uvw.z > 0.0f)) {
+    return false;
+  }
+  const float det = R::r(R::r(uvw.x + uvw.y) + uvw.z);
+  if (det == 0.0f || std::isnan(det)) return false;
+  const glm::vec3 z = R::r(sz * pz);
+  const float big_t = R::r(glm::dot(uvw, z));
+  const float inv_det = R::r(1.0f / det);
+  return accept(R::r(big_t * inv_det), R::r(uvw.y * inv_det), R::r(uvw.z * inv_det), prim, ray, hit);
+}
+
+}  // namespace
+
+bool intersect_triangle(const FlatKdTree& tree, int32_t prim, const Ray& ray, Hit& hit, const RayTest& test) {
+  const glm::vec4* texels = tree.triangles.data() + static_cast<size_t>(prim) * MOBIRT_TEXELS_PER_TRIANGLE;
+  const bool half = test.precision == Precision::Medium;
+  if (test.test == IntersectTest::Watertight) {
+    return half ? intersect_wt<Half>(texels, prim, ray, hit) : intersect_wt<Exact>(texels, prim, ray, hit);
+  }
+  return half ? intersect_mt<Half>(texels, prim, ray, hit) : intersect_mt<Exact>(texels, prim, ray, hit);
 }
 
 namespace {
@@ -139,9 +208,16 @@ class ShortStack {
 };
 
 template <bool kAnyHit>
-Hit traverse_impl(const FlatKdTree& tree, const Ray& ray, int stack_depth, TraversalStats& stats,
-                  int64_t max_steps) {
+Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, TraversalStats& stats,
+                  int64_t max_steps, const RayTest& test) {
   stats = TraversalStats{};
+  // Under mediump the pass rounds its ray once, before the walk (glsl/trace_main.glsl and the
+  // shadow rays of glsl/traverse.glsl): the traversal walks the rounded ray.
+  Ray ray = input;
+  if (test.precision == Precision::Medium) {
+    ray.origin = round_to_half(ray.origin);
+    ray.direction = round_to_half(ray.direction);
+  }
   Hit best;
   float t0 = 0.0f;
   float t1 = 0.0f;
@@ -215,7 +291,7 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& ray, int stack_depth, Trave
       const int32_t prim = checked_index(
           count == 1 ? n.x : prim_list[static_cast<size_t>(checked_index(n.x + float(i), tree.prim_list.size(), "prim-list entry"))],
           tree.triangles.size() / MOBIRT_TEXELS_PER_TRIANGLE, "primitive");
-      if (intersect_triangle(tree, prim, ray, best) && kAnyHit) return best;
+      if (intersect_triangle(tree, prim, ray, best, test) && kAnyHit) return best;
     }
     if (best.t <= tmax) return best;
     if (!stack.empty()) {
@@ -241,29 +317,29 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& ray, int stack_depth, Trave
 }  // namespace
 
 Hit traverse(const FlatKdTree& tree, const Ray& ray, int stack_depth, TraversalStats& stats,
-             int64_t max_steps) {
-  return traverse_impl<false>(tree, ray, stack_depth, stats, max_steps);
+             int64_t max_steps, const RayTest& test) {
+  return traverse_impl<false>(tree, ray, stack_depth, stats, max_steps, test);
 }
 
-Hit traverse(const FlatKdTree& tree, const Ray& ray, int stack_depth) {
+Hit traverse(const FlatKdTree& tree, const Ray& ray, int stack_depth, const RayTest& test) {
   TraversalStats stats;
-  return traverse_impl<false>(tree, ray, stack_depth, stats, -1);
+  return traverse_impl<false>(tree, ray, stack_depth, stats, -1, test);
 }
 
 bool occluded(const FlatKdTree& tree, const Ray& ray, int stack_depth, TraversalStats& stats,
-              int64_t max_steps) {
-  return traverse_impl<true>(tree, ray, stack_depth, stats, max_steps).valid();
+              int64_t max_steps, const RayTest& test) {
+  return traverse_impl<true>(tree, ray, stack_depth, stats, max_steps, test).valid();
 }
 
-bool occluded(const FlatKdTree& tree, const Ray& ray, int stack_depth) {
+bool occluded(const FlatKdTree& tree, const Ray& ray, int stack_depth, const RayTest& test) {
   TraversalStats stats;
-  return traverse_impl<true>(tree, ray, stack_depth, stats, -1).valid();
+  return traverse_impl<true>(tree, ray, stack_depth, stats, -1, test).valid();
 }
 
-Hit brute_force(const FlatKdTree& tree, const Ray& ray) {
+Hit brute_force(const FlatKdTree& tree, const Ray& ray, const RayTest& test) {
   Hit best;
   const int32_t n = static_cast<int32_t>(tree.triangles.size() / MOBIRT_TEXELS_PER_TRIANGLE);
-  for (int32_t prim = 0; prim < n; ++prim) intersect_triangle(tree, prim, ray, best);
+  for (int32_t prim = 0; prim < n; ++prim) intersect_triangle(tree, prim, ray, best, test);
   return best;
 }
 

@@ -238,7 +238,7 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, const BenchScene& bs, c
   std::optional<EmbreeEngine> embree;
   std::optional<KdTreeEngine> kd;
   if (o.baseline) embree.emplace(EmbreeOptions{o.threads, true});
-  if (o.baseline && o.cpu) kd.emplace(settings.kd);
+  if (o.baseline && o.cpu) kd.emplace(settings.kd, settings.shadow_rays.ray_test);
 
   Scene scene = animation.rest();
   const Camera fallback = frame_box(scene.bounds(), 0.7854f, float(bs.width) / float(bs.height));

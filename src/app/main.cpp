@@ -64,9 +64,20 @@ Options:
   --bins N                SAH bins per axis of the kd-tree build (default 32)
   --leaf-size N           largest leaf the build may make without trying to split (default 1)
   --max-depth N           kd-tree depth limit, -1 = 8 + 1.3 log2(triangles) (default -1)
-  --epsilon E             offset of shadow, mirror and refracted ray origins off the surface, as
-                          a share of the scene's size, never below 2 float ulps of the hit point
-                          (default 1e-6)
+  --offset MODE           how shadow, mirror and refracted rays leave a surface, along its normal:
+                          fixed (--epsilon in scene units), scaled (--epsilon x the scene's
+                          size, never below 2 ulps of the hit point) or normal-ulp (Wachter and
+                          Binder 2019: 256 x the normal in ulps of each coordinate; ignores
+                          --epsilon) (default scaled)
+  --epsilon E             the offset of --offset fixed or scaled (default 1e-6)
+  --intersect TEST        ray/triangle test of the traversal pass (and of the CPU's): mt
+                          (Moller-Trumbore) or watertight (Woop et al. 2013: no ray slips
+                          between triangles sharing an edge) (default mt)
+  --precision P           float precision of the intersection arithmetic: highp (fp32) or
+                          mediump (fp16, emulated by rounding the rays, the vertices and every
+                          intermediate result) (default highp)
+  --colour 8|16           bits per colour channel the shading pass returns: 8 (one pass) or 16
+                          (two passes: high and low bytes) (default 8)
   --light SPEC            replaces the scene's lights (repeat for several):
                             "point pos=X,Y,Z [color=R,G,B] [intensity=I] [range=R]"
                             "spot pos=X,Y,Z dir=X,Y,Z [inner=DEG] [outer=DEG] [color=..] [intensity=..] [range=..]"
@@ -323,39 +334,11 @@ int cmd_render(Args args) {
       return 0;
     } else if (a == "-o" || a == "--output") {
       output = args.value(a);
-    } else if (a == "--size") {
-      const std::string v = args.value(a);
-      int w = 0, h = 0;
-      char extra = 0;
-      if (std::sscanf(v.c_str(), "%dx%d%c", &w, &h, &extra) != 2 || w < 1 || h < 1 || w > 16384 ||
-          h > 16384) {
-        usage_error("--size " + v + ": expected WxH with 1 <= W, H <= 16384, e.g. 400x240");
-      }
-      settings.width = w;
-      settings.height = h;
-    } else if (a == "--stack") {
-      settings.stack_depth = parse_int(a, args.value(a), 0, MOBIRT_MAX_STACK_DEPTH);
-    } else if (a == "--max-steps") {
-      settings.max_steps = parse_int(a, args.value(a), 1, 1 << 24);
-    } else if (a == "--bins") {
-      settings.kd.bins = parse_int(a, args.value(a), 2, 1024);
-    } else if (a == "--leaf-size") {
-      settings.kd.max_leaf_prims = parse_int(a, args.value(a), 1, 1 << 20);
-    } else if (a == "--max-depth") {
-      settings.kd.max_depth = parse_int(a, args.value(a), -1, 128);
-    } else if (a == "--epsilon") {
-      settings.shadow_rays.epsilon = parse_float(a, args.value(a), 0.0f, 1.0f);
-      settings.secondary.epsilon = settings.shadow_rays.epsilon;
-    } else if (a == "--depth") {
-      settings.depth = parse_int(a, args.value(a), 0, 64);
-    } else if (a == "--no-shadows") {
-      settings.shadows = false;
+    } else if (cli::parse_render_setting(a, [&] { return args.value(a); }, settings, kHelp)) {
     } else if (a == "--general") {
       settings.specialize = false;
     } else if (a == "--always-rebuild") {
       settings.always_rebuild = true;
-    } else if (a == "--min-weight") {
-      settings.secondary.min_weight = parse_float(a, args.value(a), 0.0f, 1.0f);
     } else if (a == "--light") {
       lights.push_back(parse_light(args.value(a)));
     } else if (a == "--camera") {

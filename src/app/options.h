@@ -3,7 +3,12 @@
 // "mobirt --help" or "mobirt accuracy --help".
 #pragma once
 
+#include <functional>
 #include <string>
+
+namespace mobirt {
+struct RenderSettings;
+}
 
 namespace mobirt::cli {
 
@@ -16,5 +21,12 @@ int parse_int(const std::string& option, const std::string& value, int lo, int h
 float parse_float(const std::string& option, const std::string& value, float lo, float hi, const std::string& help);
 double parse_number(const std::string& option, const std::string& value, double lo, double hi,
                     const std::string& help);
+
+// The render settings the commands share (--size, --depth, --no-shadows, --min-weight, --stack,
+// --max-steps, --bins, --leaf-size, --max-depth, --epsilon, --offset, --intersect, --precision,
+// --colour) into `settings`; `value` takes the option's value. Returns false when `option` is
+// none of them.
+bool parse_render_setting(const std::string& option, const std::function<std::string()>& value,
+                          RenderSettings& settings, const std::string& help);
 
 }  // namespace mobirt::cli

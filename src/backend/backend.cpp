@@ -24,6 +24,7 @@ const char* shader_name(ShaderId id) {
     case ShaderId::TestCopyInput: return "test/copy_input.frag";
     case ShaderId::TestSpin: return "test/spin.frag";
     case ShaderId::TestAtlasLookup: return "test/atlas_lookup.frag";
+    case ShaderId::TestNumerics: return "test/numerics.frag";
   }
   return "unknown shader";
 }

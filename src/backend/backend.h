@@ -36,6 +36,7 @@ enum class ShaderId {
   TestCopyInput,      // copies texture 1 to the output: plumbing tests
   TestSpin,           // loops until the cap: watchdog tests
   TestAtlasLookup,    // atlas.glsl's lookup for (uv, texture) per ray: atlas tests
+  TestNumerics,       // fp16 rounding, the ulp offset, the output packing against the CPU
 };
 const char* shader_name(ShaderId id);
 

@@ -2,10 +2,12 @@
 
 #include <algorithm>
 #include <atomic>
+#include <bit>
 #include <cmath>
 #include <string>
 
 #include "core/error.h"
+#include "core/half.h"
 #include "core/parallel.h"
 
 namespace mobirt {
@@ -15,9 +17,48 @@ float scene_offset(const Aabb& bounds, float epsilon) {
   return epsilon * std::max(e.x, std::max(e.y, e.z));
 }
 
-float ray_offset(const glm::vec3& p, float absolute) {
-  const glm::vec3 ap = glm::abs(p);
-  return std::max(absolute, std::max(ap.x, std::max(ap.y, ap.z)) * float(MOBIRT_OFFSET_ULPS));
+float absolute_offset(const Aabb& bounds, const SurfaceOffset& offset) {
+  switch (offset.mode) {
+    case OffsetMode::Fixed: return offset.epsilon;
+    case OffsetMode::Scaled: return scene_offset(bounds, offset.epsilon);
+    case OffsetMode::NormalUlp: break;
+  }
+  return 0.0f;
+}
+
+glm::vec3 offset_normal_ulp(const glm::vec3& p, const glm::vec3& n) {
+  glm::vec3 out;
+  for (int a = 0; a < 3; ++a) {
+    if (std::abs(p[a]) < float(MOBIRT_WB_ORIGIN)) {
+      out[a] = p[a] + float(MOBIRT_WB_FLOAT_SCALE) * n[a];
+    } else {
+      const int32_t ulps = int32_t(float(MOBIRT_WB_INT_SCALE) * n[a]);  // truncated, as in the paper
+      out[a] = std::bit_cast<float>(std::bit_cast<int32_t>(p[a]) + (p[a] < 0.0f ? -ulps : ulps));
+    }
+  }
+  return out;
+}
+
+glm::vec3 point_on_triangle(const glm::vec3& v0, const glm::vec3& e1, const glm::vec3& e2, const glm::vec3& o,
+                            const glm::vec3& d) {
+  const glm::vec3 p = glm::cross(d, e2);
+  const float inv_det = 1.0f / glm::dot(e1, p);
+  const glm::vec3 s = o - v0;
+  const float u = glm::dot(s, p) * inv_det;
+  const float v = glm::dot(d, glm::cross(s, e1)) * inv_det;
+  return v0 + u * e1 + v * e2;
+}
+
+glm::vec3 offset_origin(const glm::vec3& p, const glm::vec3& n, OffsetMode mode, float absolute,
+                        Precision precision) {
+  if (mode == OffsetMode::NormalUlp) return offset_normal_ulp(p, n);
+  float offset = absolute;
+  if (mode == OffsetMode::Scaled) {
+    const glm::vec3 ap = glm::abs(p);
+    const float ulps = precision == Precision::Medium ? float(MOBIRT_OFFSET_HALF_ULPS) : float(MOBIRT_OFFSET_ULPS);
+    offset = std::max(offset, std::max(ap.x, std::max(ap.y, ap.z)) * ulps);
+  }
+  return p + offset * n;
 }
 
 namespace {
@@ -30,12 +71,21 @@ void for_each_shadow_ray(const FlatKdTree& tree, std::span<const Light> lights, 
                          const Ray& ray, float t, const ShadowSettings& settings, F&& f) {
   const size_t base = size_t(prim) * MOBIRT_TEXELS_PER_TRIANGLE;
   const glm::vec3 v0(tree.triangles[base]);
-  const glm::vec3 ng = glm::cross(glm::vec3(tree.triangles[base + 1]) - v0,
-                                  glm::vec3(tree.triangles[base + 2]) - v0);
-  const glm::vec3 p = ray.origin + t * ray.direction;
-  const float view_side = glm::dot(ng, ray.direction) < 0.0f ? 1.0f : -1.0f;
-  const float offset = ray_offset(p, scene_offset(tree.bounds, settings.epsilon));
-  const glm::vec3 origin = p + (view_side * offset / std::max(glm::length(ng), 1e-30f)) * ng;
+  const glm::vec3 e1 = glm::vec3(tree.triangles[base + 1]) - v0;
+  const glm::vec3 e2 = glm::vec3(tree.triangles[base + 2]) - v0;
+  const glm::vec3 ng = glm::cross(e1, e2);
+  // Under mediump the pass sees its ray rounded to fp16, and rounds the hit point and the shadow
+  // ray too.
+  const bool half = settings.ray_test.precision == Precision::Medium;
+  const glm::vec3 o = half ? round_to_half(ray.origin) : ray.origin;
+  const glm::vec3 d = half ? round_to_half(ray.direction) : ray.direction;
+  glm::vec3 p = settings.offset.mode == OffsetMode::NormalUlp ? point_on_triangle(v0, e1, e2, o, d) : o + t * d;
+  if (half) p = round_to_half(p);
+  const float view_side = glm::dot(ng, d) < 0.0f ? 1.0f : -1.0f;
+  const glm::vec3 n = (view_side / std::max(glm::length(ng), 1e-30f)) * ng;
+  glm::vec3 origin = offset_origin(p, n, settings.offset.mode, absolute_offset(tree.bounds, settings.offset),
+                                   settings.ray_test.precision);
+  if (half) origin = round_to_half(origin);
   for (size_t l = 0; l < lights.size(); ++l) {
     const Light& light = lights[l];
     const bool directional = light.type == LightType::Directional;
@@ -69,7 +119,7 @@ uint32_t shadow_mask(const FlatKdTree& tree, std::span<const Light> lights, int3
   for_each_shadow_ray(tree, lights, prim, ray, t, settings, [&](size_t l, const Ray& shadow) {
     TraversalStats stats;
     const int64_t bound = stack_depth < 0 ? fallback_step_bound(tree) : -1;
-    if (!occluded(tree, shadow, stack_depth, stats, bound)) mask |= 1u << l;
+    if (!occluded(tree, shadow, stack_depth, stats, bound, settings.ray_test)) mask |= 1u << l;
     if (stats.capped) corrupt_tree(bound);
   });
   return mask;
@@ -94,7 +144,8 @@ uint32_t shadow_ray_count(const FlatKdTree& tree, std::span<const Light> lights,
   return count;
 }
 
-SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ray, int32_t prim) {
+SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ray, int32_t prim,
+                       IntersectTest test) {
   Hit h;
   h.t = kInfinity;
   // Recompute on this one triangle; the range is opened so that a hit the GPU accepted at the edge
@@ -102,8 +153,9 @@ SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ra
   Ray open = ray;
   open.tmin = -kInfinity;
   open.tmax = kInfinity;
-  if (!intersect_triangle(tree, prim, open, h)) {
-    // The GPU's Möller-Trumbore accepted it and ours does not (an edge hit, rounding): use the
+  // The decoding runs in single precision whatever the pass's precision (the paper's CPU step).
+  if (!intersect_triangle(tree, prim, open, h, RayTest{test, Precision::High})) {
+    // The GPU's test accepted it and ours does not (an edge hit, rounding, mediump): use the
     // closest point the barycentric clamp gives; t from the plane.
     const size_t base = size_t(prim) * MOBIRT_TEXELS_PER_TRIANGLE;
     const glm::vec3 v0(tree.triangles[base]), v1(tree.triangles[base + 1]), v2(tree.triangles[base + 2]);
@@ -171,7 +223,7 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
     if (texel.capped) {
       capped_count.fetch_add(1, std::memory_order_relaxed);
       TraversalStats steps;
-      const Hit h = traverse(tree, ray, -1, steps, fallback_step_bound(tree));
+      const Hit h = traverse(tree, ray, -1, steps, fallback_step_bound(tree), shadows.ray_test);
       if (steps.capped) corrupt_tree(fallback_step_bound(tree));
       prim = h.prim;
       if (h.valid()) mask = shadow_mask(tree, lights, prim, ray, h.t, shadows, -1);
@@ -185,7 +237,7 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
     }
     if (prim < 0) return;
     hit_count.fetch_add(1, std::memory_order_relaxed);
-    hits[i] = surface_hit(scene, tree, ray, prim);
+    hits[i] = surface_hit(scene, tree, ray, prim, shadows.ray_test.test);
     hits[i].mask = mask;
     if (!texel.capped) {
       shadow_count.fetch_add(shadow_ray_count(tree, lights, prim, ray, hits[i].t, shadows),

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "accel/kdtree.h"
+#include "layout.h"
 #include "raytree/packing.h"
 #include "raytree/rays.h"
 #include "scene/scene.h"
@@ -31,18 +32,48 @@ struct SurfaceHit {
   bool valid() const { return prim >= 0; }
 };
 
-// The traversal pass's lights as the shadow rays see them (shared by the GPU uniforms and the
-// CPU fallback so that both test the same rays).
-struct ShadowSettings {
-  float epsilon = 1e-6f;  // origin offset along the geometric normal, as a share of the scene's size
+// Self-intersection offset of a ray that leaves a surface (shadow, mirror and refracted rays),
+// along the geometric normal (glsl/layout.h, MOBIRT_OFFSET_*; --offset and --epsilon).
+enum class OffsetMode {
+  Fixed = MOBIRT_OFFSET_FIXED,          // epsilon in scene units
+  Scaled = MOBIRT_OFFSET_SCALED,        // epsilon x the scene's size, at least 2 ulps of the point
+  NormalUlp = MOBIRT_OFFSET_NORMAL_ULP  // Wachter and Binder 2019; epsilon unused
+};
+struct SurfaceOffset {
+  OffsetMode mode = OffsetMode::Scaled;
+  float epsilon = 1e-6f;
 };
 
-// The self-intersection offset of a new ray's origin at p, along the geometric normal: `absolute`
-// (epsilon x the scene box's largest side), but never below 2 float ulps of p (MOBIRT_OFFSET_ULPS
-// x max |p|). Relative to the scene, so it holds from 1e-4 to 1e5; floored by float precision,
-// so it holds 1e5 away from the origin. glsl/traverse.glsl computes the same.
-float ray_offset(const glm::vec3& p, float absolute);
+// How the traversal pass treats its rays: the shadow rays' origin offset, and the ray/triangle
+// test of every ray it traces (shared by the GPU specialisation and uniforms and the CPU fallback,
+// so that both test the same rays).
+struct ShadowSettings {
+  SurfaceOffset offset;
+  RayTest ray_test;  // the ray/triangle test and its precision (--intersect, --precision)
+};
+
+// The absolute part of the offset, the traversal pass's uniform: epsilon (fixed), epsilon x the
+// scene box's largest side (scaled, scene_offset), 0 (normal-ulp has none).
+float absolute_offset(const Aabb& bounds, const SurfaceOffset& offset);
 float scene_offset(const Aabb& bounds, float epsilon);  // epsilon x the box's largest side
+
+// The origin of a ray leaving the surface at p on the side of the unit normal n; `absolute` from
+// absolute_offset(). Scaled: p + max(absolute, 2 ulps of max |p|) n (fp16 ulps under mediump), so
+// that it holds from scale 1e-4 to 1e5 and 1e5 away from the origin. glsl/offset.glsl computes
+// the same.
+glm::vec3 offset_origin(const glm::vec3& p, const glm::vec3& n, OffsetMode mode, float absolute,
+                        Precision precision = Precision::High);
+
+// The hit point of the ray (o, d) on the triangle (v0, v0 + e1, v0 + e2) from its barycentric
+// coordinates, which normal-ulp offsets start from (as Wachter and Binder do): its error is
+// relative to the vertices, where o + t d carries one relative to the ray's length.
+glm::vec3 point_on_triangle(const glm::vec3& v0, const glm::vec3& e1, const glm::vec3& e2, const glm::vec3& o,
+                            const glm::vec3& d);
+
+// Wachter and Binder 2019 (Ray Tracing Gems, ch. 6): each component of p moved along n by
+// int(256 n) units in the last place of its float representation (an integer added to its bits),
+// or by n / 65536 where |p| < 1/32, where ulps get too small to clear the surface.
+glm::vec3 offset_normal_ulp(const glm::vec3& p, const glm::vec3& n);
 
 // Shadow mask of a hit on the CPU, the same rays as glsl/traverse.glsl's shadow_mask().
 uint32_t shadow_mask(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
@@ -75,7 +106,9 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
 // The surface record of a hit whose t and barycentrics are known (hit.prim >= 0).
 SurfaceHit surface_from_hit(const Scene& scene, const Ray& ray, const Hit& hit);
 
-// The full surface record of a known hit (t and barycentrics recomputed on that one triangle).
-SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ray, int32_t prim);
+// The full surface record of a known hit (t and barycentrics recomputed on that one triangle with
+// `test` in single precision).
+SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ray, int32_t prim,
+                       IntersectTest test = IntersectTest::MollerTrumbore);
 
 }  // namespace mobirt

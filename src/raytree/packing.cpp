@@ -25,6 +25,23 @@ Packing choose_packing(uint64_t prims, int lights, const std::string& scene) {
   return Packing::Bits16_16;
 }
 
+glm::vec3 decode_colour(uint32_t texel) {
+  return glm::vec3(float(texel & 0xFFu), float((texel >> 8) & 0xFFu), float((texel >> 16) & 0xFFu)) / 255.0f;
+}
+
+glm::vec3 decode_colour(uint32_t high, uint32_t low) {
+  glm::vec3 c;
+  for (int i = 0; i < 3; ++i) {
+    c[i] = float(((high >> (8 * i)) & 0xFFu) * 256u + ((low >> (8 * i)) & 0xFFu)) / 65535.0f;
+  }
+  return c;
+}
+
+glm::vec3 quantize_colour(const glm::vec3& c, ColourDepth depth) {
+  const float steps = depth == ColourDepth::Bits16 ? 65535.0f : 255.0f;
+  return glm::floor(glm::clamp(c, 0.0f, 1.0f) * steps + 0.5f) / steps;
+}
+
 uint32_t pack_trace(Packing packing, uint32_t prim_plus_one, uint32_t mask) {
   if (packing == Packing::Bits24_8) return (prim_plus_one & 0xFFFFFFu) | ((mask & 0xFFu) << 24);
   return (prim_plus_one & 0xFFFFu) | ((mask & 0xFFFFu) << 16);

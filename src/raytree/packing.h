@@ -2,6 +2,8 @@
 // read back as a little-endian uint32 (r = lowest byte).
 #pragma once
 
+#include <glm/glm.hpp>
+
 #include <cstdint>
 #include <string>
 
@@ -30,6 +32,14 @@ constexpr int max_lights(Packing p) {
 // The smallest packing that holds the scene: 24/8 unless more than 8 lights need 16/16.
 // Throws Error(BadInput) naming the limit when neither holds it.
 Packing choose_packing(uint64_t prims, int lights, const std::string& scene);
+
+// The shading pass's colour (glsl/colour.glsl): 8 bits per channel in one RGBA8 texel, or 16 bits
+// per channel from two passes, one writing the high bytes and one the low bytes.
+enum class ColourDepth { Bits8 = 8, Bits16 = 16 };
+glm::vec3 decode_colour(uint32_t texel);                     // rgb / 255
+glm::vec3 decode_colour(uint32_t high, uint32_t low);        // (high x 256 + low) / 65535
+// c clamped to [0, 1] and rounded to the depth's steps, as the shading pass writes it.
+glm::vec3 quantize_colour(const glm::vec3& c, ColourDepth depth);
 
 uint32_t pack_trace(Packing packing, uint32_t prim_plus_one, uint32_t mask);
 uint32_t pack_capped(Packing packing);

@@ -40,7 +40,7 @@ RayBatch next_generation(const Scene& scene, const Aabb& scene_bounds, const Ray
                          SecondaryStats* stats) {
   RayBatch next;
   next.width = rays.width;
-  const float absolute_offset = scene_offset(scene_bounds, settings.epsilon);
+  const float absolute = absolute_offset(scene_bounds, settings.offset);
   SecondaryStats local;
   auto emit = [&](const glm::vec3& origin, const glm::vec3& direction, uint32_t pixel, const glm::vec3& w,
                   uint32_t& counter) {
@@ -62,9 +62,14 @@ RayBatch next_generation(const Scene& scene, const Aabb& scene_bounds, const Ray
     // geometric one decides which side of the surface each new ray starts on.
     const glm::vec3& ng = h.geometric;
     const glm::vec3& ns = h.normal;
-    const float offset = ray_offset(h.position, absolute_offset);
-    const glm::vec3 above = h.position + offset * ng;
-    const glm::vec3 below = h.position - offset * ng;
+    // Wachter and Binder's offset starts from the point on the triangle (point_on_triangle()).
+    glm::vec3 p = h.position;
+    if (settings.offset.mode == OffsetMode::NormalUlp) {
+      const glm::vec3* v = &scene.mesh.positions[3 * size_t(h.prim)];
+      p = v[0] + h.u * (v[1] - v[0]) + h.v * (v[2] - v[0]);
+    }
+    const glm::vec3 above = offset_origin(p, ng, settings.offset.mode, absolute);
+    const glm::vec3 below = offset_origin(p, -ng, settings.offset.mode, absolute);
 
     float reflect_share = m.reflectance;
     float refract_share = m.transmittance;

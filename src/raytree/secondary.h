@@ -17,8 +17,8 @@
 namespace mobirt {
 
 struct SecondarySettings {
-  float epsilon = 1e-6f;           // origin offset along the geometric normal, a share of the
-                                   // scene's size (see ray_offset() in hits.h)
+  SurfaceOffset offset;            // origin offset along the geometric normal (offset_origin()
+                                   // in hits.h)
   float min_weight = 1.0f / 512.0f;  // rays whose largest weight component is below this are not
                                      // traced: they cannot move an 8-bit pixel by half a step
 };

@@ -61,9 +61,13 @@ glm::vec3 shade_phong(const Scene& scene, const SurfaceHit& hit, const glm::vec3
 
 void KdTreeEngine::build(const Scene& scene) { tree_ = build_kdtree(scene.mesh.positions, options_); }
 
-Hit KdTreeEngine::closest(const Ray& ray) const { return traverse(tree_, ray, -1); }
+Hit KdTreeEngine::closest(const Ray& ray) const { return traverse(tree_, ray, -1, test_); }
 
-bool KdTreeEngine::occluded(const Ray& ray) const { return mobirt::occluded(tree_, ray, -1); }
+bool KdTreeEngine::occluded(const Ray& ray) const { return mobirt::occluded(tree_, ray, -1, test_); }
+
+SurfaceHit KdTreeEngine::surface(const Scene& scene, const Ray& ray, const Hit& hit) const {
+  return surface_hit(scene, tree_, ray, hit.prim, test_.test);
+}
 
 namespace {
 
@@ -112,7 +116,7 @@ Image render_whitted_cpu(const Scene& scene, const Camera& camera, const RenderS
     parallel_for(n, threads, [&](uint32_t i) {
       if (!closest[i].valid()) return;
       const Ray ray = rays.ray(i);
-      hits[i] = surface_from_hit(scene, ray, closest[i]);
+      hits[i] = engine.surface(scene, ray, closest[i]);
       if (!settings.shadows) {
         hits[i].mask = all_lights;
         return;
@@ -132,8 +136,7 @@ Image render_whitted_cpu(const Scene& scene, const Camera& camera, const RenderS
     parallel_for(n, threads, [&](uint32_t i) {
       glm::vec3 c = scene.background;
       if (hits[i].valid()) c = shade_phong(scene, hits[i], -glm::normalize(rays.ray(i).direction), atlas);
-      c = glm::clamp(c, 0.0f, 1.0f);
-      if (quantize) c = glm::round(c * 255.0f) / 255.0f;  // the RGBA8 shading pass
+      c = quantize ? quantize_colour(c, settings.colour) : glm::clamp(c, 0.0f, 1.0f);  // the shading pass
       colors[i] = c;
     });
     for (uint32_t i = 0; i < n; ++i) image.pixels[rays.pixel[i]] += rays.weight[i] * colors[i];
@@ -152,7 +155,7 @@ Image render_whitted_cpu(const Scene& scene, const Camera& camera, const RenderS
 }
 
 Image render_on_cpu(const Scene& scene, const Camera& camera, const RenderSettings& settings, bool quantize) {
-  KdTreeEngine engine(settings.kd);
+  KdTreeEngine engine(settings.kd, settings.shadow_rays.ray_test);
   return render_whitted_cpu(scene, camera, settings, engine, 0, nullptr, quantize);
 }
 

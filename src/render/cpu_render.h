@@ -34,21 +34,29 @@ class CpuRayEngine {
   // The triangle texels and the scene box of the last build: the shadow rays and the secondary
   // rays are made from them exactly as for the GPU passes (the box sizes the origin offset).
   virtual const FlatKdTree& triangles() const = 0;
+  // The surface record of a closest hit: by default from the engine's own t and barycentrics.
+  virtual SurfaceHit surface(const Scene& scene, const Ray& ray, const Hit& hit) const {
+    return surface_from_hit(scene, ray, hit);
+  }
 };
 
-// mobirt's binned-SAH kd-tree, traversed with a full stack (src/accel).
+// mobirt's binned-SAH kd-tree, traversed with a full stack (src/accel) with the renderer's
+// ray/triangle test; surface records recomputed on the hit triangle as hit decoding does.
 class KdTreeEngine final : public CpuRayEngine {
  public:
-  explicit KdTreeEngine(const KdBuildOptions& options = {}) : options_(options) {}
+  explicit KdTreeEngine(const KdBuildOptions& options = {}, const RayTest& test = {})
+      : options_(options), test_(test) {}
   const char* name() const override { return "mobirt kd-tree (CPU)"; }
   void build(const Scene& scene) override;
   Hit closest(const Ray& ray) const override;
   bool occluded(const Ray& ray) const override;
   const FlatKdTree& triangles() const override { return tree_; }
+  SurfaceHit surface(const Scene& scene, const Ray& ray, const Hit& hit) const override;
   const FlatKdTree& tree() const { return tree_; }
 
  private:
   KdBuildOptions options_;
+  RayTest test_;
   FlatKdTree tree_;
 };
 
@@ -69,13 +77,14 @@ struct CpuFrameTimings {
 
 // The whole Whitted frame on the CPU with `engine`: the same primary rays, shadow rays, Phong
 // (shade_phong) and ray tree as the GPU renderer; width x height; threads 0 = all cores. With
-// quantize, each generation's colours are rounded to 8 bits as the RGBA8 shading pass does.
+// quantize, each shaded colour is quantised to settings.colour as the shading pass writes it.
 Image render_whitted_cpu(const Scene& scene, const Camera& camera, const RenderSettings& settings,
                          CpuRayEngine& engine, unsigned threads = 0, CpuFrameTimings* timings = nullptr,
                          bool quantize = true);
 
-// render_whitted_cpu with a KdTreeEngine built with settings.kd: the expectation GPU images are
-// tested against.
+// The renderer's frame on the CPU: render_whitted_cpu with a KdTreeEngine built with settings.kd
+// and the same ray/triangle test, offsets and ray tree: the expectation GPU images are tested
+// against.
 Image render_on_cpu(const Scene& scene, const Camera& camera, const RenderSettings& settings,
                     bool quantize = true);
 

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <tuple>
 
 #include "core/error.h"
 #include "layout.h"
@@ -48,7 +49,7 @@ glm::vec3 light_where(const Light& light) {
 std::vector<float> trace_uniforms(const FlatKdTree& tree, std::span<const Light> lights,
                                   const ShadowSettings& s, int pass_lights) {
   std::vector<float> u;
-  put(u, MOBIRT_TP_BOUNDS_LO, glm::vec4(tree.bounds.lo, scene_offset(tree.bounds, s.epsilon)));
+  put(u, MOBIRT_TP_BOUNDS_LO, glm::vec4(tree.bounds.lo, absolute_offset(tree.bounds, s.offset)));
   put(u, MOBIRT_TP_BOUNDS_HI, glm::vec4(tree.bounds.hi, 0.0f));
   // Slots of a general pass beyond the scene's lights never light anything.
   for (size_t l = lights.size(); l < size_t(std::max(pass_lights, 0)); ++l) {
@@ -101,7 +102,7 @@ struct Renderer::Data {
   bool tree_valid = false;
   uint32_t ray_width = 0;  // the ray textures' row width; a change recreates them
   std::map<std::pair<int, int>, PassHandle> trace_passes;  // (lights, packing)
-  std::map<std::pair<int, int>, PassHandle> shade_passes;  // (lights, textures)
+  std::map<std::tuple<int, int, int>, PassHandle> shade_passes;  // (lights, textures, colour)
 };
 
 Renderer::Renderer(Backend& backend, const RenderSettings& settings)
@@ -150,7 +151,10 @@ PassHandle Renderer::trace_pass(int lights, Packing packing) {
   desc.specialization = {{MOBIRT_SPEC_LIGHT_COUNT, lights},
                          {MOBIRT_SPEC_STACK_DEPTH, settings_.stack_depth},
                          {MOBIRT_SPEC_MAX_STEPS, settings_.max_steps},
-                         {MOBIRT_SPEC_PACKING, int(packing)}};
+                         {MOBIRT_SPEC_PACKING, int(packing)},
+                         {MOBIRT_SPEC_INTERSECT, int(settings_.shadow_rays.ray_test.test)},
+                         {MOBIRT_SPEC_PRECISION, int(settings_.shadow_rays.ray_test.precision)},
+                         {MOBIRT_SPEC_OFFSET, int(settings_.shadow_rays.offset.mode)}};
   desc.uniform_vec4s = MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * uint32_t(lights);
   desc.texture_bindings = {MOBIRT_BIND_NODES, MOBIRT_BIND_PRIM_LIST, MOBIRT_BIND_TRIANGLES,
                            MOBIRT_BIND_RAY_ORIGIN, MOBIRT_BIND_RAY_DIRECTION};
@@ -159,13 +163,15 @@ PassHandle Renderer::trace_pass(int lights, Packing packing) {
   return pass;
 }
 
-PassHandle Renderer::shade_pass(int lights, int textures) {
-  const auto key = std::make_pair(lights, textures);
+PassHandle Renderer::shade_pass(int lights, int textures, int colour) {
+  const auto key = std::make_tuple(lights, textures, colour);
   auto it = data_->shade_passes.find(key);
   if (it != data_->shade_passes.end()) return it->second;
   PassDesc desc;
   desc.shader = ShaderId::Shade;
-  desc.specialization = {{MOBIRT_SPEC_LIGHT_COUNT, lights}, {MOBIRT_SPEC_TEXTURE_COUNT, textures}};
+  desc.specialization = {{MOBIRT_SPEC_LIGHT_COUNT, lights},
+                         {MOBIRT_SPEC_TEXTURE_COUNT, textures},
+                         {MOBIRT_SPEC_COLOUR, colour}};
   desc.uniform_vec4s = MOBIRT_SP_TEXTURES(uint32_t(lights)) + MOBIRT_SP_VEC4S_PER_TEXTURE * uint32_t(textures);
   desc.texture_bindings = {MOBIRT_BIND_HIT_POSITION, MOBIRT_BIND_HIT_NORMAL, MOBIRT_BIND_MATERIALS,
                            MOBIRT_BIND_SHADE_RAY_DIRECTION, MOBIRT_BIND_HIT_TEXCOORD, MOBIRT_BIND_ATLAS};
@@ -279,8 +285,8 @@ void Renderer::upload_materials(const Scene& scene) {
   backend_.upload(d.materials.handle, materials.data(), materials.size() * sizeof(glm::vec4));
 }
 
-std::vector<uint32_t> Renderer::shade(const Scene& scene, const RayBatch& rays,
-                                      std::span<const SurfaceHit> hits, GenerationTimings& timings) {
+std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
+                                       std::span<const SurfaceHit> hits, GenerationTimings& timings) {
   // The shading pass's inputs, one texel per ray in the ray layout.
   auto stage = Clock::now();
   std::vector<glm::vec4> position(rays.count()), normal(rays.count());
@@ -320,19 +326,31 @@ std::vector<uint32_t> Renderer::shade(const Scene& scene, const RayBatch& rays,
   // A general pass is sized for the most lights and textures, not for this scene.
   const int texture_count = settings_.specialize ? int(d.atlas_data.tiles.size()) : MOBIRT_ATLAS_MAX_TEXTURES;
   const int lights = pass_lights(int(scene.lights.size()));
-  const PassHandle pass = shade_pass(lights, texture_count);
   std::vector<float> uniforms = shade_uniforms(scene, lights);
   append_atlas_uniforms(d.atlas_data, lights, uniforms);
   const size_t uniform_floats = 4 * size_t(MOBIRT_SP_TEXTURES(lights) + MOBIRT_SP_VEC4S_PER_TEXTURE * texture_count);
   if (uniforms.size() < uniform_floats) uniforms.resize(uniform_floats, 0.0f);
   const TextureHandle textures[] = {d.hit_position.handle, d.hit_normal.handle, d.materials.handle,
                                     d.ray_direction.handle, texcoords, d.atlas};
-  std::vector<uint32_t> colors(rays.count());
-  const PassTiming shaded = backend_.run_pass(pass, textures, uniforms, rays.width, rays.count(), colors);
-  timings.upload_ms += shaded.upload_ms;
-  timings.shade_ms += shaded.gpu_ms;
-  timings.shade_readback_ms += shaded.readback_ms;
-  timings.bytes_read += shaded.bytes_read;
+  // 16-bit colour: the same shading twice, the high bytes, then the low bytes of each channel.
+  const bool deep = settings_.colour == ColourDepth::Bits16;
+  std::vector<uint32_t> texels[2];
+  for (int half = 0; half < (deep ? 2 : 1); ++half) {
+    const int colour = !deep ? MOBIRT_COLOUR_8 : half == 0 ? MOBIRT_COLOUR_16_HIGH : MOBIRT_COLOUR_16_LOW;
+    texels[half].resize(rays.count());
+    const PassTiming shaded = backend_.run_pass(shade_pass(lights, texture_count, colour), textures, uniforms,
+                                                rays.width, rays.count(), texels[half]);
+    timings.upload_ms += shaded.upload_ms;
+    timings.shade_ms += shaded.gpu_ms;
+    timings.shade_readback_ms += shaded.readback_ms;
+    timings.bytes_read += shaded.bytes_read;
+  }
+  stage = Clock::now();
+  std::vector<glm::vec3> colors(rays.count());
+  for (uint32_t i = 0; i < rays.count(); ++i) {
+    colors[i] = deep ? decode_colour(texels[0][i], texels[1][i]) : decode_colour(texels[0][i]);
+  }
+  timings.accumulate_ms += elapsed_ms(stage);
   return colors;
 }
 
@@ -403,15 +421,11 @@ Image Renderer::render(const Scene& scene, const Camera& camera, FrameTimings* t
     g.shadow_rays = stats.shadow_rays;
     g.decode_ms = elapsed_ms(stage);
 
-    const std::vector<uint32_t> colors = shade(scene, rays, hits, g);
+    const std::vector<glm::vec3> colors = shade(scene, rays, hits, g);
 
     stage = Clock::now();
-    for (uint32_t i = 0; i < rays.count(); ++i) {
-      const uint32_t c = colors[i];
-      const glm::vec3 rgb(float(c & 0xFFu), float((c >> 8) & 0xFFu), float((c >> 16) & 0xFFu));
-      image.pixels[rays.pixel[i]] += rays.weight[i] * (rgb / 255.0f);
-    }
-    g.accumulate_ms = elapsed_ms(stage);
+    for (uint32_t i = 0; i < rays.count(); ++i) image.pixels[rays.pixel[i]] += rays.weight[i] * colors[i];
+    g.accumulate_ms += elapsed_ms(stage);
 
     if (generation < depth) {
       stage = Clock::now();

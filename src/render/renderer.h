@@ -34,8 +34,10 @@ struct RenderSettings {
   // Rebuild the kd-tree every frame even when the triangles did not move (the paper's model, and
   // the benchmarks'); by default a static scene keeps its tree.
   bool always_rebuild = false;
+  // The shading pass's colour: 8 bits per channel, or 16 from two passes (high and low bytes).
+  ColourDepth colour = ColourDepth::Bits8;
   KdBuildOptions kd;
-  ShadowSettings shadow_rays;
+  ShadowSettings shadow_rays;  // also the ray/triangle test and precision of every traced ray
   SecondarySettings secondary;
 };
 
@@ -91,9 +93,10 @@ class Renderer {
   // been built from scene.mesh.
   TraceResult trace(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays);
 
-  // The shading pass alone over decoded hits; one RGBA8 colour per ray.
-  std::vector<uint32_t> shade(const Scene& scene, const RayBatch& rays, std::span<const SurfaceHit> hits,
-                              GenerationTimings& timings);
+  // The shading pass alone over decoded hits (two passes for 16-bit colour); one colour per ray,
+  // as read back from the RGBA8 texels.
+  std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, std::span<const SurfaceHit> hits,
+                               GenerationTimings& timings);
 
   const RenderSettings& settings() const { return settings_; }
 
@@ -102,7 +105,7 @@ class Renderer {
   TextureHandle ensure_texture(TextureHandle& handle, uint32_t& capacity_rows, uint32_t width,
                                uint32_t rows, TexelFormat format);
   PassHandle trace_pass(int lights, Packing packing);
-  PassHandle shade_pass(int lights, int textures);
+  PassHandle shade_pass(int lights, int textures, int colour);
   void prepare_atlas(const Scene& scene);
   void upload_tree(const FlatKdTree& tree);
   void upload_rays(const RayBatch& rays);

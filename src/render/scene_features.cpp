@@ -47,6 +47,18 @@ SceneFeatures analyze_scene(const AnimatedScene& animation, const RenderSettings
   add("traversal pass: STACK_DEPTH " + std::to_string(settings.stack_depth) + ", MAX_STEPS " +
           std::to_string(settings.max_steps),
       "the settings (--stack, --max-steps)");
+  const RayTest& test = settings.shadow_rays.ray_test;
+  const OffsetMode offset = settings.shadow_rays.offset.mode;
+  add(std::string("traversal pass: INTERSECT ") +
+          (test.test == IntersectTest::Watertight ? "watertight" : "mt") + ", PRECISION " +
+          (test.precision == Precision::Medium ? "mediump" : "highp") + ", OFFSET_MODE " +
+          (offset == OffsetMode::Fixed ? "fixed" : offset == OffsetMode::Scaled ? "scaled" : "normal-ulp"),
+      "the settings (--intersect, --precision, --offset): only the chosen code is compiled");
+  if (settings.colour == ColourDepth::Bits16) {
+    add("two shading passes per generation (COLOUR 16 high, low)", "--colour 16: 16 bits per channel");
+  } else {
+    add("one shading pass per generation (COLOUR 8)", "8 bits per channel");
+  }
   if (f.textures == 0) {
     add("shading pass: TEXTURE_COUNT 0", "no textures: no atlas built or uploaded, no texture coordinates, "
                                          "the atlas code folds away");

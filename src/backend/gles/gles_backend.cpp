@@ -32,6 +32,7 @@
 #include "es_test_atlas_lookup_frag.h"
 #include "es_test_copy_input_frag.h"
 #include "es_test_nine_textures_frag.h"
+#include "es_test_numerics_frag.h"
 #include "es_test_storage_write_frag.h"
 #include "es_test_two_outputs_frag.h"
 #include "es_trace_frag.h"
@@ -102,6 +103,7 @@ const char* es_source(ShaderId id) {
     case ShaderId::TestNineTextures: return es_test_nine_textures_frag;
     case ShaderId::TestCopyInput: return es_test_copy_input_frag;
     case ShaderId::TestAtlasLookup: return es_test_atlas_lookup_frag;
+    case ShaderId::TestNumerics: return es_test_numerics_frag;
     case ShaderId::TestSpin: break;  // needs bit operations and test-only constants: Vulkan only
   }
   return nullptr;
@@ -115,6 +117,10 @@ const char* define_name(uint32_t id) {
     case MOBIRT_SPEC_MAX_STEPS: return "MAX_STEPS";
     case MOBIRT_SPEC_PACKING: return "PACKING";
     case MOBIRT_SPEC_TEXTURE_COUNT: return "TEXTURE_COUNT";
+    case MOBIRT_SPEC_INTERSECT: return "INTERSECT";
+    case MOBIRT_SPEC_PRECISION: return "PRECISION";
+    case MOBIRT_SPEC_OFFSET: return "OFFSET_MODE";
+    case MOBIRT_SPEC_COLOUR: return "COLOUR";
     default: return nullptr;
   }
 }

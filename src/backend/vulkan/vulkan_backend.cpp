@@ -33,6 +33,7 @@
 #include "copy_input.frag.h"
 #include "fullscreen.vert.h"
 #include "nine_textures.frag.h"
+#include "numerics.frag.h"
 #include "spin.frag.h"
 #include "storage_write.frag.h"
 #include "two_outputs.frag.h"
@@ -98,6 +99,7 @@ std::span<const uint32_t> shader_code(ShaderId id) {
     case ShaderId::TestCopyInput: return spirv_copy_input_frag;
     case ShaderId::TestSpin: return spirv_spin_frag;
     case ShaderId::TestAtlasLookup: return spirv_atlas_lookup_frag;
+    case ShaderId::TestNumerics: return spirv_numerics_frag;
   }
   throw Error(ErrorKind::Internal, std::string("shader ") + shader_name(id) +
                                        " not built: its source is missing from glsl/ at build time");

@@ -1,0 +1,28 @@
+// main() of the numerics test shader, shared by glsl/test/numerics.frag (Vulkan) and
+// glsl/es/test/numerics.frag (GLES): the numeric primitives the traversal pass relies on, one case
+// per ray, against the CPU's answers. PARAM(0).x picks the function:
+//   0: f16_round of the four input values; 1: Wachter and Binder's offset_normal_ulp of p (input
+//   xyz) along n (operand xyz); each texel channel is 1 where the result equals the CPU's
+//   (expected texture) bit for bit, else 0.
+//   2: pack_trace(input.x, input.y), the traversal pass's output texel (PACKING).
+#include "offset.glsl"
+#include "packing.glsl"
+
+SAMPLER(1, u_input);
+SAMPLER(2, u_operand);
+SAMPLER(3, u_expected);
+
+void main() {
+  vec4 x = RAY_TEXEL(u_input);
+  float function = PARAM(0).x;
+  if (function == 2.0) {
+    OUTPUT(pack_trace(x.x, x.y));
+    return;
+  }
+  vec4 r = vec4(f16_round(x.x), f16_round(x.y), f16_round(x.z), f16_round(x.w));
+  if (function == 1.0) {
+    vec4 n = RAY_TEXEL(u_operand);
+    r = vec4(offset_normal_ulp(x.x, n.x), offset_normal_ulp(x.y, n.y), offset_normal_ulp(x.z, n.z), 0.0);
+  }
+  OUTPUT(vec4(equal(r, RAY_TEXEL(u_expected))));
+}

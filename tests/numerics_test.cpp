@@ -1,0 +1,223 @@
+// The numeric primitives behind --precision mediump and --offset normal-ulp, and the traversal
+// pass's output packing at the primitive limits: on the CPU against known answers, and in the
+// shaders of both backends (glsl/numerics_test_main.glsl) against the CPU, bit for bit. GLSL ES
+// 1.00 has no packHalf2x16 or floatBitsToInt, so the GLES path emulates both arithmetically
+// (glsl/prelude_es.glsl); these tests are what shows the emulation gives the same bits.
+#include <gtest/gtest.h>
+
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "backend/backend.h"
+#include "core/half.h"
+#include "raytree/hits.h"
+#include "raytree/packing.h"
+#include "test_support.h"
+#include "vulkan_fixture.h"
+
+namespace mobirt {
+namespace {
+
+float bits_to_float(uint32_t bits) { return std::bit_cast<float>(bits); }
+
+TEST(Numerics, RoundToHalfKnownAnswers) {
+  const float inf = std::numeric_limits<float>::infinity();
+  EXPECT_EQ(round_to_half(1.0f), 1.0f);
+  EXPECT_EQ(round_to_half(-2.5f), -2.5f);
+  EXPECT_EQ(round_to_half(1.0f + 0x1p-11f), 1.0f);                  // a tie goes to even
+  EXPECT_EQ(round_to_half(1.0f + 3 * 0x1p-11f), 1.0f + 0x1p-9f);    // ... up to even
+  EXPECT_EQ(round_to_half(1.0f + 0x1p-11f + 0x1p-20f), 1.0f + 0x1p-10f);
+  EXPECT_EQ(round_to_half(2047.5f), 2048.0f);
+  EXPECT_EQ(round_to_half(0.1f), 0.0999755859375f);
+  EXPECT_EQ(round_to_half(65504.0f), 65504.0f);
+  EXPECT_EQ(round_to_half(65519.99f), 65504.0f);
+  EXPECT_EQ(round_to_half(65520.0f), inf);
+  EXPECT_EQ(round_to_half(-1e9f), -inf);
+  EXPECT_EQ(round_to_half(0x1p-14f), 0x1p-14f);                     // the smallest normal
+  EXPECT_EQ(round_to_half(0x1p-24f), 0x1p-24f);                     // the smallest subnormal
+  EXPECT_EQ(round_to_half(0x1p-25f), 0.0f);                         // a tie, to even (zero)
+  EXPECT_EQ(round_to_half(0x1.8p-25f), 0x1p-24f);
+  EXPECT_EQ(round_to_half(3 * 0x1p-25f), 2 * 0x1p-24f);             // 1.5 subnormal steps: even
+  EXPECT_EQ(round_to_half(inf), inf);
+  EXPECT_TRUE(std::isnan(round_to_half(std::numeric_limits<float>::quiet_NaN())));
+#ifdef __FLT16_MAX__
+  // Against the compiler's own conversion (ties to even) on every 2^16th float bit pattern.
+  for (uint64_t bits = 0; bits < 0x7F800000u; bits += 0x10000u + 7u) {
+    const float x = bits_to_float(uint32_t(bits));
+    EXPECT_EQ(round_to_half(x), float(static_cast<_Float16>(x))) << x;
+    EXPECT_EQ(round_to_half(-x), float(static_cast<_Float16>(-x))) << -x;
+  }
+#endif
+}
+
+TEST(Numerics, NormalUlpOffsetKnownAnswers) {
+  // Away from the origin: 256 x n ulps, in the direction of n, across powers of two.
+  const glm::vec3 p = offset_normal_ulp({1.0f, -1.0f, 1000.0f}, {1.0f, 1.0f, -0.5f});
+  EXPECT_EQ(p.x, 1.0f + 256 * 0x1p-23f);
+  EXPECT_EQ(p.y, -(1.0f - 256 * 0x1p-24f));  // towards zero: below 1 the ulps are half as large
+  EXPECT_EQ(p.z, 1000.0f - 128 * 0x1p-14f);
+  // Within 1/32 of the origin: n / 65536.
+  const glm::vec3 q = offset_normal_ulp({0.01f, 0.0f, -0.03f}, {0.0f, 1.0f, 0.0f});
+  EXPECT_EQ(q.x, 0.01f);
+  EXPECT_EQ(q.y, 0x1p-16f);
+  EXPECT_EQ(q.z, -0.03f);
+  // The truncation of 256 n: 0.999 / 256 of an ulp is none.
+  EXPECT_EQ(offset_normal_ulp({4.0f, 4.0f, 4.0f}, {0.999f / 256.0f, 0.0f, 0.0f}).x, 4.0f);
+}
+
+enum class Api { Vulkan, Gles };
+
+class NumericsOnGpu : public ::testing::TestWithParam<Api> {
+ protected:
+  void SetUp() override {
+    const BackendOptions options = test::validated_options();
+    backend = GetParam() == Api::Vulkan ? create_vulkan_backend(options) : create_gles_backend(options);
+  }
+  void TearDown() override {
+    if (!backend) return;
+    const std::vector<std::string> messages = backend->take_debug_messages();
+    EXPECT_TRUE(messages.empty()) << test::join(messages);
+  }
+
+  // Runs the numerics shader with `function` over one ray per input texel; returns the texels.
+  std::vector<uint32_t> run(float function, const std::vector<glm::vec4>& input, const std::vector<glm::vec4>& operand,
+                            const std::vector<glm::vec4>& expected, Packing packing = Packing::Bits24_8) {
+    const uint32_t width = 256;
+    const uint32_t count = uint32_t(input.size());
+    const uint32_t rows = (count + width - 1) / width;
+    auto texture = [&](std::vector<glm::vec4> texels) {
+      texels.resize(size_t(width) * rows, glm::vec4(0.0f));
+      const TextureHandle t = backend->create_texture(width, rows, TexelFormat::RGBA32F);
+      backend->upload(t, texels.data(), texels.size() * sizeof(glm::vec4));
+      return t;
+    };
+    const TextureHandle textures[3] = {texture(input), texture(operand), texture(expected)};
+    PassDesc desc;
+    desc.shader = ShaderId::TestNumerics;
+    desc.specialization = {{MOBIRT_SPEC_PACKING, int(packing)}};
+    desc.uniform_vec4s = 1;
+    desc.texture_bindings = {1, 2, 3};
+    const PassHandle pass = backend->create_pass(desc);
+    const float uniforms[4] = {function, 0.0f, 0.0f, 0.0f};
+    std::vector<uint32_t> out(count);
+    backend->run_pass(pass, textures, uniforms, width, count, out);
+    backend->destroy(pass);
+    for (TextureHandle t : textures) backend->destroy(t);
+    return out;
+  }
+
+  // Counts the channels (of the first `channels`) the shader flagged as differing from the CPU;
+  // names the first few with describe(texel, channel).
+  template <class Describe>
+  static size_t mismatches(const std::vector<uint32_t>& flags, int channels, Describe describe) {
+    size_t bad = 0;
+    for (size_t i = 0; i < flags.size(); ++i) {
+      for (int c = 0; c < channels; ++c) {
+        if (((flags[i] >> (8 * c)) & 0xFFu) == 255u) continue;
+        if (++bad <= 10) ADD_FAILURE() << describe(i, c) << " differs from the CPU's";
+      }
+    }
+    return bad;
+  }
+
+  std::unique_ptr<Backend> backend;
+};
+
+// Values of every magnitude fp16 has (subnormals to the overflow threshold), exact ties, the
+// neighbours of ties and of powers of two, random floats.
+std::vector<float> half_cases() {
+  std::vector<float> v;
+  for (int e = -26; e <= 16; ++e) {
+    const float p = std::ldexp(1.0f, e);
+    for (float x : {p, std::nextafter(p, 0.0f), std::nextafter(p, 1e30f), p * (1.0f + 0x1p-11f),
+                    p * (1.0f + 3 * 0x1p-11f), std::nextafter(p * (1.0f + 0x1p-11f), 0.0f)}) {
+      v.push_back(x);
+      v.push_back(-x);
+    }
+  }
+  for (float x : {65504.0f, 65519.0f, 65519.996f, 0.0f, 0x1p-25f, 0x1.8p-25f}) v.push_back(x);
+  std::mt19937 rng(16);
+  std::uniform_real_distribution<float> exponent(-28.0f, 16.0f), unit(-1.0f, 1.0f);
+  while (v.size() % 4 != 0 || v.size() < 40000) v.push_back(unit(rng) * std::exp2(exponent(rng)));
+  return v;
+}
+
+TEST_P(NumericsOnGpu, HalfRoundingMatchesTheCpuBitForBit) {
+  const std::vector<float> cases = half_cases();
+  std::vector<glm::vec4> input, expected;
+  for (size_t i = 0; i < cases.size(); i += 4) {
+    const glm::vec4 x(cases[i], cases[i + 1], cases[i + 2], cases[i + 3]);
+    input.push_back(x);
+    expected.emplace_back(round_to_half(x.x), round_to_half(x.y), round_to_half(x.z), round_to_half(x.w));
+  }
+  const size_t bad = mismatches(run(0.0f, input, input, expected), 4, [&](size_t i, int c) {
+    return "f16_round(" + std::to_string(input[i][c]) + ")";
+  });
+  EXPECT_EQ(bad, 0u) << "of " << cases.size() << " values";
+}
+
+TEST_P(NumericsOnGpu, NormalUlpOffsetMatchesTheCpuBitForBit) {
+  std::mt19937 rng(19);
+  std::uniform_real_distribution<float> exponent(-7.0f, 20.0f), unit(0.0f, 1.0f);
+  std::vector<glm::vec4> input, operand, expected;
+  for (int i = 0; i < 20000; ++i) {
+    glm::vec3 p;
+    for (int a = 0; a < 3; ++a) {
+      p[a] = (unit(rng) < 0.5f ? -1.0f : 1.0f) * std::exp2(exponent(rng));
+      // Every fourth component just above or below a power of two: the move crosses it.
+      if (i % 4 == a) p[a] = std::ldexp(1.0f + (unit(rng) - 0.5f) * 0x1p-16f, int(exponent(rng)));
+    }
+    const glm::vec3 n = test::random_direction(rng);
+    input.emplace_back(p, 0.0f);
+    operand.emplace_back(n, 0.0f);
+    expected.emplace_back(offset_normal_ulp(p, n), 0.0f);
+  }
+  const size_t bad = mismatches(run(1.0f, input, operand, expected), 3, [&](size_t i, int c) {
+    return "offset_normal_ulp(" + std::to_string(input[i][c]) + ", " + std::to_string(operand[i][c]) + ")";
+  });
+  EXPECT_EQ(bad, 0u);
+}
+
+// The traversal pass's packing of hit index + 1 and the shadow mask, at the limits of both
+// variants: 2^24 - 1 primitives (24/8) and 2^16 - 1 (16/16), as float arithmetic in the shader.
+TEST_P(NumericsOnGpu, TraceTexelPackingAtThePrimitiveLimits) {
+  struct Case {
+    Packing packing;
+    std::vector<uint32_t> indices, masks;
+  };
+  const Case cases[] = {
+      {Packing::Bits24_8, {0, 1, 255, 256, 65535, 65536, MOBIRT_MAX_PRIMS_24_8 - 1, MOBIRT_MAX_PRIMS_24_8}, {0, 1, 0x80, 0xFF}},
+      {Packing::Bits16_16, {0, 1, 255, 256, MOBIRT_MAX_PRIMS_16_16 - 1, MOBIRT_MAX_PRIMS_16_16}, {0, 1, 0x8000, 0xFFFF}}};
+  for (const Case& c : cases) {
+    std::vector<glm::vec4> input;
+    std::vector<uint32_t> want;
+    for (uint32_t index : c.indices) {
+      for (uint32_t mask : c.masks) {
+        if (index == 0 && mask != 0) continue;  // a miss carries no shadow bits
+        input.emplace_back(float(index), float(mask), 0.0f, 0.0f);
+        want.push_back(pack_trace(c.packing, index, mask));
+      }
+    }
+    const std::vector<uint32_t> out = run(2.0f, input, input, input, c.packing);
+    for (size_t i = 0; i < out.size(); ++i) {
+      EXPECT_EQ(out[i], want[i]) << "index + 1 = " << input[i].x << ", mask " << input[i].y;
+      const TraceTexel t = unpack_trace(c.packing, out[i]);
+      EXPECT_EQ(t.prim_plus_one, uint32_t(input[i].x));
+      EXPECT_EQ(t.mask, uint32_t(input[i].y));
+    }
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Backends, NumericsOnGpu, ::testing::Values(Api::Vulkan, Api::Gles),
+                         [](const ::testing::TestParamInfo<Api>& p) {
+                           return std::string(p.param == Api::Vulkan ? "vulkan" : "gles");
+                         });
+
+}  // namespace
+}  // namespace mobirt
