@@ -33,6 +33,8 @@ struct KdBuildOptions {
   // box that its bounding box overlaps. Off: references keep the triangle's bounding box (clipping
   // only the box to the child box would build the very same tree, since the binning clamps to the
   // node box anyway).
+  int threads = 0;               // build threads: 0 = all hardware threads, 1 = serial. The tree
+                                 // is the same, byte for byte, for any count.
 };
 
 // Every index that reaches a shader is an exact float below 2^24: node indices, prim-list entries,
