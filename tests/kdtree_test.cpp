@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <functional>
 #include <random>
 #include <sstream>
@@ -529,6 +530,61 @@ TEST(KdTree, FlattenIsDepthFirstWithBelowChildNext) {
     ASSERT_TRUE(hit.valid());
     EXPECT_EQ(hit.prim % 2, x < 50.0f ? 0 : 1);
   }
+}
+
+// The GPU and the CPU read the same arrays, and tests compare images across machines: the tree
+// must not depend on how many threads built it, nor on how their tasks were scheduled.
+TEST(KdTree, SameTreeForAnyThreadCount) {
+  // The 40,000-triangle soup has top nodes large enough to partition in parallel blocks; the
+  // others are built by a handful of tasks or one.
+  const std::vector<NamedScene> scenes = {{"soup 40000", random_soup(40000, 41)},
+                                          {"soup 3000", random_soup(3000, 42)},
+                                          {"grid_boxes", grid_with_boxes()},
+                                          {"duplicates", duplicates(43)},
+                                          {"planar", planar(44)}};
+  for (const NamedScene& scene : scenes) {
+    for (int bins : {32, 128}) {
+      if (bins != 32 && scene.name != "soup 3000") continue;  // the sweep of more than 64 bins
+      SCOPED_TRACE(scene.name + " bins " + std::to_string(bins));
+      KdBuildOptions serial;
+      serial.bins = bins;
+      serial.threads = 1;
+      const FlatKdTree reference = build_kdtree(scene.positions, serial);
+      check_layout(reference, scene.positions, serial);
+      for (int threads : {2, 3, 0}) {
+        KdBuildOptions o = serial;
+        o.threads = threads;
+        for (int repeat = 0; repeat < 2; ++repeat) {  // different schedules
+          const FlatKdTree tree = build_kdtree(scene.positions, o);
+          ASSERT_EQ(tree.nodes.size(), reference.nodes.size()) << threads << " threads";
+          ASSERT_EQ(tree.prim_list.size(), reference.prim_list.size()) << threads << " threads";
+          ASSERT_EQ(tree.triangles.size(), reference.triangles.size()) << threads << " threads";
+          EXPECT_EQ(std::memcmp(tree.nodes.data(), reference.nodes.data(), tree.nodes.size() * sizeof(glm::vec4)), 0)
+              << threads << " threads";
+          EXPECT_EQ(std::memcmp(tree.prim_list.data(), reference.prim_list.data(),
+                                tree.prim_list.size() * sizeof(float)),
+                    0)
+              << threads << " threads";
+          EXPECT_EQ(std::memcmp(tree.triangles.data(), reference.triangles.data(),
+                                tree.triangles.size() * sizeof(glm::vec4)),
+                    0)
+              << threads << " threads";
+          EXPECT_EQ(std::memcmp(&tree.bounds, &reference.bounds, sizeof(Aabb)), 0);
+          EXPECT_EQ(tree.max_depth, reference.max_depth);
+          EXPECT_EQ(tree.stats.sah_cost, reference.stats.sah_cost);  // summed in the same order too
+          EXPECT_EQ(tree.stats.leaves, reference.stats.leaves);
+          EXPECT_EQ(tree.stats.prim_references, reference.stats.prim_references);
+          EXPECT_EQ(tree.stats.max_depth_reached, reference.stats.max_depth_reached);
+        }
+      }
+    }
+  }
+}
+
+TEST(KdTree, NegativeThreadCountIsBadInput) {
+  KdBuildOptions o;
+  o.threads = -1;
+  test::expect_bad_input([&] { build_kdtree(random_soup(10, 3), o); }, {"threads", "-1"});
 }
 
 TEST(KdTree, NonFiniteAndMalformedInputIsBadInput) {
