@@ -703,6 +703,17 @@ class Builder {
     }
   }
 
+  // The histogram of a child of a subtree node (its slot by depth and side), or null when the
+  // child must be a leaf.
+  Histogram* bin_child(SubtreeScratch& s, const Ref* refs, size_t n, const Box& box, int depth, int side) const {
+    if (!can_split(n, depth, area(box))) return nullptr;
+    Histogram& hist = histogram_slot(s, depth, side);
+    hist.clear();
+    const Binner binner(box, bins_);
+    for (size_t i = 0; i < n; ++i) hist.add(binner, refs[i]);
+    return &hist;
+  }
+
   Histogram& histogram_slot(SubtreeScratch& s, int depth, int side) const {
     const size_t slot = 2 * size_t(depth) + size_t(side);
     while (s.hists.size() <= slot) s.hists.emplace_back(bins_);
@@ -721,17 +732,6 @@ class Builder {
     }
     const auto [below_box, above_box] = child_boxes(box, split);
     const int child_depth = task.depth + 1;
-    const bool bin_children = child_depth < max_depth_;
-    Histogram* below_hist = nullptr;
-    Histogram* above_hist = nullptr;
-    if (bin_children && area(below_box) > 0.0) {
-      below_hist = &histogram_slot(s, child_depth, 0);
-      below_hist->clear();
-    }
-    if (bin_children && area(above_box) > 0.0) {
-      above_hist = &histogram_slot(s, child_depth, 1);
-      above_hist->clear();
-    }
     // The above side is written in place (each reference read adds at most one above it, so the
     // writes never pass the reads), the below side after the node's references: the below child
     // is built next, on top of the arena.
@@ -741,9 +741,13 @@ class Builder {
       s.arena.reserve(std::max(below_offset + n, 2 * s.arena.capacity()));
     }
     Ref* refs = s.arena.data() + task.offset;
-    ChildSink b{s.arena.data() + below_offset, 0, below_hist, Binner(below_box, bins_)};
-    ChildSink a{refs, 0, above_hist, Binner(above_box, bins_)};
+    ChildSink b{s.arena.data() + below_offset, 0, nullptr, {}};
+    ChildSink a{refs, 0, nullptr, {}};
     partition(refs, n, box, split, b, a);
+    // The children are binned after the partition, their references still in cache, and only those
+    // that can split (many are leaves of one reference).
+    Histogram* below_hist = bin_child(s, b.out, b.count, below_box, child_depth, 0);
+    Histogram* above_hist = bin_child(s, a.out, a.count, above_box, child_depth, 1);
 
     const size_t index = emit(out, glm::vec4(split.position, 0.0f, static_cast<float>(split.axis), 0.0f), task.parent);
     out.tally.cost += options_.traversal_cost * box_area;
