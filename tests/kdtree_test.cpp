@@ -605,6 +605,10 @@ TEST(KdTree, NonFiniteAndMalformedInputIsBadInput) {
   KdBuildOptions o;
   o.bins = 1;
   EXPECT_THROW(build_kdtree(random_soup(10, 3), o), Error);
+  o.bins = kKdMaxBins + 1;
+  test::expect_bad_input([&] { build_kdtree(random_soup(10, 3), o); }, {"bins", "1024"});
+  o.bins = kKdMaxBins;
+  EXPECT_NO_THROW(build_kdtree(random_soup(100, 3), o));
 }
 
 TEST(KdTree, TooManyTrianglesForExactFloatIndicesIsBadInput) {

@@ -14,8 +14,11 @@
 namespace mobirt {
 
 // SAH parameters, named as in pbrt's KdTreeAggregate.
+// The most bins a build accepts (the CLI's limit too).
+constexpr int kKdMaxBins = 1024;
+
 struct KdBuildOptions {
-  int bins = 32;                 // candidate split planes per axis and node
+  int bins = 32;                 // candidate split planes per axis and node, 2 .. kKdMaxBins
   float traversal_cost = 1.0f;
   float intersection_cost = 80.0f;
   float empty_bonus = 0.5f;      // SAH discount for splits that cut off empty space

@@ -1159,6 +1159,10 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, const KdBuildOptio
     throw Error(ErrorKind::BadInput,
                 "kd-tree: bins must be at least 2 (got " + std::to_string(options.bins) + ")");
   }
+  if (options.bins > kKdMaxBins) {  // each thread keeps two histograms per tree level
+    throw Error(ErrorKind::BadInput, "kd-tree: bins must be at most " + std::to_string(kKdMaxBins) + " (got " +
+                                         std::to_string(options.bins) + ")");
+  }
   if (options.threads < 0) {
     throw Error(ErrorKind::BadInput, "kd-tree: threads must be 0 (all) or more (got " +
                                          std::to_string(options.threads) + ")");
