@@ -31,9 +31,10 @@
 //   random soup 100K tris:     refs/tri 7.3 -> 3.4, SAH 5880 -> 3569, build 461 -> 370 ms
 //
 // How the build is organised (issue 5: fast, parallel, and the same tree for any thread count):
-// - Each reference is visited once per level: a node's partition also bins every reference into
-//   its child's histogram (the child box is known before the partition), so a node's split needs
-//   no pass of its own over its references. Only the root is binned separately.
+// - A node's children are binned by the node (their boxes are known once its plane is chosen):
+//   top nodes bin in the partition pass itself, subtree nodes right after it while the references
+//   are in cache, and only children that can split. A node's split thus needs no pass of its own
+//   over its references; only the root is binned separately.
 // - The sweep of a small node (up to kSparseSweepRefs references) visits only the planes next to
 //   an occupied bin (a bit per bin); larger nodes, whose bins are mostly occupied, evaluate every
 //   plane four at a time (SSE2). Deep nodes hold a handful of references, and a dense sweep over
@@ -289,11 +290,14 @@ int clip_and_split(const glm::vec3* v, const Box& box, int split_axis, float spl
   double(*next)[3] = poly_b;
   float tri_lo[3];
   float tri_hi[3];
+  for (int i = 0; i < 3; ++i) {
+    poly[i][0] = v[i].x;
+    poly[i][1] = v[i].y;
+    poly[i][2] = v[i].z;
+  }
   for (int a = 0; a < 3; ++a) {
-    const float x[3] = {v[0][a], v[1][a], v[2][a]};
-    tri_lo[a] = std::min(x[0], std::min(x[1], x[2]));
-    tri_hi[a] = std::max(x[0], std::max(x[1], x[2]));
-    for (int i = 0; i < 3; ++i) poly[i][a] = x[i];
+    tri_lo[a] = static_cast<float>(std::min(poly[0][a], std::min(poly[1][a], poly[2][a])));
+    tri_hi[a] = static_cast<float>(std::max(poly[0][a], std::max(poly[1][a], poly[2][a])));
   }
   // Only the faces of the box the triangle crosses can cut it; for the others every polygon
   // vertex (on the triangle) is inside and clipping would keep the polygon as it is. Most
@@ -353,14 +357,12 @@ std::string count_text(size_t n) {
 struct Binner {
   alignas(16) float origin[8] = {};
   alignas(16) float scale[8] = {};
-  bool active[3] = {false, false, false};
   float top = 0.0f;
 
   Binner() = default;
   Binner(const Box& box, int bins) : top(float(bins - 1)) {
     for (int a = 0; a < 3; ++a) {
-      active[a] = active_axis(box, a, bins);
-      const float s = active[a] ? float(bins) / (box.hi[a] - box.lo[a]) : 0.0f;
+      const float s = active_axis(box, a, bins) ? float(bins) / (box.hi[a] - box.lo[a]) : 0.0f;
       origin[a] = origin[a + 3] = box.lo[a];
       scale[a] = scale[a + 3] = s;  // inactive axes: everything in bin 0, never swept
     }
@@ -403,12 +405,11 @@ struct Binner {
 // bin. Rows are padded with 4 zeros: the sweep reads 4 bins at a time.
 class Histogram {
  public:
-  explicit Histogram(int bins) : bins_(bins), stride_(bins + 4), counts_(size_t(6 * stride_), 0u) {
+  explicit Histogram(int bins) : stride_(bins + 4), counts_(size_t(6 * stride_), 0u) {
     const int rows[6] = {0, 2, 4, 1, 3, 5};  // lo x, y, z, hi x, y, z
     for (int j = 0; j < 6; ++j) offsets_[j] = rows[j] * stride_;
   }
 
-  int bins() const { return bins_; }
   const uint32_t* mins(int axis) const { return counts_.data() + 2 * axis * stride_; }
   const uint32_t* maxs(int axis) const { return counts_.data() + (2 * axis + 1) * stride_; }
 
@@ -431,7 +432,6 @@ class Histogram {
   void clear() { std::fill(counts_.begin(), counts_.end(), 0u); }
 
  private:
-  int bins_;
   int stride_;
   alignas(16) int32_t offsets_[8] = {};  // row of each bound of Binner::bin
   std::vector<uint32_t> counts_;         // [axis][min, max][stride]
