@@ -4,8 +4,10 @@
 
 #include <glm/glm.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <functional>
 #include <random>
 #include <sstream>
@@ -13,6 +15,7 @@
 #include <vector>
 
 #include "accel/kdtree.h"
+#include "accel/kdtree_clip.h"
 #include "test_support.h"
 #include "core/error.h"
 #include "layout.h"
@@ -531,6 +534,156 @@ TEST(KdTree, FlattenIsDepthFirstWithBelowChildNext) {
   }
 }
 
+// ---- Split clipping (accel/kdtree_clip.h) ------------------------------------------------------
+
+TEST(KdClip, SplitsATriangleInsideTheBoxExactly) {
+  const glm::vec3 v[3] = {{0, 0, 0}, {2, 0, 0}, {0, 2, 0}};
+  const kdclip::Box box{{-1, -1, -1}, {3, 3, 1}};
+  kdclip::Box below;
+  kdclip::Box above;
+  ASSERT_EQ(kdclip::clip_and_split(v, box, 0, 1.0f, below, above), 3);
+  // Below x = 1: the vertices (0,0) and (0,2) and the crossings (1,0) and (1,1).
+  EXPECT_EQ(below.lo[0], 0.0f);
+  EXPECT_EQ(below.hi[0], 1.0f);
+  EXPECT_EQ(below.lo[1], 0.0f);
+  EXPECT_EQ(below.hi[1], 2.0f);
+  // Above: (2,0) and the crossings.
+  EXPECT_EQ(above.lo[0], 1.0f);
+  EXPECT_EQ(above.hi[0], 2.0f);
+  EXPECT_EQ(above.lo[1], 0.0f);
+  EXPECT_EQ(above.hi[1], 1.0f);
+  EXPECT_EQ(above.lo[2], 0.0f);
+  EXPECT_EQ(above.hi[2], 0.0f);
+}
+
+TEST(KdClip, ASideTheTriangleMissesGetsNothing) {
+  // Inside y >= 1.2 the triangle x + y <= 2 has x <= 0.8: nothing above x = 1.5, although the
+  // triangle's box reaches past it.
+  const glm::vec3 v[3] = {{0, 0, 0}, {2, 0, 0}, {0, 2, 0}};
+  const kdclip::Box box{{-1, 1.2f, -1}, {3, 3, 1}};
+  kdclip::Box below;
+  kdclip::Box above;
+  EXPECT_EQ(kdclip::clip_and_split(v, box, 0, 1.5f, below, above), 1);
+  EXPECT_LE(below.hi[0], 0.8f + 1e-6f);
+  EXPECT_GE(below.lo[1], 1.2f);
+  // A box the triangle misses entirely.
+  const kdclip::Box away{{1.5f, 1.5f, -1}, {3, 3, 1}};
+  EXPECT_EQ(kdclip::clip_and_split(v, away, 0, 2.0f, below, above), 0);
+}
+
+TEST(KdClip, BoundsContainEveryPointOfTheClippedParts) {
+  std::mt19937 rng(77);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  int parts = 0;
+  for (int trial = 0; trial < 3000; ++trial) {
+    glm::vec3 v[3];
+    for (glm::vec3& p : v) p = glm::vec3(u(rng), u(rng), u(rng)) * 10.0f - 5.0f;
+    kdclip::Box box;
+    for (int a = 0; a < 3; ++a) {
+      const float x = u(rng) * 10.0f - 5.0f;
+      const float y = u(rng) * 10.0f - 5.0f;
+      box.lo[a] = std::min(x, y);
+      box.hi[a] = std::max(x, y);
+    }
+    const int axis = trial % 3;
+    const float split = box.lo[axis] + (box.hi[axis] - box.lo[axis]) * u(rng);
+    kdclip::Box sides[2];
+    const int result = kdclip::clip_and_split(v, box, axis, split, sides[0], sides[1]);
+    // Points of the triangle inside the box must lie in the bounds of their side(s).
+    for (int sample = 0; sample < 200; ++sample) {
+      double a = u(rng), b = u(rng);
+      if (a + b > 1.0) {
+        a = 1.0 - a;
+        b = 1.0 - b;
+      }
+      double p[3];
+      bool inside = true;
+      for (int k = 0; k < 3; ++k) {
+        p[k] = double(v[0][k]) + a * (double(v[1][k]) - double(v[0][k])) + b * (double(v[2][k]) - double(v[0][k]));
+        inside = inside && p[k] >= box.lo[k] && p[k] <= box.hi[k];
+      }
+      if (!inside) continue;
+      for (int side = 0; side < 2; ++side) {
+        if (side == 0 ? p[axis] > split : p[axis] < split) continue;
+        ASSERT_TRUE(result & (1 << side)) << "trial " << trial << ": a part with points was reported empty";
+        for (int k = 0; k < 3; ++k) {
+          // The sample itself is rounded in double: allow its own rounding error.
+          const double slack = 1e-12 * (1.0 + std::abs(p[k]));
+          ASSERT_LE(double(sides[side].lo[k]), p[k] + slack) << "trial " << trial;
+          ASSERT_GE(double(sides[side].hi[k]), p[k] - slack) << "trial " << trial;
+        }
+        ++parts;
+      }
+    }
+    // The bounds never leave the box or the triangle's box.
+    for (int side = 0; side < 2; ++side) {
+      if (!(result & (1 << side))) continue;
+      for (int k = 0; k < 3; ++k) {
+        const float tri_lo = std::min({v[0][k], v[1][k], v[2][k]});
+        const float tri_hi = std::max({v[0][k], v[1][k], v[2][k]});
+        EXPECT_GE(sides[side].lo[k], std::nextafter(std::max(box.lo[k], tri_lo), -kInfinity));
+        EXPECT_LE(sides[side].hi[k], std::nextafter(std::min(box.hi[k], tri_hi), kInfinity));
+      }
+    }
+  }
+  EXPECT_GT(parts, 10000);
+}
+
+// The GPU and the CPU read the same arrays, and tests compare images across machines: the tree
+// must not depend on how many threads built it, nor on how their tasks were scheduled.
+TEST(KdTree, SameTreeForAnyThreadCount) {
+  // The 40,000-triangle soup has top nodes large enough to partition in parallel blocks; the
+  // others are built by a handful of tasks or one.
+  const std::vector<NamedScene> scenes = {{"soup 40000", random_soup(40000, 41)},
+                                          {"soup 3000", random_soup(3000, 42)},
+                                          {"grid_boxes", grid_with_boxes()},
+                                          {"duplicates", duplicates(43)},
+                                          {"planar", planar(44)}};
+  for (const NamedScene& scene : scenes) {
+    for (int bins : {32, 128}) {
+      if (bins != 32 && scene.name != "soup 3000") continue;  // the sweep of more than 64 bins
+      SCOPED_TRACE(scene.name + " bins " + std::to_string(bins));
+      KdBuildOptions serial;
+      serial.bins = bins;
+      serial.threads = 1;
+      const FlatKdTree reference = build_kdtree(scene.positions, serial);
+      check_layout(reference, scene.positions, serial);
+      for (int threads : {2, 3, 0}) {
+        KdBuildOptions o = serial;
+        o.threads = threads;
+        for (int repeat = 0; repeat < 2; ++repeat) {  // different schedules
+          const FlatKdTree tree = build_kdtree(scene.positions, o);
+          ASSERT_EQ(tree.nodes.size(), reference.nodes.size()) << threads << " threads";
+          ASSERT_EQ(tree.prim_list.size(), reference.prim_list.size()) << threads << " threads";
+          ASSERT_EQ(tree.triangles.size(), reference.triangles.size()) << threads << " threads";
+          EXPECT_EQ(std::memcmp(tree.nodes.data(), reference.nodes.data(), tree.nodes.size() * sizeof(glm::vec4)), 0)
+              << threads << " threads";
+          EXPECT_EQ(std::memcmp(tree.prim_list.data(), reference.prim_list.data(),
+                                tree.prim_list.size() * sizeof(float)),
+                    0)
+              << threads << " threads";
+          EXPECT_EQ(std::memcmp(tree.triangles.data(), reference.triangles.data(),
+                                tree.triangles.size() * sizeof(glm::vec4)),
+                    0)
+              << threads << " threads";
+          EXPECT_EQ(std::memcmp(&tree.bounds, &reference.bounds, sizeof(Aabb)), 0);
+          EXPECT_EQ(tree.max_depth, reference.max_depth);
+          EXPECT_EQ(tree.stats.sah_cost, reference.stats.sah_cost);  // summed in the same order too
+          EXPECT_EQ(tree.stats.leaves, reference.stats.leaves);
+          EXPECT_EQ(tree.stats.prim_references, reference.stats.prim_references);
+          EXPECT_EQ(tree.stats.max_depth_reached, reference.stats.max_depth_reached);
+        }
+      }
+    }
+  }
+}
+
+TEST(KdTree, NegativeThreadCountIsBadInput) {
+  KdBuildOptions o;
+  o.threads = -1;
+  test::expect_bad_input([&] { build_kdtree(random_soup(10, 3), o); }, {"threads", "-1"});
+}
+
 TEST(KdTree, NonFiniteAndMalformedInputIsBadInput) {
   Positions p = random_soup(10, 3);
   p[7].y = std::numeric_limits<float>::quiet_NaN();
@@ -549,6 +702,10 @@ TEST(KdTree, NonFiniteAndMalformedInputIsBadInput) {
   KdBuildOptions o;
   o.bins = 1;
   EXPECT_THROW(build_kdtree(random_soup(10, 3), o), Error);
+  o.bins = kKdMaxBins + 1;
+  test::expect_bad_input([&] { build_kdtree(random_soup(10, 3), o); }, {"bins", "1024"});
+  o.bins = kKdMaxBins;
+  EXPECT_NO_THROW(build_kdtree(random_soup(100, 3), o));
 }
 
 TEST(KdTree, TooManyTrianglesForExactFloatIndicesIsBadInput) {

@@ -15,8 +15,11 @@
 namespace mobirt {
 
 // SAH parameters, named as in pbrt's KdTreeAggregate.
+// The most bins a build accepts (the CLI's limit too).
+constexpr int kKdMaxBins = 1024;
+
 struct KdBuildOptions {
-  int bins = 32;                 // candidate split planes per axis and node
+  int bins = 32;                 // candidate split planes per axis and node, 2 .. kKdMaxBins
   float traversal_cost = 1.0f;
   float intersection_cost = 80.0f;
   float empty_bonus = 0.5f;      // SAH discount for splits that cut off empty space
@@ -34,6 +37,8 @@ struct KdBuildOptions {
   // box that its bounding box overlaps. Off: references keep the triangle's bounding box (clipping
   // only the box to the child box would build the very same tree, since the binning clamps to the
   // node box anyway).
+  int threads = 0;               // build threads: 0 = all hardware threads, 1 = serial. The tree
+                                 // is the same, byte for byte, for any count.
 };
 
 // Every index that reaches a shader is an exact float below 2^24: node indices, prim-list entries,

@@ -1,6 +1,6 @@
 // Binned-SAH kd-tree construction (Shevtsov, Soupikov and Kapustin 2007, "Highly parallel fast
-// kd-tree construction for interactive ray tracing of dynamic scenes"), flattened on the fly into
-// the texel arrays of glsl/layout.h.
+// kd-tree construction for interactive ray tracing of dynamic scenes"), flattened into the texel
+// arrays of glsl/layout.h.
 //
 // Per node and axis: `bins` uniform bins over the node box; each reference (a triangle and its box
 // inside the node) counts its box's min into one bin and its max into another; one sweep over the
@@ -23,34 +23,76 @@
 // it, gets no reference. The cheaper alternative, clipping only the reference's box to the child
 // box, builds exactly the same tree as no clipping at all (the binning clamps to the node box and
 // the classification compares with a plane inside it), so exact clipping is the only one worth
-// having. Measured (-O2, one thread, 32 bins, pbrt costs), clipping off -> on:
+// having. Measured (-O2, one thread, 32 bins, pbrt costs, the first serial builder), clipping
+// off -> on:
 //   Utah toasters 11,141 tris: refs/tri 13.8 -> 6.4, SAH 1669 -> 893, build 26 -> 32 ms,
 //                              traversal 1.71 -> 1.92 Mrays/s (full stack, one thread)
 //   SPD balls 9,830 tris:      refs/tri 7.2 -> 3.3, SAH 169 -> 128, build 13 -> 12 ms
 //   random soup 100K tris:     refs/tri 7.3 -> 3.4, SAH 5880 -> 3569, build 461 -> 370 ms
 //
-// The build is depth-first with an explicit task stack (no recursion) and one reference arena used
-// as a stack: a split writes the above child's references then the below child's at the parent's
-// offset, the below child is built next, so memory stays about twice the root's references.
-// Nodes are emitted in depth-first order: the below child is the next node, the above child's
-// index is patched into the parent when the above child is emitted.
+// How the build is organised (issue 5: fast, parallel, and the same tree for any thread count):
+// - A node's children are binned by the node (their boxes are known once its plane is chosen):
+//   top nodes bin in the partition pass itself, subtree nodes right after it while the references
+//   are in cache, and only children that can split. A node's split thus needs no pass of its own
+//   over its references; only the root is binned separately.
+// - The sweep of a small node (up to kSparseSweepRefs references) visits only the planes next to
+//   an occupied bin (a bit per bin); larger nodes, whose bins are mostly occupied, evaluate every
+//   plane four at a time (SSE2). Deep nodes hold a handful of references, and a dense sweep over
+//   every bin of every axis was the largest cost of the first builder (perf: 40% of its time on
+//   the toaster, 58% on a 100K-triangle soup).
+// - Nodes of at least kSubtreeRefs references are "top nodes": each is a task, its children run
+//   in parallel (tbb::parallel_invoke), the below child keeps the node's reference buffer (the
+//   partition writes it in place), the above child gets one from a pool, and the largest nodes
+//   partition their references in parallel blocks. A smaller node is built with its whole subtree
+//   by one task, depth first, in one reference arena used as a stack (a split writes the above
+//   child's references in place and the below child's after the node's, the below child is built
+//   next), into nodes and prim lists of its own with indices local to it.
+// - A last pass lays the parts out depth first (a node's below child is the next node, its above
+//   child follows the below child's subtree) and relocates each part's local indices while
+//   copying it, the parts in parallel.
+// Every decision (split, which nodes are top nodes, the order of references in a partition,
+// where each part lands) depends on the references alone, never on the threads or the order in
+// which tasks run, so the arrays are the same, byte for byte, for any thread count, and the same
+// as the first serial builder's. Only the SAH cost in the statistics is summed per part, so its
+// last bits may differ from a single running sum.
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/info.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
+#include <tbb/scalable_allocator.h>
+#include <tbb/task_arena.h>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include <glm/glm.hpp>
 
 #include <algorithm>
-#include <array>
+#include <bit>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
+#include <deque>
 #include <limits>
+#include <memory>
+#include <mutex>
+#include <new>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "accel/kdtree.h"
+#include "accel/kdtree_clip.h"
 #include "core/error.h"
 #include "layout.h"
 
 namespace mobirt {
 
 namespace {
+
+using kdclip::Box;
+using kdclip::clip_and_split;
 
 // No split plane closer than this (relative to the scene's size and coordinate magnitude) to the
 // node's faces. Without it the SAH, rewarded by the empty bonus, cuts ever thinner empty slabs off
@@ -61,122 +103,114 @@ namespace {
 // sizes of the scene. The SAH cost hardly changes (those slabs were empty).
 constexpr float kMinWidthRelative = 1e-5f;
 
-struct Ref {
-  Aabb box;       // the triangle's bounds inside the node (its full box without split clipping)
+// Work split. Fixed numbers, never derived from the thread count: the tree must not depend on it.
+constexpr size_t kSubtreeRefs = 1024;  // a node with fewer references: one task builds its subtree
+constexpr size_t kBlockRefs = 8192;    // top nodes of 2 blocks or more partition blocks in parallel
+// Nodes of up to this many references sweep only the planes next to occupied bins; larger ones
+// (whose bins are mostly occupied) evaluate every plane, four at a time.
+constexpr size_t kSparseSweepRefs = 16;
+
+Box to_box(const Aabb& a) { return Box{{a.lo.x, a.lo.y, a.lo.z}, {a.hi.x, a.hi.y, a.hi.z}}; }
+
+// The surface area as the first builder computed it: float extents, double arithmetic; 0 for an
+// empty box.
+double area(const Box& b) {
+  if (b.lo[0] > b.hi[0] || b.lo[1] > b.hi[1] || b.lo[2] > b.hi[2]) return 0.0;
+  const double x = b.hi[0] - b.lo[0];
+  const double y = b.hi[1] - b.lo[1];
+  const double z = b.hi[2] - b.lo[2];
+  return 2.0 * (x * y + y * z + z * x);
+}
+
+// A reference: a triangle and its bounds inside the node (the full box without split clipping).
+// lo and hi are adjacent: the six bounds are binned as one run of floats.
+struct alignas(16) Ref {
+  float lo[3];
+  float hi[3];
   uint32_t prim;
+  uint32_t unused;  // pads to 32 bytes
+};
+static_assert(sizeof(Ref) == 32 && offsetof(Ref, hi) == 3 * sizeof(float));
+
+void copy_refs(Ref* to, const Ref* from, size_t count) {
+  if (count > 0) std::memcpy(to, from, count * sizeof(Ref));
+}
+
+// References in memory from TBB's scalable allocator, never value-initialised (every slot is
+// written before it is read).
+class RefBuffer {
+ public:
+  RefBuffer() = default;
+  explicit RefBuffer(size_t capacity) { reserve(capacity); }
+  RefBuffer(RefBuffer&& o) noexcept
+      : data_(std::exchange(o.data_, nullptr)), size_(std::exchange(o.size_, 0)),
+        capacity_(std::exchange(o.capacity_, 0)) {}
+  RefBuffer& operator=(RefBuffer&& o) noexcept {
+    std::swap(data_, o.data_);
+    std::swap(size_, o.size_);
+    std::swap(capacity_, o.capacity_);
+    return *this;
+  }
+  RefBuffer(const RefBuffer&) = delete;
+  RefBuffer& operator=(const RefBuffer&) = delete;
+  ~RefBuffer() { scalable_free(data_); }
+
+  Ref* data() { return data_; }
+  const Ref* data() const { return data_; }
+  size_t size() const { return size_; }
+  size_t capacity() const { return capacity_; }
+  void set_size(size_t size) { size_ = size; }  // at most the capacity
+  // Keeps the first size() references.
+  void reserve(size_t capacity) {
+    if (capacity <= capacity_) return;
+    auto* grown = static_cast<Ref*>(scalable_malloc(capacity * sizeof(Ref)));
+    if (!grown) throw std::bad_alloc();
+    copy_refs(grown, data_, size_);
+    scalable_free(data_);
+    data_ = grown;
+    capacity_ = capacity;
+  }
+
+ private:
+  Ref* data_ = nullptr;
+  size_t size_ = 0;
+  size_t capacity_ = 0;
 };
 
-struct Task {
-  size_t offset;  // references in arena[offset, offset + count)
-  size_t count;
-  Aabb box;
-  int depth;
-  int64_t parent;  // node whose "above" index is this task's node, or -1
+// The reference buffers of the top nodes, recycled within one build: a buffer a node has
+// partitioned serves a later node, so the build touches about as much fresh memory as one arena
+// would (with a new buffer per node, page faults took a tenth of a 1M-triangle build).
+class BufferPool {
+ public:
+  RefBuffer take(size_t capacity) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      size_t best = free_.size();
+      for (size_t i = 0; i < free_.size(); ++i) {
+        if (free_[i].capacity() >= capacity && (best == free_.size() || free_[i].capacity() < free_[best].capacity())) {
+          best = i;
+        }
+      }
+      if (best < free_.size()) {
+        RefBuffer b = std::move(free_[best]);
+        free_[best] = std::move(free_.back());
+        free_.pop_back();
+        b.set_size(0);
+        return b;
+      }
+    }
+    return RefBuffer(capacity);
+  }
+  void give(RefBuffer&& b) {
+    if (b.capacity() == 0) return;
+    std::lock_guard<std::mutex> lock(mutex_);
+    free_.push_back(std::move(b));
+  }
+
+ private:
+  std::mutex mutex_;
+  std::vector<RefBuffer> free_;
 };
-
-double area(const glm::dvec3& d) { return 2.0 * (d.x * d.y + d.y * d.z + d.z * d.x); }
-
-float round_down(double x) {
-  float f = static_cast<float>(x);
-  if (static_cast<double>(f) > x) f = std::nextafter(f, -kInfinity);
-  return f;
-}
-
-float round_up(double x) {
-  float f = static_cast<float>(x);
-  if (static_cast<double>(f) < x) f = std::nextafter(f, kInfinity);
-  return f;
-}
-
-// The triangle (a, b, c) clipped against `box` (inclusive; Sutherland-Hodgman in double), then
-// split by the plane x[axis] = split: the bounds of the part below (<= split) and above (>= split),
-// rounded outwards to float. Returns bit 1 when the below part is not empty, bit 2 for above.
-int clip_and_split(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c, const Aabb& box,
-                   int split_axis, float split, Aabb& below, Aabb& above) {
-  constexpr int kMax = 16;  // 3 vertices + at most one per clipping plane
-  std::array<glm::dvec3, kMax> poly_a;
-  std::array<glm::dvec3, kMax> poly_b;
-  glm::dvec3* poly = poly_a.data();
-  glm::dvec3* next = poly_b.data();
-  poly[0] = glm::dvec3(a);
-  poly[1] = glm::dvec3(b);
-  poly[2] = glm::dvec3(c);
-  int n = 3;
-  for (int axis = 0; axis < 3; ++axis) {
-    for (int side = 0; side < 2; ++side) {
-      const double plane = side == 0 ? box.lo[axis] : box.hi[axis];
-      const double sign = side == 0 ? 1.0 : -1.0;  // inside: sign * (x - plane) >= 0
-      bool all_inside = true;
-      for (int i = 0; i < n; ++i) {
-        if (!(sign * (poly[i][axis] - plane) >= 0.0)) {
-          all_inside = false;
-          break;
-        }
-      }
-      if (all_inside) continue;
-      int m = 0;
-      for (int i = 0; i < n; ++i) {
-        const glm::dvec3& p = poly[i];
-        const glm::dvec3& q = poly[i + 1 == n ? 0 : i + 1];
-        const double dp = sign * (p[axis] - plane);
-        const double dq = sign * (q[axis] - plane);
-        if (dp >= 0.0) next[m++] = p;
-        if ((dp >= 0.0) != (dq >= 0.0)) {
-          glm::dvec3 x = p + (dp / (dp - dq)) * (q - p);
-          x[axis] = plane;  // exactly on the plane
-          next[m++] = x;
-        }
-      }
-      std::swap(poly, next);
-      n = m;
-      if (n == 0) return 0;
-    }
-  }
-  // Split: bounds of the vertices on each side plus the edge crossings (which lie on both).
-  const double s = split;
-  glm::dvec3 lo[2] = {glm::dvec3(kInfinity), glm::dvec3(kInfinity)};
-  glm::dvec3 hi[2] = {glm::dvec3(-kInfinity), glm::dvec3(-kInfinity)};
-  for (int i = 0; i < n; ++i) {
-    const glm::dvec3& p = poly[i];
-    const glm::dvec3& q = poly[i + 1 == n ? 0 : i + 1];
-    const double dp = p[split_axis] - s;
-    const double dq = q[split_axis] - s;
-    if (dp <= 0.0) {
-      lo[0] = glm::min(lo[0], p);
-      hi[0] = glm::max(hi[0], p);
-    }
-    if (dp >= 0.0) {
-      lo[1] = glm::min(lo[1], p);
-      hi[1] = glm::max(hi[1], p);
-    }
-    if ((dp < 0.0 && dq > 0.0) || (dp > 0.0 && dq < 0.0)) {
-      glm::dvec3 x = p + (dp / (dp - dq)) * (q - p);
-      x[split_axis] = s;
-      for (int k = 0; k < 2; ++k) {
-        lo[k] = glm::min(lo[k], x);
-        hi[k] = glm::max(hi[k], x);
-      }
-    }
-  }
-  int result = 0;
-  Aabb* out[2] = {&below, &above};
-  for (int k = 0; k < 2; ++k) {
-    if (!(lo[k].x <= hi[k].x)) continue;
-    result |= 1 << k;
-    for (int axis = 0; axis < 3; ++axis) {
-      out[k]->lo[axis] = round_down(lo[k][axis]);
-      out[k]->hi[axis] = round_up(hi[k][axis]);
-    }
-  }
-  return result;
-}
-
-Aabb intersect(const Aabb& a, const Aabb& b) {
-  Aabb r;
-  r.lo = glm::max(a.lo, b.lo);
-  r.hi = glm::min(a.hi, b.hi);
-  return r;
-}
 
 std::string count_text(size_t n) {
   const std::string digits = std::to_string(n);
@@ -188,271 +222,778 @@ std::string count_text(size_t n) {
   return s;
 }
 
+// Bin i of axis a covers [lo + i * width / bins, lo + (i + 1) * width / bins) of the node box.
+// The six bounds of a reference (lo xyz, hi xyz) are binned together: origin and scale hold one
+// lane per bound, padded to 8.
+struct Binner {
+  alignas(16) float origin[8] = {};
+  alignas(16) float scale[8] = {};
+  float top = 0.0f;
+
+  Binner() = default;
+  Binner(const Box& box, int bins) : top(float(bins - 1)) {
+    for (int a = 0; a < 3; ++a) {
+      const float s = active_axis(box, a, bins) ? float(bins) / (box.hi[a] - box.lo[a]) : 0.0f;
+      origin[a] = origin[a + 3] = box.lo[a];
+      scale[a] = scale[a + 3] = s;  // inactive axes: everything in bin 0, never swept
+    }
+  }
+
+  // A box thinner than float can bin (k / width overflows: 0 * inf would be NaN) is not split.
+  static bool active_axis(const Box& box, int a, int bins) {
+    return box.hi[a] > box.lo[a] && std::isfinite(float(bins) / (box.hi[a] - box.lo[a]));
+  }
+
+  // index[j] = offset[j] + the bin of bound j (r.lo[0..2], r.hi[0..2]), the bin being
+  // clamp((x - origin) * scale, 0, bins - 1).
+  void bin(const Ref& r, const int32_t* offset, int32_t* index) const {
+#if defined(__SSE2__)
+    const __m128 zero = _mm_setzero_ps();
+    const __m128 last = _mm_set1_ps(top);
+    const __m128 v0 = _mm_loadu_ps(r.lo);  // lo xyz, hi x
+    const __m128 v1 = _mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(r.hi + 1)));
+    const __m128 f0 = _mm_mul_ps(_mm_sub_ps(v0, _mm_load_ps(origin)), _mm_load_ps(scale));
+    const __m128 f1 = _mm_mul_ps(_mm_sub_ps(v1, _mm_load_ps(origin + 4)), _mm_load_ps(scale + 4));
+    const __m128i b0 = _mm_cvttps_epi32(_mm_min_ps(_mm_max_ps(f0, zero), last));
+    const __m128i b1 = _mm_cvttps_epi32(_mm_min_ps(_mm_max_ps(f1, zero), last));
+    _mm_store_si128(reinterpret_cast<__m128i*>(index),
+                    _mm_add_epi32(b0, _mm_load_si128(reinterpret_cast<const __m128i*>(offset))));
+    _mm_store_si128(reinterpret_cast<__m128i*>(index + 4),
+                    _mm_add_epi32(b1, _mm_load_si128(reinterpret_cast<const __m128i*>(offset + 4))));
+#else
+    const auto bin_of = [&](float x, int j) {
+      return offset[j] + static_cast<int32_t>(std::min(std::max((x - origin[j]) * scale[j], 0.0f), top));
+    };
+    for (int a = 0; a < 3; ++a) {
+      index[a] = bin_of(r.lo[a], a);
+      index[a + 3] = bin_of(r.hi[a], a + 3);
+    }
+#endif
+  }
+};
+
+// Per axis, how many reference boxes have their min (row 2a) and their max (row 2a + 1) in each
+// bin. Rows are padded with 4 zeros: the sweep reads 4 bins at a time.
+class Histogram {
+ public:
+  explicit Histogram(int bins) : stride_(bins + 4), counts_(size_t(6 * stride_), 0u) {
+    const int rows[6] = {0, 2, 4, 1, 3, 5};  // lo x, y, z, hi x, y, z
+    for (int j = 0; j < 6; ++j) offsets_[j] = rows[j] * stride_;
+  }
+
+  const uint32_t* mins(int axis) const { return counts_.data() + 2 * axis * stride_; }
+  const uint32_t* maxs(int axis) const { return counts_.data() + (2 * axis + 1) * stride_; }
+
+  void add(const Binner& binner, const Ref& r) {
+    alignas(16) int32_t index[8];
+    binner.bin(r, offsets_, index);
+    uint32_t* c = counts_.data();
+    ++c[index[0]];
+    ++c[index[1]];
+    ++c[index[2]];
+    ++c[index[3]];
+    ++c[index[4]];
+    ++c[index[5]];
+  }
+
+  void merge(const Histogram& o) {
+    for (size_t i = 0; i < counts_.size(); ++i) counts_[i] += o.counts_[i];
+  }
+
+  void clear() { std::fill(counts_.begin(), counts_.end(), 0u); }
+
+ private:
+  int stride_;
+  alignas(16) int32_t offsets_[8] = {};  // row of each bound of Binner::bin
+  std::vector<uint32_t> counts_;         // [axis][min, max][stride]
+};
+
+// Leaf and cost totals of a part of the tree.
+struct Tally {
+  size_t leaves = 0;
+  size_t empty_leaves = 0;
+  size_t prim_references = 0;
+  size_t max_leaf_size = 0;
+  int max_depth_reached = 0;
+  double cost = 0.0;  // SAH cost times the root's area
+
+  void add(const Tally& o) {
+    leaves += o.leaves;
+    empty_leaves += o.empty_leaves;
+    prim_references += o.prim_references;
+    max_leaf_size = std::max(max_leaf_size, o.max_leaf_size);
+    max_depth_reached = std::max(max_depth_reached, o.max_depth_reached);
+    cost += o.cost;
+  }
+};
+
+// A piece of the tree built by one task: a top node with its two children, or a subtree in node
+// and prim-list arrays of its own (indices local to them, relocated when laid out).
+struct Part {
+  int axis = -1;  // a top node: split axis and position, children below and above
+  float split = 0.0f;
+  std::unique_ptr<Part> below;
+  std::unique_ptr<Part> above;
+  std::vector<glm::vec4> nodes;  // a subtree
+  std::vector<float> prims;
+  Tally tally;             // this part alone; the whole after total()
+  size_t node_total = 0;   // after total(): nodes and prim-list entries including the children
+  size_t prim_total = 0;
+};
+
+struct Split {
+  int axis = -1;  // -1: no plane beats a leaf
+  float position = 0.0f;
+};
+
+// One child's side of a partition: references appended at `out`, binned into `hist` for the
+// child's own split when it can have one.
+struct ChildSink {
+  Ref* out = nullptr;
+  size_t count = 0;
+  Histogram* hist = nullptr;
+  Binner binner;
+
+  void push(const Ref& r) {
+    out[count++] = r;
+    if (hist) hist->add(binner, r);
+  }
+};
+
+// A node of a subtree waiting to be built.
+struct Task {
+  size_t offset;     // references in the arena at [offset, offset + count)
+  size_t count;
+  Box box;
+  int depth;
+  int64_t parent;    // node (local) whose "above" index is this task's node, or -1
+  Histogram* hist;   // its references binned, or null when it must be a leaf
+};
+
+// The scratch memory of one thread's subtree builds; nothing in it carries over between them.
+struct SubtreeScratch {
+  RefBuffer arena;
+  std::deque<Histogram> hists;           // [2 * depth + side]: children's histograms by depth
+  std::vector<Task> tasks;
+};
+
 class Builder {
  public:
   Builder(std::span<const glm::vec3> positions, const KdBuildOptions& options)
-      : positions_(positions), options_(options), bins_(std::max(1, options.bins)) {}
+      : positions_(positions), options_(options), bins_(std::max(2, options.bins)),
+        triangle_count_(positions.size() / 3) {}
 
   FlatKdTree build() {
     FlatKdTree tree;
-    const size_t n = positions_.size() / 3;
+    const size_t n = triangle_count_;
     tree.max_depth = kdtree_depth_limit(n, options_.max_depth);
+    max_depth_ = tree.max_depth;
+    std::unique_ptr<Part> root;
+    // The triangle texels do not depend on the tree: written while it is built.
+    tbb::parallel_invoke([&] { write_triangles(tree); }, [&] { root = build_root(tree.bounds); });
+    total(*root);
+    const Tally& t = root->tally;
+    if (root->node_total > kKdIndexLimit) throw too_many_nodes();
+    if (root->prim_total > kKdIndexLimit) throw too_many_prim_references();
+    tree.nodes.resize(root->node_total);
+    tree.prim_list.resize(root->prim_total);
+    lay_out(*root, 0, 0, tree);
 
-    // Triangles and root references.
-    tree.triangles.reserve(n * MOBIRT_TEXELS_PER_TRIANGLE);
-    arena_.resize(n);
-    for (size_t i = 0; i < n; ++i) {
-      Aabb box;
-      for (int k = 0; k < 3; ++k) {
-        const glm::vec3& p = positions_[3 * i + k];
-        tree.triangles.emplace_back(p, 0.0f);
-        box.extend(p);
-      }
-      arena_[i] = Ref{box, static_cast<uint32_t>(i)};
-      tree.bounds.extend(box);
-    }
-    nodes_ = &tree.nodes;
-    prim_list_ = &tree.prim_list;
-    stats_ = &tree.stats;
-    tree.nodes.reserve(std::min<size_t>(4 * n + 1, kKdIndexLimit));
-    tree.prim_list.reserve(std::min<size_t>(2 * n, kKdIndexLimit));
-
-    const double root_area = area(glm::dvec3(tree.bounds.extent()));
-    if (n > 0) {
-      const glm::vec3 magnitude = glm::max(glm::abs(tree.bounds.lo), glm::abs(tree.bounds.hi));
-      const glm::vec3 ext = tree.bounds.extent();
-      const float scale = std::max({ext.x, ext.y, ext.z, magnitude.x, magnitude.y, magnitude.z});
-      min_width_ = std::max(kMinWidthRelative * scale, std::numeric_limits<float>::min());
-    }
-    tasks_.push_back(Task{0, n, tree.bounds, 0, -1});
-    while (!tasks_.empty()) {
-      const Task task = tasks_.back();
-      tasks_.pop_back();
-      process(task, tree.max_depth);
-    }
-    stats_->nodes = tree.nodes.size();
-    stats_->sah_cost = root_area > 0.0 ? cost_ / root_area
-                                       : options_.intersection_cost * double(n);
+    KdBuildStats& s = tree.stats;
+    s.nodes = tree.nodes.size();
+    s.leaves = t.leaves;
+    s.empty_leaves = t.empty_leaves;
+    s.prim_references = t.prim_references;
+    s.max_leaf_size = t.max_leaf_size;
+    s.max_depth_reached = t.max_depth_reached;
+    const double root_area = area(to_box(tree.bounds));
+    s.sah_cost = root_area > 0.0 ? t.cost / root_area : options_.intersection_cost * double(n);
     return tree;
   }
 
  private:
-  size_t emit(const glm::vec4& node, int64_t parent) {
-    const size_t index = nodes_->size();
-    if (index >= kKdIndexLimit) {
-      throw Error(ErrorKind::BadInput,
-                  "kd-tree for " + count_text(positions_.size() / 3) + " triangles needs more than " +
-                      count_text(kKdIndexLimit) +
-                      " nodes, the limit of exact float indices (2^24) in the node texture; "
-                      "lower max_depth or raise max_leaf_prims");
+  void write_triangles(FlatKdTree& tree) const {
+    tree.triangles.reserve(triangle_count_ * MOBIRT_TEXELS_PER_TRIANGLE);
+    for (const glm::vec3& p : positions_) tree.triangles.emplace_back(p, 0.0f);
+  }
+
+  // Root references and bounds, the root's histogram, then the tree.
+  std::unique_ptr<Part> build_root(Aabb& bounds) {
+    const size_t n = triangle_count_;
+    RefBuffer refs = pool_.take(n);
+    refs.set_size(n);
+    const size_t blocks = (n + kBlockRefs - 1) / kBlockRefs;
+    std::vector<Aabb> block_bounds(blocks);
+    tbb::parallel_for(size_t(0), blocks, [&](size_t b) {
+      Aabb box;
+      for (size_t i = b * kBlockRefs, end = std::min(n, i + kBlockRefs); i < end; ++i) {
+        const glm::vec3* v = positions_.data() + 3 * i;
+        const glm::vec3 lo = glm::min(v[0], glm::min(v[1], v[2]));
+        const glm::vec3 hi = glm::max(v[0], glm::max(v[1], v[2]));
+        refs.data()[i] = Ref{{lo.x, lo.y, lo.z}, {hi.x, hi.y, hi.z}, static_cast<uint32_t>(i), 0};
+        box.lo = glm::min(box.lo, lo);
+        box.hi = glm::max(box.hi, hi);
+      }
+      block_bounds[b] = box;
+    });
+    for (const Aabb& box : block_bounds) bounds.extend(box);
+    const Box root = to_box(bounds);
+    if (n > 0) {
+      const glm::vec3 magnitude = glm::max(glm::abs(bounds.lo), glm::abs(bounds.hi));
+      const glm::vec3 ext = bounds.extent();
+      const float scale = std::max({ext.x, ext.y, ext.z, magnitude.x, magnitude.y, magnitude.z});
+      min_width_ = std::max(kMinWidthRelative * scale, std::numeric_limits<float>::min());
     }
-    nodes_->push_back(node);
-    if (parent >= 0) (*nodes_)[static_cast<size_t>(parent)].y = static_cast<float>(index);
+    std::unique_ptr<Histogram> hist;
+    if (n >= kSubtreeRefs && can_split(n, 0, area(root))) {
+      hist = std::make_unique<Histogram>(bins_);
+      std::vector<Histogram> block_hists(blocks, Histogram(bins_));
+      const Binner binner(root, bins_);
+      tbb::parallel_for(size_t(0), blocks, [&](size_t b) {
+        for (size_t i = b * kBlockRefs, end = std::min(n, i + kBlockRefs); i < end; ++i) {
+          block_hists[b].add(binner, refs.data()[i]);
+        }
+      });
+      for (const Histogram& h : block_hists) hist->merge(h);
+    }
+    return build_part(std::move(refs), root, 0, std::move(hist));
+  }
+
+  bool can_split(size_t n, int depth, double box_area) const {
+    return n > static_cast<size_t>(std::max(0, options_.max_leaf_prims)) && depth < max_depth_ && box_area > 0.0;
+  }
+
+  // ---- Top nodes -------------------------------------------------------------------------------
+
+  std::unique_ptr<Part> build_part(RefBuffer refs, const Box& box, int depth, std::unique_ptr<Histogram> hist) {
+    auto part = std::make_unique<Part>();
+    const size_t n = refs.size();
+    if (n < kSubtreeRefs) {
+      build_subtree(refs.data(), n, box, depth, hist.get(), *part, scratch_.local());
+      pool_.give(std::move(refs));
+      return part;
+    }
+    const double box_area = area(box);
+    const Split split = can_split(n, depth, box_area) ? choose_split(*hist, box, n, box_area) : Split{};
+    if (split.axis < 0) {
+      make_leaf(refs.data(), n, depth, box_area, *part);
+      pool_.give(std::move(refs));
+      return part;
+    }
+    const auto [below_box, above_box] = child_boxes(box, split);
+    std::unique_ptr<Histogram> below_hist = child_histogram(depth + 1, below_box);
+    std::unique_ptr<Histogram> above_hist = child_histogram(depth + 1, above_box);
+    // The below side stays in the node's buffer (written in place), the above side gets one.
+    RefBuffer above = pool_.take(n);
+    if (n < 2 * kBlockRefs) {
+      ChildSink b{refs.data(), 0, below_hist.get(), Binner(below_box, bins_)};
+      ChildSink a{above.data(), 0, above_hist.get(), Binner(above_box, bins_)};
+      partition(refs.data(), n, box, split, b, a);
+      refs.set_size(b.count);
+      above.set_size(a.count);
+    } else {
+      partition_blocks(refs, above, box, split, below_box, above_box, below_hist.get(), above_hist.get());
+    }
+    part->axis = split.axis;
+    part->split = split.position;
+    part->tally.cost = options_.traversal_cost * box_area;
+    tbb::parallel_invoke(
+        [&] { part->below = build_part(std::move(refs), below_box, depth + 1, std::move(below_hist)); },
+        [&] { part->above = build_part(std::move(above), above_box, depth + 1, std::move(above_hist)); });
+    return part;
+  }
+
+  std::unique_ptr<Histogram> child_histogram(int depth, const Box& box) const {
+    // Children that must be leaves whatever their count need none; one that has too few
+    // references gets one it does not use (the count is known only after the partition).
+    if (depth >= max_depth_ || !(area(box) > 0.0)) return nullptr;
+    return std::make_unique<Histogram>(bins_);
+  }
+
+  // The partition of a large node: blocks of kBlockRefs references in parallel, the below side
+  // in place inside each block, the above side into the same stretch of a scratch buffer, then
+  // both gathered in block order (the order of one pass over the node).
+  void partition_blocks(RefBuffer& refs, RefBuffer& above, const Box& box, Split split, const Box& below_box,
+                        const Box& above_box, Histogram* below_hist, Histogram* above_hist) {
+    const size_t n = refs.size();
+    const size_t blocks = (n + kBlockRefs - 1) / kBlockRefs;
+    RefBuffer scratch = std::move(above);  // n references
+    std::vector<size_t> below_counts(blocks + 1, 0);
+    std::vector<size_t> above_counts(blocks + 1, 0);
+    std::vector<Histogram> below_hists(below_hist ? blocks : 0, Histogram(bins_));
+    std::vector<Histogram> above_hists(above_hist ? blocks : 0, Histogram(bins_));
+    const Binner below_binner(below_box, bins_);
+    const Binner above_binner(above_box, bins_);
+    tbb::parallel_for(size_t(0), blocks, [&](size_t block) {
+      const size_t start = block * kBlockRefs;
+      const size_t count = std::min(kBlockRefs, n - start);
+      ChildSink b{refs.data() + start, 0, below_hist ? &below_hists[block] : nullptr, below_binner};
+      ChildSink a{scratch.data() + start, 0, above_hist ? &above_hists[block] : nullptr, above_binner};
+      partition(refs.data() + start, count, box, split, b, a);
+      below_counts[block + 1] = b.count;
+      above_counts[block + 1] = a.count;
+    });
+    for (size_t block = 0; block < blocks; ++block) {
+      below_counts[block + 1] += below_counts[block];
+      above_counts[block + 1] += above_counts[block];
+    }
+    RefBuffer below = pool_.take(below_counts[blocks]);
+    below.set_size(below_counts[blocks]);
+    above = pool_.take(above_counts[blocks]);
+    above.set_size(above_counts[blocks]);
+    tbb::parallel_for(size_t(0), blocks, [&](size_t block) {
+      const size_t start = block * kBlockRefs;
+      copy_refs(below.data() + below_counts[block], refs.data() + start, below_counts[block + 1] - below_counts[block]);
+      copy_refs(above.data() + above_counts[block], scratch.data() + start, above_counts[block + 1] - above_counts[block]);
+    });
+    for (const Histogram& h : below_hists) below_hist->merge(h);
+    for (const Histogram& h : above_hists) above_hist->merge(h);
+    pool_.give(std::move(scratch));
+    pool_.give(std::exchange(refs, std::move(below)));
+  }
+
+  // ---- Subtrees of one task --------------------------------------------------------------------
+
+  void build_subtree(const Ref* refs, size_t n, const Box& box, int depth, Histogram* hist, Part& out,
+                     SubtreeScratch& s) {
+    s.arena.set_size(0);
+    s.arena.reserve(std::max<size_t>(4 * n, 64));
+    copy_refs(s.arena.data(), refs, n);
+    s.tasks.clear();
+    if (!hist && can_split(n, depth, area(box))) {  // the root of a small tree: nobody binned it
+      hist = &histogram_slot(s, depth, 0);
+      hist->clear();
+      const Binner binner(box, bins_);
+      for (size_t i = 0; i < n; ++i) hist->add(binner, refs[i]);
+    }
+    s.tasks.push_back(Task{0, n, box, depth, -1, hist});
+    while (!s.tasks.empty()) {
+      const Task task = s.tasks.back();
+      s.tasks.pop_back();
+      process(task, out, s);
+    }
+  }
+
+  // The histogram of a child of a subtree node (its slot by depth and side), or null when the
+  // child must be a leaf.
+  Histogram* bin_child(SubtreeScratch& s, const Ref* refs, size_t n, const Box& box, int depth, int side) const {
+    if (!can_split(n, depth, area(box))) return nullptr;
+    Histogram& hist = histogram_slot(s, depth, side);
+    hist.clear();
+    const Binner binner(box, bins_);
+    for (size_t i = 0; i < n; ++i) hist.add(binner, refs[i]);
+    return &hist;
+  }
+
+  Histogram& histogram_slot(SubtreeScratch& s, int depth, int side) const {
+    const size_t slot = 2 * size_t(depth) + size_t(side);
+    while (s.hists.size() <= slot) s.hists.emplace_back(bins_);
+    return s.hists[slot];
+  }
+
+  void process(const Task& task, Part& out, SubtreeScratch& s) {
+    const Box& box = task.box;
+    const size_t n = task.count;
+    const double box_area = area(box);
+    const Split split =
+        task.hist && can_split(n, task.depth, box_area) ? choose_split(*task.hist, box, n, box_area) : Split{};
+    if (split.axis < 0) {
+      make_leaf(s.arena.data() + task.offset, n, task.depth, box_area, out, task.parent);
+      return;
+    }
+    const auto [below_box, above_box] = child_boxes(box, split);
+    const int child_depth = task.depth + 1;
+    // The above side is written in place (each reference read adds at most one above it, so the
+    // writes never pass the reads), the below side after the node's references: the below child
+    // is built next, on top of the arena.
+    const size_t below_offset = task.offset + n;
+    if (below_offset + n > s.arena.capacity()) {
+      s.arena.set_size(below_offset);  // all that must survive the reallocation
+      s.arena.reserve(std::max(below_offset + n, 2 * s.arena.capacity()));
+    }
+    Ref* refs = s.arena.data() + task.offset;
+    ChildSink b{s.arena.data() + below_offset, 0, nullptr, {}};
+    ChildSink a{refs, 0, nullptr, {}};
+    partition(refs, n, box, split, b, a);
+    // The children are binned after the partition, their references still in cache, and only those
+    // that can split (many are leaves of one reference).
+    Histogram* below_hist = bin_child(s, b.out, b.count, below_box, child_depth, 0);
+    Histogram* above_hist = bin_child(s, a.out, a.count, above_box, child_depth, 1);
+
+    const size_t index = emit(out, glm::vec4(split.position, 0.0f, static_cast<float>(split.axis), 0.0f), task.parent);
+    out.tally.cost += options_.traversal_cost * box_area;
+    s.tasks.push_back(Task{task.offset, a.count, above_box, child_depth, static_cast<int64_t>(index), above_hist});
+    s.tasks.push_back(Task{below_offset, b.count, below_box, child_depth, -1, below_hist});
+  }
+
+  size_t emit(Part& out, const glm::vec4& node, int64_t parent) const {
+    const size_t index = out.nodes.size();
+    if (index >= kKdIndexLimit) throw too_many_nodes();
+    out.nodes.push_back(node);
+    if (parent >= 0) out.nodes[static_cast<size_t>(parent)].y = static_cast<float>(index);
     return index;
   }
 
-  void make_leaf(const Task& task, double box_area) {
-    const Ref* refs = arena_.data() + task.offset;
-    const size_t count = task.count;
+  // ---- Shared by top nodes and subtrees ---------------------------------------------------------
+
+  void make_leaf(const Ref* refs, size_t count, int depth, double box_area, Part& out, int64_t parent = -1) const {
     glm::vec4 node(0.0f, static_cast<float>(count), static_cast<float>(MOBIRT_NODE_LEAF), 0.0f);
     if (count == 1) {
       node.x = static_cast<float>(refs[0].prim);
     } else if (count > 1) {
-      const size_t start = prim_list_->size();
-      if (start + count > kKdIndexLimit) {
-        throw Error(ErrorKind::BadInput,
-                    "kd-tree for " + count_text(positions_.size() / 3) +
-                        " triangles needs more than " + count_text(kKdIndexLimit) +
-                        " leaf references (prim-list entries), the limit of exact float indices "
-                        "(2^24); lower max_depth or turn split_clipping on");
-      }
+      const size_t start = out.prims.size();
+      if (start + count > kKdIndexLimit) throw too_many_prim_references();
       node.x = static_cast<float>(start);
-      for (size_t i = 0; i < count; ++i) prim_list_->push_back(static_cast<float>(refs[i].prim));
+      for (size_t i = 0; i < count; ++i) out.prims.push_back(static_cast<float>(refs[i].prim));
     }
-    emit(node, task.parent);
-    stats_->leaves += 1;
-    if (count == 0) stats_->empty_leaves += 1;
-    stats_->prim_references += count;
-    stats_->max_leaf_size = std::max(stats_->max_leaf_size, count);
-    stats_->max_depth_reached = std::max(stats_->max_depth_reached, task.depth);
-    cost_ += options_.intersection_cost * double(count) * box_area;
+    emit(out, node, parent);
+    Tally& t = out.tally;
+    t.leaves += 1;
+    if (count == 0) t.empty_leaves += 1;
+    t.prim_references += count;
+    t.max_leaf_size = std::max(t.max_leaf_size, count);
+    t.max_depth_reached = std::max(t.max_depth_reached, depth);
+    t.cost += options_.intersection_cost * double(count) * box_area;
   }
 
-  void process(const Task& task, int max_depth) {
-    const Aabb& box = task.box;
-    const glm::dvec3 ext(box.extent());
-    const double box_area = area(ext);
-    const size_t n = task.count;
-    const double leaf_cost = options_.intersection_cost * double(n);
-    if (n <= static_cast<size_t>(std::max(0, options_.max_leaf_prims)) || task.depth >= max_depth ||
-        !(box_area > 0.0)) {
-      make_leaf(task, box_area);
-      return;
-    }
+  static std::pair<Box, Box> child_boxes(const Box& box, Split split) {
+    Box below = box;
+    below.hi[split.axis] = split.position;
+    Box above = box;
+    above.lo[split.axis] = split.position;
+    return {below, above};
+  }
 
-    // ---- Binning: per axis, bin counts of reference minima and maxima.
+  // The sweep over the candidate planes of every active axis. Plane i (1 .. k-1) lies at
+  // lo + i * step; the child areas are linear in i: P_below / P = c + g * i,
+  // P_above / P = c + g * (k - i). The counts are constant between bins that hold no minimum or
+  // maximum and the cost is linear in i there: only the ends of such runs can be the minimum, so
+  // only planes next to a bin that holds one are candidates (and the first and the last plane).
+  Split choose_split(const Histogram& hist, const Box& box, size_t n, double box_area) const {
+    const double leaf_cost = options_.intersection_cost * double(n);
     const int k = bins_;
-    counts_.assign(static_cast<size_t>(6 * k), 0u);
-    const Ref* refs = arena_.data() + task.offset;
-    float scale[3];
-    bool active[3];
+    float best_cost = kInfinity;
+    Split best;
+    const double inv_area = 1.0 / box_area;
+    const double ext[3] = {double(box.hi[0] - box.lo[0]), double(box.hi[1] - box.lo[1]), double(box.hi[2] - box.lo[2])};
     for (int a = 0; a < 3; ++a) {
-      // A box thinner than float can bin (k / width overflows: 0 * inf would be NaN) is not split.
-      active[a] = box.hi[a] > box.lo[a] && std::isfinite(float(k) / (box.hi[a] - box.lo[a]));
-      scale[a] = active[a] ? float(k) / (box.hi[a] - box.lo[a]) : 0.0f;
-    }
-    const float top = float(k - 1);
-    for (size_t i = 0; i < n; ++i) {
-      const Aabb& b = refs[i].box;
-      for (int a = 0; a < 3; ++a) {
-        if (!active[a]) continue;
-        const float fl = std::clamp((b.lo[a] - box.lo[a]) * scale[a], 0.0f, top);
-        const float fh = std::clamp((b.hi[a] - box.lo[a]) * scale[a], 0.0f, top);
-        counts_[static_cast<size_t>((2 * a) * k + static_cast<int>(fl))] += 1;
-        counts_[static_cast<size_t>((2 * a + 1) * k + static_cast<int>(fh))] += 1;
+      if (!Binner::active_axis(box, a, k)) continue;
+      const float o1 = static_cast<float>(ext[(a + 1) % 3]);
+      const float o2 = static_cast<float>(ext[(a + 2) % 3]);
+      const float step = (box.hi[a] - box.lo[a]) / float(k);
+      const SweepAxis axis{
+          hist.mins(a), hist.maxs(a), k, static_cast<uint32_t>(n),
+          static_cast<float>(2.0 * double(o1) * double(o2) * inv_area),
+          static_cast<float>(2.0 * double(step) * (double(o1) + double(o2)) * inv_area),
+          box.lo[a], box.hi[a], step,
+          // Planes computed as lo + i * step are monotone in i; every plane must keep
+          // min_width_ from the node's faces (checked one by one only when the bins are that thin).
+          step >= 2.0f * min_width_};
+      if (k <= 64 && n <= kSparseSweepRefs) {
+        sweep_sparse(axis, a, best_cost, best);
+      } else {
+        sweep(axis, a, best_cost, best);
       }
     }
+    if (best.axis < 0 || !(double(best_cost) < leaf_cost)) return Split{};
+    return best;
+  }
 
-    // ---- Sweep.
-    float best_cost = kInfinity;
-    int best_axis = -1;
-    float best_split = 0.0f;
-    const double inv_area = 1.0 / box_area;
-    // Candidate i (1 .. k-1) lies at lo + i * step; the child areas are linear in i:
-    //   P_below / P = c + g * i, P_above / P = c + g * (k - i).
+  struct SweepAxis {
+    const uint32_t* mins;  // per bin, then 4 zeros
+    const uint32_t* maxs;
+    int bins;
+    uint32_t total;
+    float c;               // P_below / P = c + g * i
+    float g;
+    float lo, hi, step;    // plane i at lo + i * step
+    bool all_valid;        // every plane keeps min_width_ from the faces
+  };
+
+  // Plane i of an axis, with `below` and `above` references on its sides: the plane becomes the
+  // best when its SAH cost is below best_cost (and it keeps min_width_ from the faces).
+  void consider_plane(const SweepAxis& s, int i, uint32_t below, uint32_t above, int axis, float& best_cost,
+                      Split& best) const {
+    const int k = s.bins;
+    const float empty_min_bins = options_.empty_bonus_min_width * float(k);
+    const float pb = s.c + s.g * float(i);
+    const float pa = s.c + s.g * float(k - i);
+    float cost = pb * float(below) + pa * float(above);
+    if ((below == 0 && float(i) >= empty_min_bins) || (above == 0 && float(k - i) >= empty_min_bins)) {
+      cost *= 1.0f - options_.empty_bonus;
+    }
+    cost = options_.traversal_cost + options_.intersection_cost * cost;
+    if (cost < best_cost) {
+      const float position = s.lo + float(i) * s.step;
+      if (!s.all_valid && !(position - s.lo >= min_width_ && s.hi - position >= min_width_)) return;
+      best_cost = cost;
+      best.axis = axis;
+      best.position = position;
+    }
+  }
+
+  // Bit b set when bin b holds a min or a max (bins <= 64).
+  static uint64_t occupied_bins(const SweepAxis& s) {
+    uint64_t bits = 0;
+#if defined(__SSE2__)
+    const __m128i zero = _mm_setzero_si128();
+    for (int b = 0; b < s.bins; b += 4) {
+      const __m128i counts = _mm_or_si128(_mm_loadu_si128(reinterpret_cast<const __m128i*>(s.mins + b)),
+                                          _mm_loadu_si128(reinterpret_cast<const __m128i*>(s.maxs + b)));
+      const int empty = _mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(counts, zero)));
+      bits |= uint64_t(~empty & 0xF) << b;  // the padding's zeros leave bits past the last bin clear
+    }
+#else
+    for (int b = 0; b < s.bins; ++b) bits |= uint64_t((s.mins[b] | s.maxs[b]) != 0) << b;
+#endif
+    return bits;
+  }
+
+  // sweep() for few references (bins <= 64): the candidate planes one by one, from a bit per
+  // occupied bin, instead of every plane.
+  void sweep_sparse(const SweepAxis& s, int axis, float& best_cost, Split& best) const {
+    const int k = s.bins;
+    const uint64_t events = occupied_bins(s);
+    // Plane i is a candidate when bin i or bin i - 1 holds an event; planes 1 and k - 1 always.
+    const uint64_t in_range = (~uint64_t(0) >> (64 - k)) & ~uint64_t(1);  // planes 1 .. k - 1
+    uint64_t planes = ((events | (events << 1)) & in_range) | 2u | (uint64_t(1) << (k - 1));
+    uint64_t pending = events;  // bins not yet added to the counts
+    uint32_t below = 0;
+    uint32_t ended = 0;
+    for (; planes != 0; planes &= planes - 1) {
+      const int i = std::countr_zero(planes);
+      for (uint64_t bins = pending & ((uint64_t(1) << i) - 1); bins != 0; bins &= bins - 1) {
+        const int bin = std::countr_zero(bins);
+        below += s.mins[bin];
+        ended += s.maxs[bin];
+      }
+      pending &= ~((uint64_t(1) << i) - 1);
+      consider_plane(s, i, below, s.total - ended, axis, best_cost, best);
+    }
+  }
+
+  // One axis of the sweep: the first candidate plane of it whose cost is below best_cost and
+  // below every earlier candidate's becomes the best (the order of the first builder's loop).
+  void sweep(const SweepAxis& s, int axis, float& best_cost, Split& best) const {
+    const int k = s.bins;
+#if defined(__SSE2__)
     const float trav = options_.traversal_cost;
     const float isect = options_.intersection_cost;
     const float empty_factor = 1.0f - options_.empty_bonus;
     const float empty_min_bins = options_.empty_bonus_min_width * float(k);
-    for (int a = 0; a < 3; ++a) {
-      if (!active[a]) continue;
-      const float o1 = static_cast<float>(ext[(a + 1) % 3]);
-      const float o2 = static_cast<float>(ext[(a + 2) % 3]);
-      const float step = (box.hi[a] - box.lo[a]) / float(k);
-      const float g = static_cast<float>(2.0 * double(step) * (double(o1) + double(o2)) * inv_area);
-      const float c = static_cast<float>(2.0 * double(o1) * double(o2) * inv_area);
-      // Planes computed as lo + i * step are monotone in i; every plane must keep min_width_
-      // from the node's faces (checked one by one only when the bins are that thin).
-      const bool all_valid = step >= 2.0f * min_width_;
-      const uint32_t* lo_counts = counts_.data() + (2 * a) * k;
-      const uint32_t* hi_counts = counts_.data() + (2 * a + 1) * k;
-      uint32_t below = 0;
-      uint32_t ended = 0;  // references whose max lies in a bin below the plane
-      const uint32_t total = static_cast<uint32_t>(n);
-      for (int i = 1; i < k; ++i) {
-        const uint32_t change_before = lo_counts[i - 1] | hi_counts[i - 1];
-        below += lo_counts[i - 1];
-        ended += hi_counts[i - 1];
-        // The counts are constant between bins that hold no minimum or maximum and the cost is
-        // linear in i there: only the ends of such runs can be the minimum.
-        if (i > 1 && i + 1 < k && change_before == 0 && (lo_counts[i] | hi_counts[i]) == 0) continue;
-        const uint32_t above = total - ended;
-        const float pb = c + g * float(i);
-        const float pa = c + g * float(k - i);
-        float cost = pb * float(below) + pa * float(above);
-        if ((below == 0 && float(i) >= empty_min_bins) || (above == 0 && float(k - i) >= empty_min_bins)) {
-          cost *= empty_factor;
-        }
-        cost = trav + isect * cost;
-        if (cost < best_cost) {
-          if (!all_valid) {
-            const float split = box.lo[a] + float(i) * step;
-            if (!(split - box.lo[a] >= min_width_ && box.hi[a] - split >= min_width_)) continue;
-          }
-          best_cost = cost;
-          best_axis = a;
-          best_split = box.lo[a] + float(i) * step;
-        }
+    // Planes i .. i + 3 in the lanes. The references below plane j are the minima in bins < j:
+    // a running prefix sum of bins j - 1. Costs of planes that are not candidates (or past
+    // k - 1, or too close to a face) become +inf; per lane the first smallest cost is kept with
+    // its plane, then the smallest plane among the lanes that hold the smallest cost wins.
+    const __m128i zero = _mm_setzero_si128();
+    const __m128 one = _mm_set1_ps(1.0f);
+    const __m128 inf = _mm_set1_ps(kInfinity);
+    const __m128 kf = _mm_set1_ps(float(k));
+    const __m128 c = _mm_set1_ps(s.c);
+    const __m128 g = _mm_set1_ps(s.g);
+    const __m128 min_bins = _mm_set1_ps(empty_min_bins);
+    const __m128 factor = _mm_set1_ps(empty_factor);
+    const __m128 vtrav = _mm_set1_ps(trav);
+    const __m128 visect = _mm_set1_ps(isect);
+    const __m128 lo = _mm_set1_ps(s.lo);
+    const __m128 hi = _mm_set1_ps(s.hi);
+    const __m128 step = _mm_set1_ps(s.step);
+    const __m128 min_width = _mm_set1_ps(min_width_);
+    const __m128i total = _mm_set1_epi32(static_cast<int32_t>(s.total));
+    __m128i below_before = zero;
+    __m128i ended_before = zero;
+    __m128 fi = _mm_set_ps(4.0f, 3.0f, 2.0f, 1.0f);
+    __m128 lane_best = inf;
+    __m128 lane_plane = _mm_setzero_ps();
+    for (int i = 1; i < k; i += 4, fi = _mm_add_ps(fi, _mm_set1_ps(4.0f))) {
+      const __m128i min_prev = _mm_loadu_si128(reinterpret_cast<const __m128i*>(s.mins + i - 1));
+      const __m128i max_prev = _mm_loadu_si128(reinterpret_cast<const __m128i*>(s.maxs + i - 1));
+      const __m128i min_cur = _mm_loadu_si128(reinterpret_cast<const __m128i*>(s.mins + i));
+      const __m128i max_cur = _mm_loadu_si128(reinterpret_cast<const __m128i*>(s.maxs + i));
+      __m128i below = _mm_add_epi32(min_prev, _mm_slli_si128(min_prev, 4));
+      below = _mm_add_epi32(_mm_add_epi32(below, _mm_slli_si128(below, 8)), below_before);
+      __m128i ended = _mm_add_epi32(max_prev, _mm_slli_si128(max_prev, 4));
+      ended = _mm_add_epi32(_mm_add_epi32(ended, _mm_slli_si128(ended, 8)), ended_before);
+      below_before = _mm_shuffle_epi32(below, 0xFF);
+      ended_before = _mm_shuffle_epi32(ended, 0xFF);
+      const __m128i above = _mm_sub_epi32(total, ended);
+      const __m128 fk = _mm_sub_ps(kf, fi);
+      const __m128 pb = _mm_add_ps(c, _mm_mul_ps(g, fi));
+      const __m128 pa = _mm_add_ps(c, _mm_mul_ps(g, fk));
+      __m128 cost = _mm_add_ps(_mm_mul_ps(pb, _mm_cvtepi32_ps(below)), _mm_mul_ps(pa, _mm_cvtepi32_ps(above)));
+      const __m128 empty =
+          _mm_or_ps(_mm_and_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(below, zero)), _mm_cmpge_ps(fi, min_bins)),
+                    _mm_and_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(above, zero)), _mm_cmpge_ps(fk, min_bins)));
+      cost = _mm_or_ps(_mm_and_ps(empty, _mm_mul_ps(cost, factor)), _mm_andnot_ps(empty, cost));
+      cost = _mm_add_ps(vtrav, _mm_mul_ps(visect, cost));
+      // A candidate: an event in bin i or i - 1, or the first or the last plane; none past k - 1.
+      const __m128i events = _mm_or_si128(_mm_or_si128(min_prev, max_prev), _mm_or_si128(min_cur, max_cur));
+      __m128 candidate = _mm_or_ps(_mm_cmpeq_ps(fi, one), _mm_cmpeq_ps(fk, one));
+      candidate = _mm_or_ps(candidate, _mm_andnot_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(events, zero)),
+                                                     _mm_castsi128_ps(_mm_set1_epi32(-1))));
+      candidate = _mm_and_ps(candidate, _mm_and_ps(_mm_cmpge_ps(fk, one), _mm_cmpord_ps(cost, cost)));
+      if (!s.all_valid) {
+        const __m128 position = _mm_add_ps(lo, _mm_mul_ps(fi, step));
+        candidate = _mm_and_ps(candidate, _mm_and_ps(_mm_cmpge_ps(_mm_sub_ps(position, lo), min_width),
+                                                     _mm_cmpge_ps(_mm_sub_ps(hi, position), min_width)));
+      }
+      const __m128 better = _mm_and_ps(candidate, _mm_cmplt_ps(cost, lane_best));
+      lane_best = _mm_or_ps(_mm_and_ps(better, cost), _mm_andnot_ps(better, lane_best));
+      lane_plane = _mm_or_ps(_mm_and_ps(better, fi), _mm_andnot_ps(better, lane_plane));
+    }
+    alignas(16) float costs[4];
+    alignas(16) float planes[4];
+    _mm_store_ps(costs, lane_best);
+    _mm_store_ps(planes, lane_plane);
+    int lane = 0;
+    for (int j = 1; j < 4; ++j) {
+      if (costs[j] < costs[lane] || (costs[j] == costs[lane] && planes[j] < planes[lane])) lane = j;
+    }
+    if (costs[lane] < best_cost) {
+      best_cost = costs[lane];
+      best.axis = axis;
+      best.position = s.lo + planes[lane] * s.step;
+    }
+#else
+    uint32_t below = 0;
+    uint32_t ended = 0;  // references whose max lies in a bin below the plane
+    for (int i = 1; i < k; ++i) {
+      const uint32_t change_before = s.mins[i - 1] | s.maxs[i - 1];
+      below += s.mins[i - 1];
+      ended += s.maxs[i - 1];
+      if (i > 1 && i + 1 < k && (change_before | s.mins[i] | s.maxs[i]) == 0) continue;
+      consider_plane(s, i, below, s.total - ended, axis, best_cost, best);
+    }
+#endif
+  }
+
+  // Sends each reference to the side(s) of the plane its box reaches, in order (so leaf lists stay
+  // sorted by primitive index). Either output may be `refs` itself: each reference read adds at
+  // most one to each side, after it has been read.
+  void partition(const Ref* refs, size_t n, const Box& box, Split split, ChildSink& below,
+                 ChildSink& above) const {
+    const int a = split.axis;
+    const float s = split.position;
+    for (size_t i = 0; i < n; ++i) {
+      const Ref r = refs[i];
+      if (r.hi[a] < s) {
+        below.push(r);
+      } else if (r.lo[a] > s) {
+        above.push(r);
+      } else {
+        straddle(r, box, split, below, above);
       }
     }
-    if (best_axis < 0 || !(double(best_cost) < leaf_cost)) {
-      make_leaf(task, box_area);
+  }
+
+  // A reference whose box reaches the plane: referenced on both sides, its box clipped to each
+  // side's part of the triangle (split clipping) or cut at the plane.
+  void straddle(const Ref& r, const Box& box, Split split, ChildSink& below, ChildSink& above) const {
+    const int a = split.axis;
+    const float s = split.position;
+    if (!options_.split_clipping) {
+      below.push(r);
+      above.push(r);
       return;
     }
-
-    // ---- Partition (order-preserving, so leaf lists stay sorted by primitive index).
-    const int a = best_axis;
-    const float s = best_split;
-    Aabb below_box = box;
-    below_box.hi[a] = s;
-    Aabb above_box = box;
-    above_box.lo[a] = s;
-    below_.clear();
-    above_.clear();
-    const bool clipping = options_.split_clipping;
-    for (size_t i = 0; i < n; ++i) {
-      const Ref& r = refs[i];
-      const float lo = r.box.lo[a];
-      const float hi = r.box.hi[a];
-      const bool to_below = lo <= s;
-      const bool to_above = hi >= s;
-      if (!(to_below && to_above)) {
-        if (to_below) {
-          below_.push_back(r);
-        } else {
-          above_.push_back(r);
-        }
-        continue;
+    Ref rb = r;
+    rb.hi[a] = s;
+    Ref ra = r;
+    ra.lo[a] = s;
+    if (r.lo[a] < s && s < r.hi[a]) {
+      Box cb;
+      Box ca;
+      const int sides = clip_and_split(positions_.data() + 3 * size_t(r.prim), box, a, s, cb, ca);
+      const bool hit_b = (sides & 1) != 0;
+      const bool hit_a = (sides & 2) != 0;
+      if (hit_b || hit_a) {  // both empty can only be rounding: keep the box clip then
+        if (hit_b && intersect(rb, cb)) below.push(rb);
+        if (hit_a && intersect(ra, ca)) above.push(ra);
+        return;
       }
-      if (!clipping) {
-        below_.push_back(r);
-        above_.push_back(r);
-        continue;
-      }
-      Ref rb = r;
-      rb.box.hi[a] = s;
-      Ref ra = r;
-      ra.box.lo[a] = s;
-      if (lo < s && s < hi) {
-        const glm::vec3* v = positions_.data() + 3 * size_t(r.prim);
-        Aabb cb;
-        Aabb ca;
-        const int sides = clip_and_split(v[0], v[1], v[2], box, a, s, cb, ca);
-        const bool hit_b = (sides & 1) != 0;
-        const bool hit_a = (sides & 2) != 0;
-        if (hit_b || hit_a) {  // both empty can only be rounding: keep the box clip then
-          if (hit_b) {
-            rb.box = intersect(rb.box, cb);
-            if (!rb.box.empty()) below_.push_back(rb);
-          }
-          if (hit_a) {
-            ra.box = intersect(ra.box, ca);
-            if (!ra.box.empty()) above_.push_back(ra);
-          }
-          continue;
-        }
-      }
-      below_.push_back(rb);
-      above_.push_back(ra);
     }
+    below.push(rb);
+    above.push(ra);
+  }
 
-    const size_t nb = below_.size();
-    const size_t na = above_.size();
-    if (arena_.size() < task.offset + na + nb) arena_.resize(task.offset + na + nb);
-    std::copy(above_.begin(), above_.end(), arena_.begin() + static_cast<std::ptrdiff_t>(task.offset));
-    std::copy(below_.begin(), below_.end(),
-              arena_.begin() + static_cast<std::ptrdiff_t>(task.offset + na));
+  // r's box cut down to `box`; false when nothing is left.
+  static bool intersect(Ref& r, const Box& box) {
+    bool empty = false;
+    for (int a = 0; a < 3; ++a) {
+      r.lo[a] = std::max(r.lo[a], box.lo[a]);
+      r.hi[a] = std::min(r.hi[a], box.hi[a]);
+      empty = empty || r.lo[a] > r.hi[a];
+    }
+    return !empty;
+  }
 
-    const size_t index =
-        emit(glm::vec4(s, 0.0f, static_cast<float>(a), 0.0f), task.parent);
-    cost_ += options_.traversal_cost * box_area;
-    tasks_.push_back(Task{task.offset, na, above_box, task.depth + 1, static_cast<int64_t>(index)});
-    tasks_.push_back(Task{task.offset + na, nb, below_box, task.depth + 1, -1});
+  // ---- Layout -----------------------------------------------------------------------------------
+
+  static void total(Part& part) {
+    if (part.axis < 0) {
+      part.node_total = part.nodes.size();
+      part.prim_total = part.prims.size();
+      return;
+    }
+    total(*part.below);
+    total(*part.above);
+    part.node_total = 1 + part.below->node_total + part.above->node_total;
+    part.prim_total = part.below->prim_total + part.above->prim_total;
+    Tally whole = part.tally;
+    whole.add(part.below->tally);
+    whole.add(part.above->tally);
+    part.tally = whole;
+  }
+
+  // Depth first: a top node, its below child's part next, then its above child's part.
+  static void lay_out(const Part& part, size_t node_base, size_t prim_base, FlatKdTree& tree) {
+    if (part.axis >= 0) {
+      const size_t above = node_base + 1 + part.below->node_total;
+      tree.nodes[node_base] = glm::vec4(part.split, static_cast<float>(above), static_cast<float>(part.axis), 0.0f);
+      tbb::parallel_invoke([&] { lay_out(*part.below, node_base + 1, prim_base, tree); },
+                           [&] { lay_out(*part.above, above, prim_base + part.below->prim_total, tree); });
+      return;
+    }
+    const float node_offset = static_cast<float>(node_base);
+    const float prim_offset = static_cast<float>(prim_base);
+    glm::vec4* out = tree.nodes.data() + node_base;
+    for (size_t i = 0; i < part.nodes.size(); ++i) {
+      glm::vec4 node = part.nodes[i];
+      // Exact: every index and every sum stays below 2^24 (checked before the layout).
+      if (node.z != static_cast<float>(MOBIRT_NODE_LEAF)) {
+        node.y += node_offset;
+      } else if (node.y > 1.0f) {
+        node.x += prim_offset;
+      }
+      out[i] = node;
+    }
+    std::copy(part.prims.begin(), part.prims.end(), tree.prim_list.begin() + static_cast<std::ptrdiff_t>(prim_base));
+  }
+
+  Error too_many_nodes() const {
+    return Error(ErrorKind::BadInput,
+                 "kd-tree for " + count_text(triangle_count_) + " triangles needs more than " +
+                     count_text(kKdIndexLimit) +
+                     " nodes, the limit of exact float indices (2^24) in the node texture; "
+                     "lower max_depth or raise max_leaf_prims");
+  }
+
+  Error too_many_prim_references() const {
+    return Error(ErrorKind::BadInput,
+                 "kd-tree for " + count_text(triangle_count_) + " triangles needs more than " +
+                     count_text(kKdIndexLimit) +
+                     " leaf references (prim-list entries), the limit of exact float indices "
+                     "(2^24); lower max_depth or turn split_clipping on");
   }
 
   std::span<const glm::vec3> positions_;
   const KdBuildOptions& options_;
   int bins_;
-  std::vector<Ref> arena_;
-  std::vector<Ref> below_;
-  std::vector<Ref> above_;
-  std::vector<Task> tasks_;
-  std::vector<uint32_t> counts_;
-  std::vector<glm::vec4>* nodes_ = nullptr;
-  std::vector<float>* prim_list_ = nullptr;
-  KdBuildStats* stats_ = nullptr;
-  double cost_ = 0.0;
+  size_t triangle_count_;
+  int max_depth_ = 0;
   float min_width_ = std::numeric_limits<float>::min();
+  BufferPool pool_;
+  tbb::enumerable_thread_specific<SubtreeScratch> scratch_;
 };
 
 }  // namespace
@@ -489,7 +1030,19 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, const KdBuildOptio
     throw Error(ErrorKind::BadInput,
                 "kd-tree: bins must be at least 2 (got " + std::to_string(options.bins) + ")");
   }
-  return Builder(positions, options).build();
+  if (options.bins > kKdMaxBins) {  // each thread keeps two histograms per tree level
+    throw Error(ErrorKind::BadInput, "kd-tree: bins must be at most " + std::to_string(kKdMaxBins) + " (got " +
+                                         std::to_string(options.bins) + ")");
+  }
+  if (options.threads < 0) {
+    throw Error(ErrorKind::BadInput, "kd-tree: threads must be 0 (all) or more (got " +
+                                         std::to_string(options.threads) + ")");
+  }
+  Builder builder(positions, options);
+  if (options.threads == 0) return builder.build();
+  // More threads than the machine has would only make TBB warn (the tree is the same anyway).
+  tbb::task_arena arena(std::min(options.threads, tbb::info::default_concurrency()));
+  return arena.execute([&] { return builder.build(); });
 }
 
 }  // namespace mobirt

@@ -1,0 +1,17 @@
+// mobirt_microbench: kd-tree build (1 and 2 threads) beside Embree's BVH build on the same
+// triangles, hit decoding, primary ray generation and atlas packing. See bench/CMakeLists.txt.
+#include <benchmark/benchmark.h>
+
+#include "benchmarks.h"
+
+int main(int argc, char** argv) {
+  mobirt::bench::register_kdtree_benchmarks();
+  mobirt::bench::register_embree_benchmarks();
+  mobirt::bench::register_raytree_benchmarks();
+  mobirt::bench::register_atlas_benchmarks();
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}

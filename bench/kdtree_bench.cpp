@@ -1,0 +1,38 @@
+// KdBuild/<mesh>/threads:<n>: build_kdtree (binned SAH, default options: 32 bins, pbrt costs,
+// split clipping) from the triangle positions to the flat texel arrays, as every frame does.
+#include <benchmark/benchmark.h>
+
+#include <string>
+
+#include "accel/kdtree.h"
+#include "bench_meshes.h"
+#include "benchmarks.h"
+
+namespace mobirt::bench {
+
+void register_kdtree_benchmarks() {
+  for (BenchMesh* mesh : build_meshes()) {
+    for (int threads : {1, 2}) {
+      const std::string name = "KdBuild/" + mesh->name() + "/threads:" + std::to_string(threads);
+      benchmark::RegisterBenchmark(name.c_str(), [mesh, threads](benchmark::State& state) {
+        const std::vector<glm::vec3>& positions = mesh->positions();
+        KdBuildOptions options;
+        options.threads = threads;
+        KdBuildStats stats;
+        for (auto _ : state) {
+          FlatKdTree tree = build_kdtree(positions, options);
+          benchmark::DoNotOptimize(tree.nodes.data());
+          stats = tree.stats;
+        }
+        const double triangles = double(positions.size() / 3);
+        state.counters["tris"] = triangles;
+        state.counters["tris/s"] = benchmark::Counter(triangles, benchmark::Counter::kIsIterationInvariantRate);
+        state.counters["sah"] = stats.sah_cost;
+        state.counters["nodes"] = double(stats.nodes);
+        state.counters["refs/tri"] = triangles > 0 ? double(stats.prim_references) / triangles : 0.0;
+      })->Unit(benchmark::kMillisecond)->UseRealTime();
+    }
+  }
+}
+
+}  // namespace mobirt::bench

@@ -1,0 +1,79 @@
+// PrimaryRays/<w>x<h>: the CPU's ray generation of every frame (raytree/rays.h).
+// DecodeHits/toaster/<w>x<h>: decoding one traversal pass's read-back (raytree/hits.h) for the
+// toaster scene's primary rays at the paper's 400x240, with its lights: the texels are what the
+// GPU would return (closest hit and shadow mask, computed once on the CPU before timing), so the
+// batch has the scene's real mix of hits, misses and shadow bits.
+#include <benchmark/benchmark.h>
+
+#include <string>
+#include <vector>
+
+#include "accel/kdtree.h"
+#include "bench_meshes.h"
+#include "benchmarks.h"
+#include "core/camera.h"
+#include "raytree/hits.h"
+#include "raytree/packing.h"
+#include "raytree/rays.h"
+
+namespace mobirt::bench {
+
+namespace {
+
+Camera scene_camera(const Scene& scene, int width, int height) {
+  return scene.camera ? *scene.camera : frame_box(scene.bounds(), 0.7854f, float(width) / float(height));
+}
+
+void primary_ray_generation(benchmark::State& state) {
+  const int width = int(state.range(0));
+  const int height = int(state.range(1));
+  const Camera camera = scene_camera(project_scene_loaded("toaster"), width, height);
+  for (auto _ : state) {
+    RayBatch rays = primary_rays(camera, width, height);
+    benchmark::DoNotOptimize(rays.origin.data());
+  }
+  state.counters["rays/s"] =
+      benchmark::Counter(double(width) * double(height), benchmark::Counter::kIsIterationInvariantRate);
+}
+
+void hit_decoding(benchmark::State& state) {
+  const int width = int(state.range(0));
+  const int height = int(state.range(1));
+  const Scene& scene = project_scene_loaded("toaster");
+  const FlatKdTree tree = build_kdtree(scene.mesh.positions);
+  const RayBatch rays = primary_rays(scene_camera(scene, width, height), width, height);
+  const ShadowSettings shadows;
+  const Packing packing = choose_packing(scene.mesh.triangle_count(), int(scene.lights.size()), scene.source);
+  std::vector<uint32_t> texels(rays.count());
+  for (uint32_t i = 0; i < rays.count(); ++i) {
+    const Ray ray = rays.ray(i);
+    const Hit hit = traverse(tree, ray);
+    const uint32_t mask = hit.valid() ? shadow_mask(tree, scene.lights, hit.prim, ray, hit.t, shadows, -1) : 0u;
+    texels[i] = pack_trace(packing, uint32_t(hit.prim + 1), mask);
+  }
+  DecodeStats stats;
+  for (auto _ : state) {
+    std::vector<SurfaceHit> hits = decode_hits(scene, tree, rays, texels, packing, scene.lights, shadows, &stats);
+    benchmark::DoNotOptimize(hits.data());
+  }
+  state.counters["rays"] = double(rays.count());
+  state.counters["hits"] = double(stats.hits);
+  state.counters["rays/s"] =
+      benchmark::Counter(double(rays.count()), benchmark::Counter::kIsIterationInvariantRate);
+}
+
+}  // namespace
+
+void register_raytree_benchmarks() {
+  benchmark::RegisterBenchmark("PrimaryRays", primary_ray_generation)
+      ->Args({400, 240})
+      ->Args({1920, 1080})
+      ->ArgNames({"w", "h"})
+      ->Unit(benchmark::kMicrosecond);
+  benchmark::RegisterBenchmark("DecodeHits/toaster", hit_decoding)
+      ->Args({400, 240})
+      ->ArgNames({"w", "h"})
+      ->Unit(benchmark::kMicrosecond);
+}
+
+}  // namespace mobirt::bench

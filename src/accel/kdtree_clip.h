@@ -1,0 +1,23 @@
+// Split clipping for the kd-tree build (kdtree_build.cpp): the bounds of the parts of a triangle
+// inside a node box on each side of a split plane, computed in double precision (Sutherland-
+// Hodgman) and rounded outwards to float, so that a reference's box is the tightest float box
+// that contains its part of the triangle.
+#pragma once
+
+#include <glm/glm.hpp>
+
+namespace mobirt::kdclip {
+
+// An axis-aligned box with indexable bounds (glm's operator[] is a switch).
+struct Box {
+  float lo[3];
+  float hi[3];
+};
+
+// The triangle v[0..2] clipped against `box` (inclusive), then split by the plane
+// x[axis] = split: `below` gets the bounds of the part with x[axis] <= split, `above` of the part
+// with x[axis] >= split, each rounded outwards to float. Returns bit 1 when the below part is not
+// empty, bit 2 when the above part is not (0: the triangle misses the box).
+int clip_and_split(const glm::vec3* v, const Box& box, int axis, float split, Box& below, Box& above);
+
+}  // namespace mobirt::kdclip
