@@ -3,8 +3,10 @@
 #include <benchmark/benchmark.h>
 
 #include "benchmarks.h"
+#include "core/memory.h"
 
 int main(int argc, char** argv) {
+  mobirt::retain_freed_memory();  // as the mobirt command does: no page faults per frame buffer
   mobirt::bench::register_kdtree_benchmarks();
   mobirt::bench::register_embree_benchmarks();
   mobirt::bench::register_raytree_benchmarks();

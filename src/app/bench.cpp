@@ -534,6 +534,7 @@ int cmd_bench(const std::vector<std::string>& args) {
   }
 
   o.backend_options.pipeline_cache_dir = default_pipeline_cache_dir();
+  o.settings.kd.threads = int(o.threads);  // the kd-tree build gets the cores the CPU columns get
   std::vector<GpuColumn> columns;
   for (const std::string& b : o.backends) {
     columns.push_back({b == "vulkan" ? "mobirt" : "mobirt_gles", create_backend(b, o.backend_options, kHelp)});
