@@ -2,8 +2,16 @@
 // triangles, hit decoding, primary ray generation and atlas packing. See bench/CMakeLists.txt.
 #include <benchmark/benchmark.h>
 
+#include <ctime>
+
 #include "benchmarks.h"
 #include "core/memory.h"
+
+double mobirt::bench::process_cpu_ms() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return double(t.tv_sec) * 1e3 + double(t.tv_nsec) * 1e-6;
+}
 
 int main(int argc, char** argv) {
   mobirt::retain_freed_memory();  // as the mobirt command does: no page faults per frame buffer

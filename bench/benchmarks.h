@@ -4,6 +4,10 @@
 
 namespace mobirt::bench {
 
+// CPU time of the whole process (every thread) in milliseconds: Google Benchmark's CPU column
+// counts the main thread only, which says nothing about the work of a parallel build.
+double process_cpu_ms();
+
 void register_kdtree_benchmarks();
 void register_embree_benchmarks();
 void register_raytree_benchmarks();

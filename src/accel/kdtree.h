@@ -14,10 +14,10 @@
 
 namespace mobirt {
 
-// SAH parameters, named as in pbrt's KdTreeAggregate.
 // The most bins a build accepts (the CLI's limit too).
 constexpr int kKdMaxBins = 1024;
 
+// SAH parameters, named as in pbrt's KdTreeAggregate.
 struct KdBuildOptions {
   int bins = 32;                 // candidate split planes per axis and node, 2 .. kKdMaxBins
   float traversal_cost = 1.0f;

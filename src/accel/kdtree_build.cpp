@@ -480,7 +480,10 @@ class Builder {
       pool_.give(std::move(refs));
       return part;
     }
-    const auto [below_box, above_box] = child_boxes(box, split);
+    // Named boxes, not a structured binding: the lambdas below capture them (clang < 16 cannot).
+    const std::pair<Box, Box> children = child_boxes(box, split);
+    const Box& below_box = children.first;
+    const Box& above_box = children.second;
     std::unique_ptr<Histogram> below_hist = child_histogram(depth + 1, below_box);
     std::unique_ptr<Histogram> above_hist = child_histogram(depth + 1, above_box);
     // The below side stays in the node's buffer (written in place), the above side gets one.
