@@ -6,6 +6,7 @@
 #include <glm/glm.hpp>
 
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -46,6 +47,11 @@ float scene_offset(const Aabb& bounds, float epsilon);  // epsilon x the box's l
 // Shadow mask of a hit on the CPU, the same rays as glsl/traverse.glsl's shadow_mask().
 uint32_t shadow_mask(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
                      const Ray& ray, float t, const ShadowSettings& settings, int stack_depth);
+
+// The shadow rays the traversal pass casts for this hit, one entry per light (none for a light
+// that cannot light it), for profiling tools (tools/profile/simd_stats.cpp).
+std::vector<std::optional<Ray>> shadow_rays(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
+                                            const Ray& ray, float t, const ShadowSettings& settings);
 
 // How many shadow rays the traversal pass cast for this hit (for rays-per-second figures).
 uint32_t shadow_ray_count(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
