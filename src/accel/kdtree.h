@@ -114,6 +114,20 @@ struct TraversalStats {
   }
 };
 
+// The walk as the loops of glsl/traverse.glsl run it, for SIMD simulations
+// (tools/profile/simd_stats.cpp): one segment per leaf with primitives, the iterations of the node
+// loop that led to it (one per node fetched, interior or leaf, the first also closing the previous
+// leaf) and the triangles tested there; a walk that ends by closing a leaf (not by an any-hit)
+// ends with a segment of the node-loop iterations after the last leaf, plus the closing one, and
+// no triangles.
+struct TraversalTrace {
+  struct Segment {
+    uint32_t node_iterations = 0;
+    uint32_t triangle_tests = 0;
+  };
+  std::vector<Segment> segments;
+};
+
 // Closest hit in [ray.tmin, ray.tmax] by traversal of the flattened arrays.
 // stack_depth < 0: a full stack; 0: pure kd-restart; N > 0: a short stack of N entries that drops
 // its oldest entry on overflow and restarts from the root when it runs dry (Horn et al. 2007),
@@ -124,14 +138,14 @@ Hit traverse(const FlatKdTree& tree, const Ray& ray, int stack_depth = -1);
 // more than max_steps steps stops with a miss and stats.capped = 1 (the GPU then reports "capped"
 // and the CPU traces that ray without a cap).
 Hit traverse(const FlatKdTree& tree, const Ray& ray, int stack_depth, TraversalStats& stats,
-             int64_t max_steps = -1);
+             int64_t max_steps = -1, TraversalTrace* trace = nullptr);
 
 // Any hit in [ray.tmin, ray.tmax]: shadow rays.
 bool occluded(const FlatKdTree& tree, const Ray& ray, int stack_depth = -1);
 
 // The same, with counters and the loop cap (a capped call returns false with stats.capped = 1).
 bool occluded(const FlatKdTree& tree, const Ray& ray, int stack_depth, TraversalStats& stats,
-              int64_t max_steps = -1);
+              int64_t max_steps = -1, TraversalTrace* trace = nullptr);
 
 // Closest hit by testing every triangle: the oracle for the kd-tree tests.
 Hit brute_force(const FlatKdTree& tree, const Ray& ray);

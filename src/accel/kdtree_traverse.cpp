@@ -138,10 +138,33 @@ class ShortStack {
   int size_ = 0;
 };
 
+// Records TraversalTrace segments when a trace is wanted.
+class TraceRecorder {
+ public:
+  explicit TraceRecorder(TraversalTrace* trace) : trace_(trace) {
+    if (trace_) trace_->segments.clear();
+  }
+  void node() { ++node_iterations_; }
+  void leaf(uint32_t triangle_tests) {
+    if (!trace_) return;
+    trace_->segments.push_back({node_iterations_, triangle_tests});
+    node_iterations_ = 0;
+  }
+  // The walk ends in the node loop: the iteration that closes the last leaf ends it.
+  void end() {
+    if (trace_) trace_->segments.push_back({node_iterations_ + 1, 0});
+  }
+
+ private:
+  TraversalTrace* trace_;
+  uint32_t node_iterations_ = 0;
+};
+
 template <bool kAnyHit>
 Hit traverse_impl(const FlatKdTree& tree, const Ray& ray, int stack_depth, TraversalStats& stats,
-                  int64_t max_steps) {
+                  int64_t max_steps, TraversalTrace* trace) {
   stats = TraversalStats{};
+  TraceRecorder recorder(trace);
   Hit best;
   float t0 = 0.0f;
   float t1 = 0.0f;
@@ -167,6 +190,7 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& ray, int stack_depth, Trave
   bool strict = false;
   for (;;) {
     const glm::vec4 n = nodes[node];
+    recorder.node();
     if (n.z != static_cast<float>(MOBIRT_NODE_LEAF)) {
       if (stats.steps >= cap) {
         stats.capped = 1;
@@ -215,9 +239,16 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& ray, int stack_depth, Trave
       const int32_t prim = checked_index(
           count == 1 ? n.x : prim_list[static_cast<size_t>(checked_index(n.x + float(i), tree.prim_list.size(), "prim-list entry"))],
           tree.triangles.size() / MOBIRT_TEXELS_PER_TRIANGLE, "primitive");
-      if (intersect_triangle(tree, prim, ray, best) && kAnyHit) return best;
+      if (intersect_triangle(tree, prim, ray, best) && kAnyHit) {
+        recorder.leaf(uint32_t(i + 1));
+        return best;
+      }
     }
-    if (best.t <= tmax) return best;
+    if (count > 0) recorder.leaf(uint32_t(count));
+    if (best.t <= tmax) {
+      recorder.end();
+      return best;
+    }
     if (!stack.empty()) {
       const Entry e = stack.pop();
       ++stats.pops;
@@ -226,6 +257,7 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& ray, int stack_depth, Trave
       tmax = e.tmax;
       strict = false;
     } else if (tmax >= scene_tmax) {
+      recorder.end();
       return best;
     } else {
       ++stats.restarts;
@@ -241,23 +273,23 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& ray, int stack_depth, Trave
 }  // namespace
 
 Hit traverse(const FlatKdTree& tree, const Ray& ray, int stack_depth, TraversalStats& stats,
-             int64_t max_steps) {
-  return traverse_impl<false>(tree, ray, stack_depth, stats, max_steps);
+             int64_t max_steps, TraversalTrace* trace) {
+  return traverse_impl<false>(tree, ray, stack_depth, stats, max_steps, trace);
 }
 
 Hit traverse(const FlatKdTree& tree, const Ray& ray, int stack_depth) {
   TraversalStats stats;
-  return traverse_impl<false>(tree, ray, stack_depth, stats, -1);
+  return traverse_impl<false>(tree, ray, stack_depth, stats, -1, nullptr);
 }
 
 bool occluded(const FlatKdTree& tree, const Ray& ray, int stack_depth, TraversalStats& stats,
-              int64_t max_steps) {
-  return traverse_impl<true>(tree, ray, stack_depth, stats, max_steps).valid();
+              int64_t max_steps, TraversalTrace* trace) {
+  return traverse_impl<true>(tree, ray, stack_depth, stats, max_steps, trace).valid();
 }
 
 bool occluded(const FlatKdTree& tree, const Ray& ray, int stack_depth) {
   TraversalStats stats;
-  return traverse_impl<true>(tree, ray, stack_depth, stats, -1).valid();
+  return traverse_impl<true>(tree, ray, stack_depth, stats, -1, nullptr).valid();
 }
 
 Hit brute_force(const FlatKdTree& tree, const Ray& ray) {
