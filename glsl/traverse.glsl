@@ -102,8 +102,8 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
   for (int leaf = 0; leaf < MAX_STEPS; ++leaf) {
     // Down to the next leaf with primitives, one node per iteration; empty leaves are closed on
     // the way.
-    vec4 n = vec4(0.0);
-    bool at_leaf = false;
+    float leaf_first = 0.0;
+    float leaf_count = 0.0;  // > 0: the lane stands at a leaf with primitives
     for (int i = 0; i < MAX_STEPS; ++i) {
       if (leaf_done) {
         leaf_done = false;
@@ -141,63 +141,62 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
           node = 0.0;
         }
       }
-      n = DATA_TEXEL(u_nodes, node);
-      if (n.b == MOBIRT_NODE_LEAF && n.g > 0.0) {
-        at_leaf = true;
+      vec4 n = DATA_TEXEL(u_nodes, node);
+      bool leaf = n.b == MOBIRT_NODE_LEAF;
+      if (leaf && n.g > 0.0) {
+        leaf_first = n.r;
+        leaf_count = n.g;
         break;
       }
       if (steps >= MAX_STEPS) return vec3(best_prim, best_t, 1.0);
       steps = steps + 1;
-      if (n.b == MOBIRT_NODE_LEAF) {
-        leaf_done = true;  // an empty leaf
-      } else {
-        float split = n.r;
-        float oa = component(o, n.b);
-        float da = component(d, n.b);
-        float tsplit = (split - oa) * component(inv_d, n.b);
-        bool below_first = oa < split || (oa == split && da <= 0.0);
-        float near_child = below_first ? node + 1.0 : n.g;
-        float far_child = below_first ? n.g : node + 1.0;
-        if (tsplit > tmax || tsplit <= 0.0 || tsplit != tsplit) {
-          node = near_child;
-        } else if (tsplit < tmin || (strict && tsplit == tmin)) {
-          node = far_child;
-        } else {
-          if (STACK_DEPTH > 0) {
-            // Push (far_child, tmax); the guards fold away with the constant STACK_DEPTH.
-            if (STACK_DEPTH > 30) s15 = vec4(s14.zw, s15.xy);
-            if (STACK_DEPTH > 28) s14 = vec4(s13.zw, s14.xy);
-            if (STACK_DEPTH > 26) s13 = vec4(s12.zw, s13.xy);
-            if (STACK_DEPTH > 24) s12 = vec4(s11.zw, s12.xy);
-            if (STACK_DEPTH > 22) s11 = vec4(s10.zw, s11.xy);
-            if (STACK_DEPTH > 20) s10 = vec4(s9.zw, s10.xy);
-            if (STACK_DEPTH > 18) s9 = vec4(s8.zw, s9.xy);
-            if (STACK_DEPTH > 16) s8 = vec4(s7.zw, s8.xy);
-            if (STACK_DEPTH > 14) s7 = vec4(s6.zw, s7.xy);
-            if (STACK_DEPTH > 12) s6 = vec4(s5.zw, s6.xy);
-            if (STACK_DEPTH > 10) s5 = vec4(s4.zw, s5.xy);
-            if (STACK_DEPTH > 8) s4 = vec4(s3.zw, s4.xy);
-            if (STACK_DEPTH > 6) s3 = vec4(s2.zw, s3.xy);
-            if (STACK_DEPTH > 4) s2 = vec4(s1.zw, s2.xy);
-            if (STACK_DEPTH > 2) s1 = vec4(s0.zw, s1.xy);
-            s0 = vec4(far_child, tmax, s0.xy);
-            if (size < STACK_DEPTH) size = size + 1;  // a full stack dropped its oldest entry
-          }
-          node = near_child;
-          tmax = tsplit;
-        }
+      // An interior node, or an empty leaf (closed at the start of the next iteration). Written
+      // as selects: every assignment in a loop costs llvmpipe a blend per component.
+      float split = n.r;
+      float oa = component(o, n.b);
+      float da = component(d, n.b);
+      float tsplit = (split - oa) * component(inv_d, n.b);
+      bool below_first = oa < split || (oa == split && da <= 0.0);
+      bool near_only = tsplit > tmax || tsplit <= 0.0 || tsplit != tsplit;
+      bool far_only = !near_only && (tsplit < tmin || (strict && tsplit == tmin));
+      bool push = !leaf && !near_only && !far_only;
+      bool below = below_first != far_only;
+      float next = below ? node + 1.0 : n.g;
+      float far_child = below_first ? n.g : node + 1.0;
+      node = leaf ? node : next;
+      leaf_done = leaf;
+      if (STACK_DEPTH > 0 && push) {
+        // Push (the far child, tmax); the guards fold away with the constant STACK_DEPTH.
+        if (STACK_DEPTH > 30) s15 = vec4(s14.zw, s15.xy);
+        if (STACK_DEPTH > 28) s14 = vec4(s13.zw, s14.xy);
+        if (STACK_DEPTH > 26) s13 = vec4(s12.zw, s13.xy);
+        if (STACK_DEPTH > 24) s12 = vec4(s11.zw, s12.xy);
+        if (STACK_DEPTH > 22) s11 = vec4(s10.zw, s11.xy);
+        if (STACK_DEPTH > 20) s10 = vec4(s9.zw, s10.xy);
+        if (STACK_DEPTH > 18) s9 = vec4(s8.zw, s9.xy);
+        if (STACK_DEPTH > 16) s8 = vec4(s7.zw, s8.xy);
+        if (STACK_DEPTH > 14) s7 = vec4(s6.zw, s7.xy);
+        if (STACK_DEPTH > 12) s6 = vec4(s5.zw, s6.xy);
+        if (STACK_DEPTH > 10) s5 = vec4(s4.zw, s5.xy);
+        if (STACK_DEPTH > 8) s4 = vec4(s3.zw, s4.xy);
+        if (STACK_DEPTH > 6) s3 = vec4(s2.zw, s3.xy);
+        if (STACK_DEPTH > 4) s2 = vec4(s1.zw, s2.xy);
+        if (STACK_DEPTH > 2) s1 = vec4(s0.zw, s1.xy);
+        s0 = vec4(far_child, tmax, s0.xy);
+        if (size < STACK_DEPTH) size = size + 1;  // a full stack dropped its oldest entry
       }
+      tmax = push ? tsplit : tmax;
     }
     // The leaf's triangles, one test per iteration. (Only lanes that reached a leaf: llvmpipe's
     // own loop limit may have ended the node loop early. One iteration more than the cap, so that
     // a leaf that needs more steps than are left ends at the cap check, not at the loop bound.)
-    bool single = n.g == 1.0;
+    bool single = leaf_count == 1.0;
     for (int k = 0; k < MAX_STEPS + 1; ++k) {
       float next = float(k);
-      if (!at_leaf || next >= n.g) break;
+      if (next >= leaf_count) break;
       if (steps >= MAX_STEPS) return vec3(best_prim, best_t, 1.0);
       steps = steps + 1;
-      float prim = single ? n.r : DATA_TEXEL(u_prim_list, n.r + next).r;
+      float prim = single ? leaf_first : DATA_TEXEL(u_prim_list, leaf_first + next).r;
       float t = intersect_triangle(prim, o, d, ray_tmin, ray_tmax);
       // Ties in t go to the lower primitive index, so they do not depend on the test order.
       if (t >= 0.0 && (t < best_t || (t == best_t && prim < best_prim))) {
@@ -206,7 +205,7 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
         if (any_hit) return vec3(best_prim, best_t, 0.0);
       }
     }
-    if (at_leaf) leaf_done = true;
+    if (leaf_count > 0.0) leaf_done = true;
   }
   // The cap, or the driver's own loop limit, ended the walk before it could decide.
   return vec3(best_prim, best_t, 1.0);
