@@ -150,21 +150,31 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
       }
       if (steps >= MAX_STEPS) return vec3(best_prim, best_t, 1.0);
       steps = steps + 1;
-      // An interior node, or an empty leaf (closed at the start of the next iteration). Written
+      // An interior node, or an empty leaf (closed at the start of the next iteration). Empty
+      // children flagged in the node are closed without a visit (src/accel/kdtree_traverse.cpp):
+      // an empty near side when the ray also crosses into the far side, an empty only side. Written
       // as selects: every assignment in a loop costs llvmpipe a blend per component.
       float split = n.r;
       float oa = component(o, n.b);
       float da = component(d, n.b);
       float tsplit = (split - oa) * component(inv_d, n.b);
       bool below_first = oa < split || (oa == split && da <= 0.0);
+      bool below_empty = n.a == MOBIRT_NODE_BELOW_EMPTY || n.a == MOBIRT_NODE_BELOW_EMPTY + MOBIRT_NODE_ABOVE_EMPTY;
+      bool above_empty = n.a >= MOBIRT_NODE_ABOVE_EMPTY;
+      bool near_empty = below_first ? below_empty : above_empty;
+      bool far_empty = below_first ? above_empty : below_empty;
       bool near_only = tsplit > tmax || tsplit <= 0.0 || tsplit != tsplit;
       bool far_only = !near_only && (tsplit < tmin || (strict && tsplit == tmin));
-      bool push = !leaf && !near_only && !far_only;
-      bool below = below_first != far_only;
+      bool both = !leaf && !near_only && !far_only;
+      bool skip_near = both && near_empty;
+      bool push = both && !near_empty;
+      bool below = below_first != (far_only || skip_near);
       float next = below ? node + 1.0 : n.g;
       float far_child = below_first ? n.g : node + 1.0;
       node = leaf ? node : next;
-      leaf_done = leaf;
+      tmin = skip_near ? tsplit : tmin;
+      strict = strict && !skip_near;
+      leaf_done = leaf || (near_only && near_empty) || (far_only && far_empty) || (skip_near && far_empty);
       if (STACK_DEPTH > 0 && push) {
         // Push (the far child, tmax); the guards fold away with the constant STACK_DEPTH.
         if (STACK_DEPTH > 30) s15 = vec4(s14.zw, s15.xy);

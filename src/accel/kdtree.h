@@ -68,6 +68,12 @@ struct FlatKdTree {
 
 FlatKdTree build_kdtree(std::span<const glm::vec3> positions, const KdBuildOptions& options = {});
 
+// Sets the empty-child flags of every interior node (glsl/layout.h: MOBIRT_NODE_BELOW_EMPTY,
+// MOBIRT_NODE_ABOVE_EMPTY in the node's fourth component), with which traversal closes an empty
+// leaf without visiting it. build_kdtree calls it; a tree without flags (all 0) traverses the same,
+// only visiting its empty leaves.
+void mark_empty_children(FlatKdTree& tree);
+
 struct Hit {
   int32_t prim = -1;   // -1 = miss
   float t = kInfinity;
@@ -89,8 +95,8 @@ bool intersect_triangle(const FlatKdTree& tree, int32_t prim, const Ray& ray, Hi
 
 // Cost counters of one traversal call (reset by each call; sum them with +=).
 // steps = the GPU loop's unit: one per interior node, one per triangle test, and one for an empty
-// leaf (a leaf's node fetch shares its step with its first triangle test), as in
-// glsl/traverse.glsl.
+// leaf that is visited (a leaf's node fetch shares its step with its first triangle test; empty
+// leaves flagged in their parent are closed without a visit), as in glsl/traverse.glsl.
 struct TraversalStats {
   uint64_t nodes_visited = 0;     // interior nodes and leaves
   uint64_t leaves_visited = 0;

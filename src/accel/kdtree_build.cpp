@@ -489,7 +489,9 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, const KdBuildOptio
     throw Error(ErrorKind::BadInput,
                 "kd-tree: bins must be at least 2 (got " + std::to_string(options.bins) + ")");
   }
-  return Builder(positions, options).build();
+  FlatKdTree tree = Builder(positions, options).build();
+  mark_empty_children(tree);
+  return tree;
 }
 
 }  // namespace mobirt
