@@ -19,7 +19,6 @@
 //        [--stack N] [--bins N] [--leaf-size N] [--isect-cost C] [--depth N] [--csv FILE]
 #include <algorithm>
 #include <cstdio>
-#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -30,9 +29,7 @@
 #include "raytree/hits.h"
 #include "raytree/rays.h"
 #include "raytree/secondary.h"
-#include "scene/animation.h"
-#include "scene/loader.h"
-#include "scene/overrides.h"
+#include "profile_scene.h"
 
 namespace mobirt {
 namespace {
@@ -144,41 +141,16 @@ PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& r
 double occupancy(uint64_t lane, uint64_t group) { return group ? double(lane) / (8.0 * double(group)) : 0.0; }
 
 int run(int argc, char** argv) {
-  if (argc < 2) {
-    std::fprintf(stderr,
-                 "usage: mobirt_simd_stats SCENE [--mtl F] [--camera SPEC] [--light SPEC]... [--size WxH] "
-                 "[--stack N] [--bins N] [--leaf-size N] [--isect-cost C] [--depth N] [--csv FILE]\n");
-    return 2;
-  }
-  std::string scene_path = argv[1], csv;
-  LoadOptions load;
-  std::vector<Light> lights;
-  std::optional<Camera> camera;
-  int width = 400, height = 240, stack = 4, depth = 0;
-  KdBuildOptions kd;
-  for (int i = 2; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (i + 1 >= argc) throw Error(ErrorKind::BadInput, a + " needs a value");
-    const std::string v = argv[++i];
-    if (a == "--mtl") load.mtl = v;
-    else if (a == "--camera") camera = parse_camera(v);
-    else if (a == "--light") lights.push_back(parse_light(v));
-    else if (a == "--size") std::sscanf(v.c_str(), "%dx%d", &width, &height);
-    else if (a == "--stack") stack = std::stoi(v);
-    else if (a == "--bins") kd.bins = std::stoi(v);
-    else if (a == "--leaf-size") kd.max_leaf_prims = std::stoi(v);
-    else if (a == "--isect-cost") kd.intersection_cost = std::stof(v);
-    else if (a == "--depth") depth = std::stoi(v);
-    else if (a == "--csv") csv = v;
-    else throw Error(ErrorKind::BadInput, "unknown option " + a);
-  }
-  const AnimatedScene animation = load_animated_scene(scene_path, load);
-  Scene scene = animation.rest();
-  apply_overrides(scene, lights, camera);
-  const Camera view = scene.camera ? *scene.camera
-                                   : frame_box(scene.bounds(), 0.7854f, float(width) / float(height));
-  const FlatKdTree tree = build_kdtree(scene.mesh.positions, kd);
-  RayBatch rays = primary_rays(view, width, height);
+  const profile::ProfileScene p = profile::load_profile_scene(
+      argc, argv,
+      "usage: mobirt_simd_stats SCENE [--mtl F] [--camera SPEC] [--light SPEC]... [--size WxH] [--stack N] "
+      "[--bins N] [--leaf-size N] [--isect-cost C] [--depth N] [--csv FILE]");
+  const Scene& scene = p.scene;
+  const FlatKdTree& tree = p.tree;
+  const int width = p.width, height = p.height, stack = p.stack, depth = p.depth;
+  const std::string& scene_path = p.path;
+  const std::string& csv = p.csv;
+  RayBatch rays = primary_rays(p.camera, width, height);
   std::FILE* out = csv.empty() ? nullptr : std::fopen(csv.c_str(), "w");
   if (out) {
     std::fprintf(out, "generation,rays,shadow_rays,steps,interior_steps,triangle_tests,empty_leaves,"
