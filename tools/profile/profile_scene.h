@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdio>
+#include <exception>
 #include <optional>
 #include <string>
 #include <vector>
@@ -63,6 +64,16 @@ inline ProfileScene load_profile_scene(int argc, char** argv, const char* usage)
                             : frame_box(p.scene.bounds(), 0.7854f, float(p.width) / float(p.height));
   p.tree = build_kdtree(p.scene.mesh.positions, kd);
   return p;
+}
+
+// main() of a profiling tool: runs `run`, and turns an exception into a message and exit code 2.
+inline int run_tool(const char* name, int argc, char** argv, int (*run)(int, char**)) {
+  try {
+    return run(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: error: %s\n", name, e.what());
+    return 2;
+  }
 }
 
 }  // namespace mobirt::profile

@@ -193,11 +193,4 @@ int run(int argc, char** argv) {
 }  // namespace
 }  // namespace mobirt
 
-int main(int argc, char** argv) {
-  try {
-    return mobirt::run(argc, argv);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "mobirt_simd_stats: error: %s\n", e.what());
-    return 2;
-  }
-}
+int main(int argc, char** argv) { return mobirt::profile::run_tool("mobirt_simd_stats", argc, argv, mobirt::run); }
