@@ -63,6 +63,11 @@ float component(vec3 v, float axis) {
 vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
   vec3 inv_d = 1.0 / d;
   vec2 box = intersect_scene_box(o, inv_d, ray_tmin, ray_tmax);
+  // The node loop's 1 / d, with -inf for both zeros: then inv_a < 0 says d_a <= 0, so d is not
+  // needed there. Every split decision stays the same: a zero component gives tsplit = +-inf
+  // (near side only either way) or NaN (near side only).
+  vec3 inv_s = vec3(d.x == 0.0 ? -inv_d.x * inv_d.x : inv_d.x, d.y == 0.0 ? -inv_d.y * inv_d.y : inv_d.y,
+                    d.z == 0.0 ? -inv_d.z * inv_d.z : inv_d.z);
   if (!(box.x <= box.y)) return vec3(-1.0, ray_tmax, 0.0);
   float scene_tmax = box.y;
   float tmin = box.x;
@@ -156,9 +161,9 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
       // as selects: every assignment in a loop costs llvmpipe a blend per component.
       float split = n.r;
       float oa = component(o, n.b);
-      float da = component(d, n.b);
-      float tsplit = (split - oa) * component(inv_d, n.b);
-      bool below_first = oa < split || (oa == split && da <= 0.0);
+      float inv_a = component(inv_s, n.b);
+      float tsplit = (split - oa) * inv_a;
+      bool below_first = oa < split || (oa == split && inv_a < 0.0);
       bool below_empty = n.a == MOBIRT_NODE_BELOW_EMPTY || n.a == MOBIRT_NODE_BELOW_EMPTY + MOBIRT_NODE_ABOVE_EMPTY;
       bool above_empty = n.a >= MOBIRT_NODE_ABOVE_EMPTY;
       bool near_empty = below_first ? below_empty : above_empty;

@@ -2,7 +2,8 @@
 // (the subset that matters to traversal), shared by tools/profile/*.cpp.
 //
 //   TOOL SCENE [--mtl F] [--camera SPEC] [--light SPEC]... [--size WxH] [--stack N] [--bins N]
-//        [--leaf-size N] [--isect-cost C] [--depth N] [--csv FILE] [--repeat N]
+//        [--leaf-size N] [--isect-cost C] [--max-depth N] [--empty-bonus-min-width W] [--depth N]
+//        [--csv FILE] [--repeat N]
 #pragma once
 
 #include <cstdio>
@@ -52,6 +53,8 @@ inline ProfileScene load_profile_scene(int argc, char** argv, const char* usage)
     else if (a == "--bins") kd.bins = std::stoi(v);
     else if (a == "--leaf-size") kd.max_leaf_prims = std::stoi(v);
     else if (a == "--isect-cost") kd.intersection_cost = std::stof(v);
+    else if (a == "--max-depth") kd.max_depth = std::stoi(v);
+    else if (a == "--empty-bonus-min-width") kd.empty_bonus_min_width = std::stof(v);
     else if (a == "--depth") p.depth = std::stoi(v);
     else if (a == "--repeat") p.repeat = std::stoi(v);
     else if (a == "--csv") p.csv = v;
