@@ -13,7 +13,9 @@
 //   node occ.         lane node-loop iterations / (8 x group node-loop iterations): the share of
 //                     lanes doing useful work in the node loop
 //   ... (8 in a row)  the same with each group made of 8 consecutive rays instead of a 4x2 tile
-//                     of the ray texture (a different ray layout, for secondary rays)
+//                     of the ray texture (for comparison; secondary rays are ordered by
+//                     order_in_simd_tiles, as the renderer does, so that a tile holds 8
+//                     consecutively made rays)
 //
 // Usage: mobirt_simd_stats SCENE [--mtl F] [--camera SPEC] [--light SPEC]... [--size WxH]
 //        [--stack N] [--bins N] [--leaf-size N] [--isect-cost C] [--depth N] [--csv FILE]
@@ -184,7 +186,10 @@ int run(int argc, char** argv) {
                    (unsigned long long)s.linear.node, (unsigned long long)s.linear.leaf,
                    occupancy(s.linear.lane_node, s.linear.node));
     }
-    if (g < depth) rays = next_generation(scene, tree.bounds, rays, hits, SecondarySettings{});
+    if (g < depth) {
+      rays = next_generation(scene, tree.bounds, rays, hits, SecondarySettings{});
+      order_in_simd_tiles(rays);  // as the renderer does
+    }
   }
   if (out) std::fclose(out);
   return 0;
