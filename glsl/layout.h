@@ -18,10 +18,14 @@
 
 // kd-tree node: one RGBA32F texel.
 //   interior: r = split position, g = index of the "above" child (the "below" child is the next
-//             node), b = split axis (0, 1, 2), a = 0
+//             node), b = split axis (0, 1, 2), a = empty-child flags: MOBIRT_NODE_BELOW_EMPTY
+//             (the below child is a leaf without primitives) + MOBIRT_NODE_ABOVE_EMPTY (the above
+//             child is); traversal closes such a child without fetching it. 0 = no flags.
 //   leaf:     r = first entry in the prim-list texture, or the primitive index itself when the
 //             leaf holds exactly one primitive, g = primitive count, b = MOBIRT_NODE_LEAF, a = 0
 #define MOBIRT_NODE_LEAF 3.0
+#define MOBIRT_NODE_BELOW_EMPTY 1.0
+#define MOBIRT_NODE_ABOVE_EMPTY 2.0
 
 // Prim-list texture: one R32F texel per entry, a primitive index.
 // Triangle texture: three RGBA32F texels per primitive: v0, v1, v2 (xyz; w unused = 0).

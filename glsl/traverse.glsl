@@ -129,13 +129,26 @@ float component(vec3 v, float axis) {
 vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
   vec3 inv_d = 1.0 / d;
   vec2 box = intersect_scene_box(o, inv_d, ray_tmin, ray_tmax);
+  // The node loop's 1 / d, with -inf for both zeros: then inv_a < 0 says d_a <= 0, so d is not
+  // needed there. Every split decision stays the same: a zero component gives tsplit = +-inf
+  // (near side only either way) or NaN (near side only).
+  vec3 inv_s = vec3(d.x == 0.0 ? -inv_d.x * inv_d.x : inv_d.x, d.y == 0.0 ? -inv_d.y * inv_d.y : inv_d.y,
+                    d.z == 0.0 ? -inv_d.z * inv_d.z : inv_d.z);
   if (!(box.x <= box.y)) return vec3(-1.0, ray_tmax, 0.0);
   float scene_tmax = box.y;
   float tmin = box.x;
   float tmax = box.y;
 
-  vec3 stack[MOBIRT_MAX_STACK_DEPTH];  // (node, tmin, tmax), a ring of STACK_DEPTH entries
-  int top = 0;                         // slot of the newest entry
+  // The short stack: entries (node, tmax), newest first, two per vec4: s0.xy, s0.zw, s1.xy, ...
+  // A shift register in named variables, not an array: llvmpipe keeps an array that is indexed
+  // with a variable in memory and reads and writes it lane by lane (about 50 scalar loads, stores
+  // and branches per access, on every step, whether or not a lane pushes), and does not unroll
+  // loops, so only constant names stay in registers. Shifting drops the oldest entry when the
+  // stack is full, as a ring would. An entry's tmin is the tmax in force when it is popped (the
+  // near side always ends where the far side begins), so it is not stored.
+  vec4 s0 = vec4(0.0), s1 = vec4(0.0), s2 = vec4(0.0), s3 = vec4(0.0), s4 = vec4(0.0), s5 = vec4(0.0),
+       s6 = vec4(0.0), s7 = vec4(0.0), s8 = vec4(0.0), s9 = vec4(0.0), s10 = vec4(0.0), s11 = vec4(0.0),
+       s12 = vec4(0.0), s13 = vec4(0.0), s14 = vec4(0.0), s15 = vec4(0.0);
   int size = 0;
 
   float node = 0.0;
@@ -145,51 +158,126 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
   float restart_t = box.x;
   bool strict = false;
   float best_prim = -1.0;
-  // Leaf cursor: the remaining primitives of the leaf being tested.
-  float leaf_first = 0.0;
-  float leaf_next = 0.0;
-  float leaf_end = 0.0;
-  bool in_leaf = false;
-  bool single = false;
+  // The steps of src/accel/kdtree_traverse.cpp: one per interior node, one per triangle test,
+  // one per empty leaf (a leaf's node fetch shares the step of its first triangle test).
+  int steps = 0;
+  // The leaf just walked must be closed (done, pop or restart) before the next node.
+  bool leaf_done = false;
 
-  for (int step = 0; step < MAX_STEPS; ++step) {
-    if (!in_leaf) {
-      vec4 n = DATA_TEXEL(u_nodes, node);
-      if (n.b != MOBIRT_NODE_LEAF) {
-        // Interior node: one step.
-        float split = n.r;
-        float oa = component(o, n.b);
-        float da = component(d, n.b);
-        float tsplit = (split - oa) * component(inv_d, n.b);
-        bool below_first = oa < split || (oa == split && da <= 0.0);
-        float near_child = below_first ? node + 1.0 : n.g;
-        float far_child = below_first ? n.g : node + 1.0;
-        if (tsplit > tmax || tsplit <= 0.0 || tsplit != tsplit) {
-          node = near_child;
-        } else if (tsplit < tmin || (strict && tsplit == tmin)) {
-          node = far_child;
+  // Loops nested the way llvmpipe runs them cheaply (Aila and Laine's while-while). llvmpipe
+  // never branches around an `if`: every iteration of a loop runs its whole body under a lane
+  // mask, until the last of the 8 lanes of a SIMD group is done. One loop with a node step and a
+  // triangle test in each iteration paid for both (four texel fetches and the intersection) on
+  // every step, when 3 in 4 steps are interior nodes. Here an iteration of the inner node loop
+  // costs one node fetch, one of the triangle loop one triangle test.
+  for (int leaf = 0; leaf < MAX_STEPS; ++leaf) {
+    // Down to the next leaf with primitives, one node per iteration; empty leaves are closed on
+    // the way.
+    float leaf_first = 0.0;
+    float leaf_count = 0.0;  // > 0: the lane stands at a leaf with primitives
+    for (int i = 0; i < MAX_STEPS; ++i) {
+      if (leaf_done) {
+        leaf_done = false;
+        if (best_t <= tmax) return vec3(best_prim, best_t, 0.0);
+        if (size > 0) {
+          node = s0.x;
+          tmin = tmax;
+          tmax = s0.y;
+          s0 = vec4(s0.zw, s1.xy);
+          if (STACK_DEPTH > 2) s1 = vec4(s1.zw, s2.xy);
+          if (STACK_DEPTH > 4) s2 = vec4(s2.zw, s3.xy);
+          if (STACK_DEPTH > 6) s3 = vec4(s3.zw, s4.xy);
+          if (STACK_DEPTH > 8) s4 = vec4(s4.zw, s5.xy);
+          if (STACK_DEPTH > 10) s5 = vec4(s5.zw, s6.xy);
+          if (STACK_DEPTH > 12) s6 = vec4(s6.zw, s7.xy);
+          if (STACK_DEPTH > 14) s7 = vec4(s7.zw, s8.xy);
+          if (STACK_DEPTH > 16) s8 = vec4(s8.zw, s9.xy);
+          if (STACK_DEPTH > 18) s9 = vec4(s9.zw, s10.xy);
+          if (STACK_DEPTH > 20) s10 = vec4(s10.zw, s11.xy);
+          if (STACK_DEPTH > 22) s11 = vec4(s11.zw, s12.xy);
+          if (STACK_DEPTH > 24) s12 = vec4(s12.zw, s13.xy);
+          if (STACK_DEPTH > 26) s13 = vec4(s13.zw, s14.xy);
+          if (STACK_DEPTH > 28) s14 = vec4(s14.zw, s15.xy);
+          if (STACK_DEPTH > 30) s15 = vec4(s15.zw, 0.0, 0.0);
+          size = size - 1;
+          strict = false;
+        } else if (tmax >= scene_tmax) {
+          return vec3(best_prim, best_t, 0.0);
         } else {
-          if (STACK_DEPTH > 0) {
-            top = top + 1;
-            if (top >= STACK_DEPTH) top = 0;
-            stack[top] = vec3(far_child, tsplit, tmax);
-            if (size < STACK_DEPTH) size = size + 1;  // a full ring overwrote its oldest entry
-          }
-          node = near_child;
-          tmax = tsplit;
+          // kd-restart: everything before tmax is done; walk down again from the root.
+          strict = tmax == restart_t;
+          restart_t = tmax;
+          tmin = tmax;
+          tmax = scene_tmax;
+          node = 0.0;
         }
-        continue;
       }
-      // Leaf: its node fetch shares a step with its first triangle test.
-      in_leaf = true;
-      single = n.g == 1.0;
-      leaf_first = n.r;
-      leaf_next = 0.0;
-      leaf_end = n.g;
+      vec4 n = DATA_TEXEL(u_nodes, node);
+      bool leaf = n.b == MOBIRT_NODE_LEAF;
+      if (leaf && n.g > 0.0) {
+        leaf_first = n.r;
+        leaf_count = n.g;
+        break;
+      }
+      if (steps >= MAX_STEPS) return vec3(best_prim, best_t, 1.0);
+      steps = steps + 1;
+      // An interior node, or an empty leaf (closed at the start of the next iteration). Empty
+      // children flagged in the node are closed without a visit (src/accel/kdtree_traverse.cpp):
+      // an empty near side when the ray also crosses into the far side, an empty only side. Written
+      // as selects: every assignment in a loop costs llvmpipe a blend per component.
+      float split = n.r;
+      float oa = component(o, n.b);
+      float inv_a = component(inv_s, n.b);
+      float tsplit = (split - oa) * inv_a;
+      bool below_first = oa < split || (oa == split && inv_a < 0.0);
+      bool below_empty = n.a == MOBIRT_NODE_BELOW_EMPTY || n.a == MOBIRT_NODE_BELOW_EMPTY + MOBIRT_NODE_ABOVE_EMPTY;
+      bool above_empty = n.a >= MOBIRT_NODE_ABOVE_EMPTY;
+      bool near_empty = below_first ? below_empty : above_empty;
+      bool far_empty = below_first ? above_empty : below_empty;
+      bool near_only = tsplit > tmax || tsplit <= 0.0 || tsplit != tsplit;
+      bool far_only = !near_only && (tsplit < tmin || (strict && tsplit == tmin));
+      bool both = !leaf && !near_only && !far_only;
+      bool skip_near = both && near_empty;
+      bool push = both && !near_empty;
+      bool below = below_first != (far_only || skip_near);
+      float next = below ? node + 1.0 : n.g;
+      float far_child = below_first ? n.g : node + 1.0;
+      node = leaf ? node : next;
+      tmin = skip_near ? tsplit : tmin;
+      strict = strict && !skip_near;
+      leaf_done = leaf || (near_only && near_empty) || (far_only && far_empty) || (skip_near && far_empty);
+      if (STACK_DEPTH > 0 && push) {
+        // Push (the far child, tmax); the guards fold away with the constant STACK_DEPTH.
+        if (STACK_DEPTH > 30) s15 = vec4(s14.zw, s15.xy);
+        if (STACK_DEPTH > 28) s14 = vec4(s13.zw, s14.xy);
+        if (STACK_DEPTH > 26) s13 = vec4(s12.zw, s13.xy);
+        if (STACK_DEPTH > 24) s12 = vec4(s11.zw, s12.xy);
+        if (STACK_DEPTH > 22) s11 = vec4(s10.zw, s11.xy);
+        if (STACK_DEPTH > 20) s10 = vec4(s9.zw, s10.xy);
+        if (STACK_DEPTH > 18) s9 = vec4(s8.zw, s9.xy);
+        if (STACK_DEPTH > 16) s8 = vec4(s7.zw, s8.xy);
+        if (STACK_DEPTH > 14) s7 = vec4(s6.zw, s7.xy);
+        if (STACK_DEPTH > 12) s6 = vec4(s5.zw, s6.xy);
+        if (STACK_DEPTH > 10) s5 = vec4(s4.zw, s5.xy);
+        if (STACK_DEPTH > 8) s4 = vec4(s3.zw, s4.xy);
+        if (STACK_DEPTH > 6) s3 = vec4(s2.zw, s3.xy);
+        if (STACK_DEPTH > 4) s2 = vec4(s1.zw, s2.xy);
+        if (STACK_DEPTH > 2) s1 = vec4(s0.zw, s1.xy);
+        s0 = vec4(far_child, tmax, s0.xy);
+        if (size < STACK_DEPTH) size = size + 1;  // a full stack dropped its oldest entry
+      }
+      tmax = push ? tsplit : tmax;
     }
-
-    if (leaf_next < leaf_end) {
-      float prim = single ? leaf_first : DATA_TEXEL(u_prim_list, leaf_first + leaf_next).r;
+    // The leaf's triangles, one test per iteration. (Only lanes that reached a leaf: llvmpipe's
+    // own loop limit may have ended the node loop early. One iteration more than the cap, so that
+    // a leaf that needs more steps than are left ends at the cap check, not at the loop bound.)
+    bool single = leaf_count == 1.0;
+    for (int k = 0; k < MAX_STEPS + 1; ++k) {
+      float next = float(k);
+      if (next >= leaf_count) break;
+      if (steps >= MAX_STEPS) return vec3(best_prim, best_t, 1.0);
+      steps = steps + 1;
+      float prim = single ? leaf_first : DATA_TEXEL(u_prim_list, leaf_first + next).r;
       float t = intersect_triangle(prim, o, d, ray_tmin, ray_tmax);
       // Ties in t go to the lower primitive index, so they do not depend on the test order.
       if (t >= 0.0 && (t < best_t || (t == best_t && prim < best_prim))) {
@@ -197,32 +285,8 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
         best_prim = prim;
         if (any_hit) return vec3(best_prim, best_t, 0.0);
       }
-      leaf_next = leaf_next + 1.0;
-      if (leaf_next < leaf_end) continue;
     }
-
-    // Leaf done.
-    in_leaf = false;
-    if (best_t <= tmax) return vec3(best_prim, best_t, 0.0);
-    if (size > 0) {
-      vec3 entry = stack[top];
-      top = top - 1;
-      if (top < 0) top = STACK_DEPTH - 1;
-      size = size - 1;
-      node = entry.x;
-      tmin = entry.y;
-      tmax = entry.z;
-      strict = false;
-    } else if (tmax >= scene_tmax) {
-      return vec3(best_prim, best_t, 0.0);
-    } else {
-      // kd-restart: everything before tmax is done; walk down again from the root.
-      strict = tmax == restart_t;
-      restart_t = tmax;
-      tmin = tmax;
-      tmax = scene_tmax;
-      node = 0.0;
-    }
+    if (leaf_count > 0.0) leaf_done = true;
   }
   // The cap, or the driver's own loop limit, ended the walk before it could decide.
   return vec3(best_prim, best_t, 1.0);

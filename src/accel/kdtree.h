@@ -74,6 +74,12 @@ struct FlatKdTree {
 
 FlatKdTree build_kdtree(std::span<const glm::vec3> positions, const KdBuildOptions& options = {});
 
+// Sets the empty-child flags of every interior node (glsl/layout.h: MOBIRT_NODE_BELOW_EMPTY,
+// MOBIRT_NODE_ABOVE_EMPTY in the node's fourth component), with which traversal closes an empty
+// leaf without visiting it. build_kdtree calls it; a tree without flags (all 0) traverses the same,
+// only visiting its empty leaves.
+void mark_empty_children(FlatKdTree& tree);
+
 struct Hit {
   int32_t prim = -1;   // -1 = miss
   float t = kInfinity;
@@ -108,8 +114,8 @@ bool intersect_triangle(const FlatKdTree& tree, int32_t prim, const Ray& ray, Hi
 
 // Cost counters of one traversal call (reset by each call; sum them with +=).
 // steps = the GPU loop's unit: one per interior node, one per triangle test, and one for an empty
-// leaf (a leaf's node fetch shares its step with its first triangle test), as in
-// glsl/traverse.glsl.
+// leaf that is visited (a leaf's node fetch shares its step with its first triangle test; empty
+// leaves flagged in their parent are closed without a visit), as in glsl/traverse.glsl.
 struct TraversalStats {
   uint64_t nodes_visited = 0;     // interior nodes and leaves
   uint64_t leaves_visited = 0;
@@ -133,6 +139,20 @@ struct TraversalStats {
   }
 };
 
+// The walk as the loops of glsl/traverse.glsl run it, for SIMD simulations
+// (tools/profile/simd_stats.cpp): one segment per leaf with primitives, the iterations of the node
+// loop that led to it (one per node fetched, interior or leaf, the first also closing the previous
+// leaf) and the triangles tested there; a walk that ends by closing a leaf (not by an any-hit)
+// ends with a segment of the node-loop iterations after the last leaf, plus the closing one, and
+// no triangles.
+struct TraversalTrace {
+  struct Segment {
+    uint32_t node_iterations = 0;
+    uint32_t triangle_tests = 0;
+  };
+  std::vector<Segment> segments;
+};
+
 // Closest hit in [ray.tmin, ray.tmax] by traversal of the flattened arrays.
 // stack_depth < 0: a full stack; 0: pure kd-restart; N > 0: a short stack of N entries that drops
 // its oldest entry on overflow and restarts from the root when it runs dry (Horn et al. 2007),
@@ -143,14 +163,14 @@ Hit traverse(const FlatKdTree& tree, const Ray& ray, int stack_depth = -1, const
 // more than max_steps steps stops with a miss and stats.capped = 1 (the GPU then reports "capped"
 // and the CPU traces that ray without a cap).
 Hit traverse(const FlatKdTree& tree, const Ray& ray, int stack_depth, TraversalStats& stats,
-             int64_t max_steps = -1, const RayTest& test = {});
+             int64_t max_steps = -1, const RayTest& test = {}, TraversalTrace* trace = nullptr);
 
 // Any hit in [ray.tmin, ray.tmax]: shadow rays.
 bool occluded(const FlatKdTree& tree, const Ray& ray, int stack_depth = -1, const RayTest& test = {});
 
 // The same, with counters and the loop cap (a capped call returns false with stats.capped = 1).
 bool occluded(const FlatKdTree& tree, const Ray& ray, int stack_depth, TraversalStats& stats,
-              int64_t max_steps = -1, const RayTest& test = {});
+              int64_t max_steps = -1, const RayTest& test = {}, TraversalTrace* trace = nullptr);
 
 // Closest hit by testing every triangle: the oracle for the kd-tree tests.
 Hit brute_force(const FlatKdTree& tree, const Ray& ray, const RayTest& test = {});

@@ -1042,10 +1042,16 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, const KdBuildOptio
                                          std::to_string(options.threads) + ")");
   }
   Builder builder(positions, options);
-  if (options.threads == 0) return builder.build();
-  // More threads than the machine has would only make TBB warn (the tree is the same anyway).
-  tbb::task_arena arena(std::min(options.threads, tbb::info::default_concurrency()));
-  return arena.execute([&] { return builder.build(); });
+  FlatKdTree tree;
+  if (options.threads == 0) {
+    tree = builder.build();
+  } else {
+    // More threads than the machine has would only make TBB warn (the tree is the same anyway).
+    tbb::task_arena arena(std::min(options.threads, tbb::info::default_concurrency()));
+    tree = arena.execute([&] { return builder.build(); });
+  }
+  mark_empty_children(tree);
+  return tree;
 }
 
 }  // namespace mobirt

@@ -6,13 +6,19 @@
 //   miss if empty (or if the tree's box is empty).
 //   scene_tmax = t1, tmin = t0, tmax = t1, node = root, inv = 1 / dir,
 //   restart_t = t0, strict = false.
-//   interior node (split s, axis a):
+//   interior node (split s, axis a, empty-child flags):
 //     tsplit = (s - o[a]) * inv[a]
 //     below_first = o[a] < s || (o[a] == s && d[a] <= 0)   (near = below_first ? below : above)
-//     if (tsplit > tmax || tsplit <= 0 || isnan(tsplit))      node = near
-//     else if (tsplit < tmin || (strict && tsplit == tmin))  node = far
+//     if (tsplit > tmax || tsplit <= 0 || isnan(tsplit))      near only:  close if near is empty,
+//                                                                         else node = near
+//     else if (tsplit < tmin || (strict && tsplit == tmin))  far only:   close if far is empty,
+//                                                                         else node = far
+//     else if (near empty)           { tmin = tsplit; strict = false;
+//                                      close if far is empty, else node = far }
 //     else { push(far, tsplit, tmax); node = near; tmax = tsplit; }
-//   leaf: test its triangles (hits anywhere in [ray.tmin, ray.tmax], not only inside the leaf);
+//   leaf: test its triangles (hits anywhere in [ray.tmin, ray.tmax], not only inside the leaf),
+//     then close.
+//   close (a leaf, or an empty child, whose interval ends at tmax):
 //     if (best_t <= tmax) done
 //     else if (stack not empty) { (node, tmin, tmax) = pop newest; strict = false; }
 //     else if (tmax >= scene_tmax) done
@@ -20,6 +26,17 @@
 //            tmin = tmax; tmax = scene_tmax; node = root; }
 //   The stack is a ring of stack_depth entries that overwrites its oldest entry when full; the
 //   restart covers whatever was dropped, because dropped entries are always the farthest.
+//   A popped entry's tmin is always the tmax in force when it is popped (the near side of a split
+//   ends where its far side begins), which lets the shader keep only (node, tmax) per entry.
+//
+// Empty children (flagged by mark_empty_children) are closed without a visit: the same walk as
+// pushing the far child, visiting the empty near leaf (closing it) and popping, or as visiting an
+// empty leaf that is the only side, minus the steps and texel fetches of those visits. Skipping
+// the empty near leaf also skips its early-out test (best_t <= tsplit), which cannot pass: the
+// near side holds no triangle, and a hit before it would have ended the walk earlier. An empty
+// far side of a split is pushed and visited as before: walking the near side with the far side's
+// tmax instead would widen the interval of every node below it (more nodes and triangles), and
+// not pushing it at all would break the (node, tmax) stack above.
 //
 // Equality cases, and why:
 // - tsplit == tmin visits both children (the near one with [tmin, tmin]). Equal t values do not
@@ -207,10 +224,33 @@ class ShortStack {
   int size_ = 0;
 };
 
+// Records TraversalTrace segments when a trace is wanted.
+class TraceRecorder {
+ public:
+  explicit TraceRecorder(TraversalTrace* trace) : trace_(trace) {
+    if (trace_) trace_->segments.clear();
+  }
+  void node() { ++node_iterations_; }
+  void leaf(uint32_t triangle_tests) {
+    if (!trace_) return;
+    trace_->segments.push_back({node_iterations_, triangle_tests});
+    node_iterations_ = 0;
+  }
+  // The walk ends in the node loop: the iteration that closes the last leaf ends it.
+  void end() {
+    if (trace_) trace_->segments.push_back({node_iterations_ + 1, 0});
+  }
+
+ private:
+  TraversalTrace* trace_;
+  uint32_t node_iterations_ = 0;
+};
+
 template <bool kAnyHit>
 Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, TraversalStats& stats,
-                  int64_t max_steps, const RayTest& test) {
+                  int64_t max_steps, const RayTest& test, TraversalTrace* trace) {
   stats = TraversalStats{};
+  TraceRecorder recorder(trace);
   // Under mediump the pass rounds its ray once, before the walk (glsl/trace_main.glsl and the
   // shadow rays of glsl/traverse.glsl): the traversal walks the rounded ray.
   Ray ray = input;
@@ -241,8 +281,30 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
   int32_t node = 0;
   float restart_t = t0;
   bool strict = false;
+  // Closes a leaf or an empty child whose interval ends at tmax; true when the walk is done.
+  auto close = [&]() {
+    if (best.t <= tmax) return true;
+    if (!stack.empty()) {
+      const Entry e = stack.pop();
+      ++stats.pops;
+      node = e.node;
+      tmin = e.tmin;
+      tmax = e.tmax;
+      strict = false;
+      return false;
+    }
+    if (tmax >= scene_tmax) return true;
+    ++stats.restarts;
+    strict = tmax == restart_t;
+    restart_t = tmax;
+    tmin = tmax;
+    tmax = scene_tmax;
+    node = 0;
+    return false;
+  };
   for (;;) {
     const glm::vec4 n = nodes[node];
+    recorder.node();
     if (n.z != static_cast<float>(MOBIRT_NODE_LEAF)) {
       if (stats.steps >= cap) {
         stats.capped = 1;
@@ -258,14 +320,30 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
       const int32_t above = checked_index(n.y, tree.nodes.size(), "child");
       const int32_t near_child = below_first ? below : above;
       const int32_t far_child = below_first ? above : below;
+      const bool below_empty = n.w == MOBIRT_NODE_BELOW_EMPTY || n.w == MOBIRT_NODE_BELOW_EMPTY + MOBIRT_NODE_ABOVE_EMPTY;
+      const bool above_empty = n.w >= MOBIRT_NODE_ABOVE_EMPTY;
+      const bool near_empty = below_first ? below_empty : above_empty;
+      const bool far_empty = below_first ? above_empty : below_empty;
+      bool closed = false;
       if (tsplit > tmax || tsplit <= 0.0f || std::isnan(tsplit)) {
+        closed = near_empty;
         node = near_child;
       } else if (tsplit < tmin || (strict && tsplit == tmin)) {
+        closed = far_empty;
         node = far_child;
+      } else if (near_empty) {
+        closed = far_empty;
+        node = far_child;
+        tmin = tsplit;
+        strict = false;
       } else {
         if (stack.push(Entry{far_child, tsplit, tmax})) ++stats.dropped;
         node = near_child;
         tmax = tsplit;
+      }
+      if (closed && close()) {
+        recorder.end();
+        return best;
       }
       continue;
     }
@@ -291,49 +369,51 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
       const int32_t prim = checked_index(
           count == 1 ? n.x : prim_list[static_cast<size_t>(checked_index(n.x + float(i), tree.prim_list.size(), "prim-list entry"))],
           tree.triangles.size() / MOBIRT_TEXELS_PER_TRIANGLE, "primitive");
-      if (intersect_triangle(tree, prim, ray, best, test) && kAnyHit) return best;
+      if (intersect_triangle(tree, prim, ray, best, test) && kAnyHit) {
+        recorder.leaf(uint32_t(i + 1));
+        return best;
+      }
     }
-    if (best.t <= tmax) return best;
-    if (!stack.empty()) {
-      const Entry e = stack.pop();
-      ++stats.pops;
-      node = e.node;
-      tmin = e.tmin;
-      tmax = e.tmax;
-      strict = false;
-    } else if (tmax >= scene_tmax) {
+    if (count > 0) recorder.leaf(uint32_t(count));
+    if (close()) {
+      recorder.end();
       return best;
-    } else {
-      ++stats.restarts;
-      strict = tmax == restart_t;
-      restart_t = tmax;
-      tmin = tmax;
-      tmax = scene_tmax;
-      node = 0;
     }
   }
 }
 
 }  // namespace
 
+void mark_empty_children(FlatKdTree& tree) {
+  auto empty_leaf = [&](size_t i) {
+    return i < tree.nodes.size() && tree.nodes[i].z == static_cast<float>(MOBIRT_NODE_LEAF) && tree.nodes[i].y == 0.0f;
+  };
+  for (size_t i = 0; i < tree.nodes.size(); ++i) {
+    glm::vec4& n = tree.nodes[i];
+    if (n.z == static_cast<float>(MOBIRT_NODE_LEAF)) continue;
+    n.w = (empty_leaf(i + 1) ? MOBIRT_NODE_BELOW_EMPTY : 0.0f) +
+          (empty_leaf(static_cast<size_t>(n.y)) ? MOBIRT_NODE_ABOVE_EMPTY : 0.0f);
+  }
+}
+
 Hit traverse(const FlatKdTree& tree, const Ray& ray, int stack_depth, TraversalStats& stats,
-             int64_t max_steps, const RayTest& test) {
-  return traverse_impl<false>(tree, ray, stack_depth, stats, max_steps, test);
+             int64_t max_steps, const RayTest& test, TraversalTrace* trace) {
+  return traverse_impl<false>(tree, ray, stack_depth, stats, max_steps, test, trace);
 }
 
 Hit traverse(const FlatKdTree& tree, const Ray& ray, int stack_depth, const RayTest& test) {
   TraversalStats stats;
-  return traverse_impl<false>(tree, ray, stack_depth, stats, -1, test);
+  return traverse_impl<false>(tree, ray, stack_depth, stats, -1, test, nullptr);
 }
 
 bool occluded(const FlatKdTree& tree, const Ray& ray, int stack_depth, TraversalStats& stats,
-              int64_t max_steps, const RayTest& test) {
-  return traverse_impl<true>(tree, ray, stack_depth, stats, max_steps, test).valid();
+              int64_t max_steps, const RayTest& test, TraversalTrace* trace) {
+  return traverse_impl<true>(tree, ray, stack_depth, stats, max_steps, test, trace).valid();
 }
 
 bool occluded(const FlatKdTree& tree, const Ray& ray, int stack_depth, const RayTest& test) {
   TraversalStats stats;
-  return traverse_impl<true>(tree, ray, stack_depth, stats, -1, test).valid();
+  return traverse_impl<true>(tree, ray, stack_depth, stats, -1, test, nullptr).valid();
 }
 
 Hit brute_force(const FlatKdTree& tree, const Ray& ray, const RayTest& test) {

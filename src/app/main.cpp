@@ -10,10 +10,13 @@
 #include <cstring>
 #include <exception>
 #include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <optional>
 #include <string>
 #include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include "app/commands.h"
 #include "app/options.h"
@@ -98,6 +101,8 @@ Options:
                           driver compiles shaders at first use), then the median of --repeat
                           frames
   --repeat N              frames to time with --timings (default 5)
+  --timings-json FILE     also write those timings as JSON: every stage of the median frame, in
+                          total and per generation of rays (implies --timings)
 )";
 
 constexpr const char* kInfoUsage = R"(Usage: mobirt info [SCENE] [--backend gles|vulkan] [--device D] [--validation]
@@ -314,6 +319,34 @@ void print_timings(const FrameTimings& t) {
   }
 }
 
+// The numbers print_timings() shows, as JSON (for tools/profile/).
+nlohmann::json timings_json(const FrameTimings& t) {
+  auto generation = [](const GenerationTimings& g) {
+    return nlohmann::json{{"rays", g.rays},
+                          {"shadow_rays", g.shadow_rays},
+                          {"hits", g.hits},
+                          {"capped", g.capped},
+                          {"upload_ms", g.upload_ms},
+                          {"trace_ms", g.trace_ms},
+                          {"trace_mrays", g.trace_ms > 0 ? double(g.rays + g.shadow_rays) / (g.trace_ms * 1e3) : 0.0},
+                          {"trace_readback_ms", g.trace_readback_ms},
+                          {"decode_ms", g.decode_ms},
+                          {"shade_ms", g.shade_ms},
+                          {"shade_readback_ms", g.shade_readback_ms},
+                          {"accumulate_ms", g.accumulate_ms},
+                          {"secondary_ms", g.secondary_ms},
+                          {"bytes_read", g.bytes_read}};
+  };
+  nlohmann::json j = generation(t.sum);
+  j["build_ms"] = t.build_ms;
+  j["tree_rebuilt"] = t.tree_rebuilt;
+  j["rays_ms"] = t.rays_ms;
+  j["frame_ms"] = t.total_ms;
+  j["generations"] = nlohmann::json::array();
+  for (const GenerationTimings& g : t.generations) j["generations"].push_back(generation(g));
+  return j;
+}
+
 int cmd_render(Args args) {
   std::string scene_path, output;
   RenderSettings settings;
@@ -323,6 +356,7 @@ int cmd_render(Args args) {
   std::optional<Camera> camera;
   std::optional<glm::vec3> background;
   bool timings = false;
+  std::string timings_json_path;
   int repeat = 5;
   std::string mtl;
   std::optional<double> fps, time;
@@ -367,6 +401,9 @@ int cmd_render(Args args) {
       }
       frames = std::make_pair(first, last);
     } else if (a == "--timings") {
+      timings = true;
+    } else if (a == "--timings-json") {
+      timings_json_path = args.value(a);
       timings = true;
     } else if (a == "--repeat") {
       repeat = parse_int(a, args.value(a), 1, 1000);
@@ -461,7 +498,26 @@ int cmd_render(Args args) {
     } else {
       std::printf("median of %d frames after one warm-up frame\n", repeat);
     }
-    print_timings(median_timings(measured));
+    const FrameTimings median = median_timings(measured);
+    print_timings(median);
+    if (!timings_json_path.empty()) {
+      nlohmann::json j{{"scene", scene_path},
+                       {"triangles", scene.mesh.triangle_count()},
+                       {"lights", scene.lights.size()},
+                       {"width", settings.width},
+                       {"height", settings.height},
+                       {"depth", settings.depth},
+                       {"stack", settings.stack_depth},
+                       {"max_steps", settings.max_steps},
+                       {"bins", settings.kd.bins},
+                       {"device", backend->device_info().device},
+                       {"backend", backend_name},
+                       {"frames", measured.size()},
+                       {"median", timings_json(median)}};
+      std::ofstream file(timings_json_path);
+      file << j.dump(2) << "\n";
+      if (!file) throw Error(ErrorKind::BadInput, "--timings-json " + timings_json_path + ": cannot write the file");
+    }
   }
   return 0;
 }

@@ -136,6 +136,14 @@ uint32_t shadow_mask_with(const FlatKdTree& tree, std::span<const Light> lights,
   return mask;
 }
 
+std::vector<std::optional<Ray>> shadow_rays(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
+                                            const Ray& ray, float t, const ShadowSettings& settings) {
+  std::vector<std::optional<Ray>> rays(lights.size());
+  if (prim < 0) return rays;
+  for_each_shadow_ray(tree, lights, prim, ray, t, settings, [&](size_t l, const Ray& shadow) { rays[l] = shadow; });
+  return rays;
+}
+
 uint32_t shadow_ray_count(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
                           const Ray& ray, float t, const ShadowSettings& settings) {
   uint32_t count = 0;

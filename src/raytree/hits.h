@@ -7,6 +7,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -84,6 +85,11 @@ uint32_t shadow_mask(const FlatKdTree& tree, std::span<const Light> lights, int3
 uint32_t shadow_mask_with(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim, const Ray& ray,
                           float t, const ShadowSettings& settings,
                           const std::function<bool(const Ray&)>& is_occluded);
+
+// The shadow rays the traversal pass casts for this hit, one entry per light (none for a light
+// that cannot light it), for profiling tools (tools/profile/simd_stats.cpp).
+std::vector<std::optional<Ray>> shadow_rays(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
+                                            const Ray& ray, float t, const ShadowSettings& settings);
 
 // How many shadow rays the traversal pass cast for this hit (for rays-per-second figures).
 uint32_t shadow_ray_count(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,

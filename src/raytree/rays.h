@@ -31,4 +31,12 @@ struct RayBatch {
 // One ray through the centre of every pixel, in pixel order (width = image width).
 RayBatch primary_rays(const Camera& camera, int width, int height);
 
+// Reorders a batch made in a spatially coherent order (secondary rays follow their parents) so
+// that every 8 rays made one after the other fill one 4x2 tile of the ray textures: llvmpipe runs
+// a fragment shader on the 4x2 fragments of half a 4x4 block in lock step, and a group of similar
+// rays finishes its traversal loops together. Rows of tiles need 2 rows of the batch; the rays
+// after the last full pair of rows keep their order. Needs width to be a multiple of 4 (else the
+// batch is left as it is).
+void order_in_simd_tiles(RayBatch& batch);
+
 }  // namespace mobirt

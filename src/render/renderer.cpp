@@ -430,6 +430,7 @@ Image Renderer::render(const Scene& scene, const Camera& camera, FrameTimings* t
     if (generation < depth) {
       stage = Clock::now();
       rays = next_generation(scene, tree.bounds, rays, hits, settings_.secondary);
+      order_in_simd_tiles(rays);  // 8 neighbouring rays per SIMD group of the traversal pass
       g.secondary_ms = elapsed_ms(stage);
     }
     t.generations.push_back(g);

@@ -1,0 +1,201 @@
+// mobirt_simd_stats: how well the traversal pass's rays fill llvmpipe's SIMD lanes.
+//
+// llvmpipe runs a fragment shader on 8 fragments at once (256-bit vectors): the two 2x2 quads
+// side by side of one half of a 4x4 block, a 4x2 pixel tile of the pass. Its `if` never branches:
+// both sides run under an execution mask, every iteration of a loop runs the whole body, and a
+// loop runs until the last of its lanes is done (at least once). The traversal pass therefore
+// costs loop iterations per 8-lane group, not ray steps. This tool replays the CPU traversal
+// (src/accel/kdtree_traverse.cpp, which the shader follows step for step) for the rays of one
+// frame, groups the rays as llvmpipe does and counts, per generation of rays:
+//   steps/ray         the rays' own steps (interior nodes / triangle tests per ray)
+//   node, leaf iter.  iterations of glsl/traverse.glsl's node loop and triangle loop summed over
+//                     the 8-lane groups (primary walk, then one walk per light)
+//   node occ.         lane node-loop iterations / (8 x group node-loop iterations): the share of
+//                     lanes doing useful work in the node loop
+//   ... (8 in a row)  the same with each group made of 8 consecutive rays instead of a 4x2 tile
+//                     of the ray texture (for comparison; secondary rays are ordered by
+//                     order_in_simd_tiles, as the renderer does, so that a tile holds 8
+//                     consecutively made rays)
+//
+// Usage: mobirt_simd_stats SCENE [--mtl F] [--camera SPEC] [--light SPEC]... [--size WxH]
+//        [--stack N] [--bins N] [--leaf-size N] [--isect-cost C] [--depth N] [--csv FILE]
+#include <algorithm>
+#include <cstdio>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "accel/kdtree.h"
+#include "core/camera.h"
+#include "core/error.h"
+#include "raytree/hits.h"
+#include "raytree/rays.h"
+#include "raytree/secondary.h"
+#include "profile_scene.h"
+
+namespace mobirt {
+namespace {
+
+// The walks of one ray: its closest-hit walk, then one per light (empty: no shadow ray).
+struct RayWalks {
+  std::vector<TraversalTrace> walks;
+  bool active = false;  // the fragment has a ray at all
+};
+
+struct LoopCounts {
+  uint64_t node = 0, leaf = 0;        // group iterations
+  uint64_t lane_node = 0, lane_leaf = 0;  // iterations the lanes needed
+  LoopCounts& operator+=(const LoopCounts& o) {
+    node += o.node;
+    leaf += o.leaf;
+    lane_node += o.lane_node;
+    lane_leaf += o.lane_leaf;
+    return *this;
+  }
+};
+
+// One traverse() call run by a group in lock step (see TraversalTrace for the segments).
+LoopCounts simulate_walk(const std::vector<const TraversalTrace*>& lanes) {
+  LoopCounts c;
+  size_t outer = 1;  // a loop runs at least once, even with every lane masked off
+  for (const TraversalTrace* t : lanes) outer = std::max(outer, t->segments.size());
+  for (size_t k = 0; k < outer; ++k) {
+    uint32_t node = 1, leaf = 1;
+    for (const TraversalTrace* t : lanes) {
+      if (k >= t->segments.size()) continue;
+      node = std::max(node, t->segments[k].node_iterations);
+      leaf = std::max(leaf, t->segments[k].triangle_tests);
+      c.lane_node += t->segments[k].node_iterations;
+      c.lane_leaf += t->segments[k].triangle_tests;
+    }
+    c.node += node;
+    c.leaf += leaf;
+  }
+  return c;
+}
+
+// A group's traversal pass: the closest-hit walk, then the light loop.
+LoopCounts simulate_group(const std::vector<const RayWalks*>& lanes, size_t lights) {
+  LoopCounts c;
+  for (size_t w = 0; w <= lights; ++w) {
+    std::vector<const TraversalTrace*> walks;
+    for (const RayWalks* r : lanes) walks.push_back(&r->walks[w]);
+    c += simulate_walk(walks);
+  }
+  return c;
+}
+
+struct PassStats {
+  uint64_t rays = 0, shadow_rays = 0;
+  TraversalStats steps;
+  LoopCounts tiled, linear;  // 4x2 tiles of the ray texture; 8 consecutive rays
+};
+
+PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& rays, int stack,
+                   std::vector<SurfaceHit>& hits) {
+  PassStats s;
+  const size_t lights = scene.lights.size();
+  std::vector<RayWalks> walks(rays.count());
+  hits.assign(rays.count(), SurfaceHit{});
+  for (uint32_t i = 0; i < rays.count(); ++i) {
+    RayWalks& r = walks[i];
+    r.active = true;
+    r.walks.resize(lights + 1);
+    const Ray ray = rays.ray(i);
+    TraversalStats ts;
+    const Hit h = traverse(tree, ray, stack, ts, -1, RayTest{}, &r.walks[0]);
+    s.steps += ts;
+    ++s.rays;
+    if (!h.valid()) continue;
+    uint32_t mask = 0;
+    const auto shadows = shadow_rays(tree, scene.lights, h.prim, ray, h.t, ShadowSettings{});
+    for (size_t l = 0; l < lights; ++l) {
+      if (!shadows[l]) continue;
+      TraversalStats ss;
+      if (!occluded(tree, *shadows[l], stack, ss, -1, RayTest{}, &r.walks[l + 1])) mask |= 1u << l;
+      s.steps += ss;
+      ++s.shadow_rays;
+    }
+    hits[i] = surface_hit(scene, tree, ray, h.prim);
+    hits[i].mask = mask;
+  }
+  const RayWalks idle{std::vector<TraversalTrace>(lights + 1), false};
+  auto lane = [&](uint64_t i) { return i < rays.count() ? &walks[i] : &idle; };
+  // llvmpipe's groups: 4x2 tiles of the pass (ray i at (i mod W, i div W)).
+  const uint32_t w = rays.width, rows = rays.rows();
+  for (uint32_t y0 = 0; y0 < rows; y0 += 2) {
+    for (uint32_t x0 = 0; x0 < w; x0 += 4) {
+      std::vector<const RayWalks*> group;
+      for (uint32_t y = y0; y < std::min(y0 + 2, rows); ++y) {
+        for (uint32_t x = x0; x < std::min(x0 + 4, w); ++x) group.push_back(lane(uint64_t(y) * w + x));
+      }
+      s.tiled += simulate_group(group, lights);
+    }
+  }
+  for (uint64_t i0 = 0; i0 < rays.count(); i0 += 8) {
+    std::vector<const RayWalks*> group;
+    for (uint64_t i = i0; i < i0 + 8; ++i) group.push_back(lane(i));
+    s.linear += simulate_group(group, lights);
+  }
+  return s;
+}
+
+double occupancy(uint64_t lane, uint64_t group) { return group ? double(lane) / (8.0 * double(group)) : 0.0; }
+
+int run(int argc, char** argv) {
+  const profile::ProfileScene p = profile::load_profile_scene(
+      argc, argv,
+      "usage: mobirt_simd_stats SCENE [--mtl F] [--camera SPEC] [--light SPEC]... [--size WxH] [--stack N] "
+      "[--bins N] [--leaf-size N] [--isect-cost C] [--depth N] [--csv FILE]");
+  const Scene& scene = p.scene;
+  const FlatKdTree& tree = p.tree;
+  const int width = p.width, height = p.height, stack = p.stack, depth = p.depth;
+  const std::string& scene_path = p.path;
+  const std::string& csv = p.csv;
+  RayBatch rays = primary_rays(p.camera, width, height);
+  std::FILE* out = csv.empty() ? nullptr : std::fopen(csv.c_str(), "w");
+  if (out) {
+    std::fprintf(out, "generation,rays,shadow_rays,steps,interior_steps,triangle_tests,empty_leaves,"
+                      "node_iterations,leaf_iterations,node_occupancy,leaf_occupancy,"
+                      "node_iterations_linear,leaf_iterations_linear,node_occupancy_linear\n");
+  }
+  std::printf("%s: %zu triangles, %zu lights, %dx%d, stack %d, %zu nodes, SAH %.0f\n", scene_path.c_str(),
+              scene.mesh.triangle_count(), scene.lights.size(), width, height, stack, tree.nodes.size(),
+              tree.stats.sah_cost);
+  std::printf("gen    rays  shadow  steps/ray  interior/tri/empty   node iter. occ.  leaf iter. occ."
+              "   (8 in a row: node iter. occ.)\n");
+  for (int g = 0; g <= depth && rays.count() > 0; ++g) {
+    std::vector<SurfaceHit> hits;
+    const PassStats s = simulate(tree, scene, rays, stack, hits);
+    const double n = double(s.rays + s.shadow_rays);
+    const uint64_t interior = s.steps.nodes_visited - s.steps.leaves_visited;
+    const uint64_t empty = s.steps.steps - interior - s.steps.triangles_tested;
+    std::printf("%3d %7llu %7llu %10.2f %6.2f/%.2f/%.2f %12llu %4.2f %11llu %4.2f   (%12llu %4.2f)\n", g,
+                (unsigned long long)s.rays, (unsigned long long)s.shadow_rays, double(s.steps.steps) / n,
+                double(interior) / n, double(s.steps.triangles_tested) / n, double(empty) / n,
+                (unsigned long long)s.tiled.node, occupancy(s.tiled.lane_node, s.tiled.node),
+                (unsigned long long)s.tiled.leaf, occupancy(s.tiled.lane_leaf, s.tiled.leaf),
+                (unsigned long long)s.linear.node, occupancy(s.linear.lane_node, s.linear.node));
+    if (out) {
+      std::fprintf(out, "%d,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%.4f,%.4f,%llu,%llu,%.4f\n", g,
+                   (unsigned long long)s.rays, (unsigned long long)s.shadow_rays,
+                   (unsigned long long)s.steps.steps, (unsigned long long)interior,
+                   (unsigned long long)s.steps.triangles_tested, (unsigned long long)empty,
+                   (unsigned long long)s.tiled.node, (unsigned long long)s.tiled.leaf,
+                   occupancy(s.tiled.lane_node, s.tiled.node), occupancy(s.tiled.lane_leaf, s.tiled.leaf),
+                   (unsigned long long)s.linear.node, (unsigned long long)s.linear.leaf,
+                   occupancy(s.linear.lane_node, s.linear.node));
+    }
+    if (g < depth) {
+      rays = next_generation(scene, tree.bounds, rays, hits, SecondarySettings{});
+      order_in_simd_tiles(rays);  // as the renderer does
+    }
+  }
+  if (out) std::fclose(out);
+  return 0;
+}
+
+}  // namespace
+}  // namespace mobirt
+
+int main(int argc, char** argv) { return mobirt::profile::run_tool("mobirt_simd_stats", argc, argv, mobirt::run); }
