@@ -12,17 +12,16 @@
 //
 // Usage: mobirt_embree_rays SCENE [--camera SPEC] [--light SPEC]... [--mtl F] [--size WxH]
 //        [--repeat N] [--threads N]
-#include <embree3/rtcore.h>
-
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <string>
-#include <thread>
 #include <vector>
 
+#include "baseline/embree_engine.h"
+#include "core/parallel.h"
 #include "raytree/hits.h"
 #include "raytree/rays.h"
 #include "profile_scene.h"
@@ -33,37 +32,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
-
-// Runs f(i) for i in [0, n) on `threads` threads, in chunks of 64 rays taken in turn.
-template <class F>
-void parallel(size_t n, int threads, F&& f) {
-  std::atomic<size_t> next{0};
-  auto work = [&] {
-    for (;;) {
-      const size_t start = next.fetch_add(64);
-      if (start >= n) return;
-      for (size_t i = start; i < std::min(n, start + 64); ++i) f(i);
-    }
-  };
-  std::vector<std::thread> pool;
-  for (int t = 1; t < threads; ++t) pool.emplace_back(work);
-  work();
-  for (std::thread& t : pool) t.join();
-}
-
-RTCRay embree_ray(const Ray& r) {
-  RTCRay ray{};
-  ray.org_x = r.origin.x;
-  ray.org_y = r.origin.y;
-  ray.org_z = r.origin.z;
-  ray.dir_x = r.direction.x;
-  ray.dir_y = r.direction.y;
-  ray.dir_z = r.direction.z;
-  ray.tnear = r.tmin;
-  ray.tfar = r.tmax;
-  ray.mask = 0xFFFFFFFFu;
-  return ray;
-}
 
 double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
@@ -98,59 +66,31 @@ int run(int argc, char** argv) {
     }
   }
 
-  RTCDevice device = rtcNewDevice(("threads=" + std::to_string(threads)).c_str());
-  if (!device) throw Error(ErrorKind::Internal, "rtcNewDevice failed");
-  RTCScene scene = rtcNewScene(device);
+  // The same Embree the benchmark baseline uses (src/baseline/), here with a static MEDIUM BVH.
+  EmbreeEngine embree(EmbreeOptions{unsigned(threads), false});
   const auto build_start = Clock::now();
-  RTCGeometry geometry = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
-  const std::vector<glm::vec3>& positions = p.scene.mesh.positions;
-  auto* vertices = static_cast<float*>(rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0,
-                                                                RTC_FORMAT_FLOAT3, 3 * sizeof(float),
-                                                                positions.size()));
-  auto* indices = static_cast<unsigned*>(rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                                                 3 * sizeof(unsigned), positions.size() / 3));
-  for (size_t i = 0; i < positions.size(); ++i) {
-    vertices[3 * i + 0] = positions[i].x;
-    vertices[3 * i + 1] = positions[i].y;
-    vertices[3 * i + 2] = positions[i].z;
-    indices[i] = unsigned(i);
-  }
-  rtcCommitGeometry(geometry);
-  rtcAttachGeometry(scene, geometry);
-  rtcReleaseGeometry(geometry);
-  rtcCommitScene(scene);
+  embree.build(p.scene);
   const double build_ms = seconds_since(build_start) * 1e3;
+  const std::vector<glm::vec3>& positions = p.scene.mesh.positions;
 
   std::vector<double> intersect_ms, mixed_ms;
   std::atomic<size_t> primary_hits{0}, occluded{0};
   for (int r = 0; r < std::max(1, p.repeat) + 1; ++r) {  // the first round warms up
     primary_hits = 0;
     occluded = 0;
-    auto closest = [&](const Ray& ray) {
-      RTCIntersectContext context;
-      rtcInitIntersectContext(&context);
-      RTCRayHit rh{};
-      rh.ray = embree_ray(ray);
-      rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-      rtcIntersect1(scene, &context, &rh);
-      return rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
-    };
+    const uint32_t n = uint32_t(primary.size() + shadow.size());
     auto start = Clock::now();
-    parallel(primary.size() + shadow.size(), threads, [&](size_t i) {
-      closest(i < primary.size() ? primary[i] : shadow[i - primary.size()]);
+    parallel_for(n, unsigned(threads), [&](uint32_t i) {
+      embree.closest(i < primary.size() ? primary[i] : shadow[i - primary.size()]);
     });
     const double a = seconds_since(start) * 1e3;
     start = Clock::now();
-    parallel(primary.size() + shadow.size(), threads, [&](size_t i) {
+    parallel_for(n, unsigned(threads), [&](uint32_t i) {
       if (i < primary.size()) {
-        if (closest(primary[i])) ++primary_hits;
-        return;
+        if (embree.closest(primary[i]).valid()) ++primary_hits;
+      } else if (embree.occluded(shadow[i - primary.size()])) {
+        ++occluded;
       }
-      RTCIntersectContext context;
-      rtcInitIntersectContext(&context);
-      RTCRay ray = embree_ray(shadow[i - primary.size()]);
-      rtcOccluded1(scene, &context, &ray);
-      if (ray.tfar < 0.0f) ++occluded;
     });
     const double b = seconds_since(start) * 1e3;
     if (r > 0) {
@@ -158,8 +98,6 @@ int run(int argc, char** argv) {
       mixed_ms.push_back(b);
     }
   }
-  rtcReleaseScene(scene);
-  rtcReleaseDevice(device);
 
   const double rays = double(primary.size() + shadow.size());
   const double ia = median(intersect_ms), mx = median(mixed_ms);
