@@ -15,6 +15,7 @@ PACKAGES=(
   glslang-tools glslang-dev spirv-tools
   libglm-dev libtinygltf-dev nlohmann-json3-dev libstb-dev libtinyobjloader-dev
   libopenimageio-dev libgtest-dev libbenchmark-dev
+  libcli11-dev                # the command line's option table and --help
   libegl-dev libgles-dev
   clang libclang-rt-14-dev    # the scene fuzzer (tools/fuzz.sh): clang 14's libFuzzer, ASan, UBSan
   python3                     # tools/bad_inputs/, tests/fuzz/make_corpus.py
