@@ -3,60 +3,21 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
-#include <cmath>
 
 #include "accel/kdtree.h"
 #include "core/parallel.h"
 #include "layout.h"
 #include "raytree/secondary.h"
+#include "raytree/shading_math.h"
 #include "render/whitted.h"
 
 namespace mobirt {
-
-namespace {
-
-float light_attenuation(float distance2, float range) {
-  float window = 1.0f;
-  if (range > 0.0f) {
-    const float r = distance2 / (range * range);
-    window = std::clamp(1.0f - r * r, 0.0f, 1.0f);
-    window *= window;
-  }
-  return window / std::max(distance2, 1e-8f);
-}
-
-}  // namespace
 
 glm::vec3 shade_phong(const Scene& scene, const SurfaceHit& hit, const glm::vec3& view, const Atlas& atlas) {
   const Material& m = scene.materials[hit.material];
   glm::vec3 diffuse = m.diffuse;
   if (!atlas.empty() && m.texture >= 0) diffuse *= sample_atlas(atlas, m.texture, hit.texcoord);
-  glm::vec3 color = m.ambient * diffuse;
-  for (size_t l = 0; l < scene.lights.size(); ++l) {
-    if (!(hit.mask & (1u << l))) continue;
-    const Light& light = scene.lights[l];
-    glm::vec3 to_light = -light.direction;
-    float falloff = 1.0f;
-    if (light.type != LightType::Directional) {
-      to_light = light.position - hit.position;
-      falloff = light_attenuation(glm::dot(to_light, to_light), light.range);
-    }
-    const glm::vec3 l_dir = glm::normalize(to_light);
-    if (light.type == LightType::Spot) {
-      const float cos_outer = std::cos(light.outer_cone);
-      const float cos_inner = std::cos(light.inner_cone);
-      const float cone = std::clamp((glm::dot(-l_dir, light.direction) - cos_outer) /
-                                        std::max(cos_inner - cos_outer, 1e-4f),
-                                    0.0f, 1.0f);
-      falloff *= cone * cone;
-    }
-    const float n_dot_l = glm::dot(hit.normal, l_dir);
-    if (n_dot_l <= 0.0f) continue;
-    const glm::vec3 r = 2.0f * n_dot_l * hit.normal - l_dir;
-    const float spec = m.shininess > 0.0f ? std::pow(std::max(glm::dot(r, view), 0.0f), m.shininess) : 0.0f;
-    color += falloff * light.color * light.intensity * (diffuse * n_dot_l + m.specular * spec);
-  }
-  return color;
+  return phong<float>(scene.lights, m, diffuse, hit.position, hit.normal, view, hit.mask);
 }
 
 void KdTreeEngine::build(const Scene& scene) { tree_ = build_kdtree(scene.mesh.positions, options_); }
