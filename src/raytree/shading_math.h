@@ -105,10 +105,7 @@ glm::vec<3, T> mirror_direction(const glm::vec<3, T>& d, const glm::vec<3, T>& n
   return r;
 }
 
-// How a hit on material m splits the ray's weight: the mirror share and the refracted share with
-// its direction. Entering and leaving a medium are told apart by the geometric normal (`entering`);
-// total internal reflection, or a shading normal bending the refracted ray back out, sends the
-// refracted share into the mirror ray; with m.fresnel, Schlick moves part of it there.
+// How a hit splits its ray's weight between the mirror ray and the refracted one (and its direction).
 template <typename T>
 struct WeightSplit {
   T reflect = T(0);
@@ -117,6 +114,10 @@ struct WeightSplit {
   bool total_internal_reflection = false;
 };
 
+// The split on material m for unit direction d at shading normal ns and geometric normal ng (both
+// facing the ray). Entering and leaving a medium are told apart by the geometric normal
+// (`entering`); total internal reflection, or a shading normal bending the refracted ray back out,
+// sends the refracted share into the mirror ray; with m.fresnel, Schlick moves part of it there.
 template <typename T>
 WeightSplit<T> split_weight(const Material& m, const glm::vec<3, T>& d, const glm::vec<3, T>& ns,
                             const glm::vec<3, T>& ng, bool entering) {
