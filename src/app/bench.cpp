@@ -165,18 +165,19 @@ void add_gpu_frame(Samples& s, double animate_ms, const FrameTimings& t) {
   }
 }
 
-void add_cpu_frame(Samples& s, double animate_ms, const CpuFrameTimings& t) {
+void add_cpu_frame(Samples& s, double animate_ms, const FrameTimings& t) {
+  const GenerationTimings& g = t.sum;
   s.add("animate", animate_ms);
   s.add("build", t.build_ms);
   s.add("rays", t.rays_ms);
-  s.add("trace", t.trace_ms);
-  s.add("shadow", t.shadow_ms);
-  s.add("shade", t.shade_ms);
-  s.add("secondary", t.secondary_ms);
+  s.add("trace", g.trace_ms);
+  s.add("shadow", g.shadow_ms);
+  s.add("shade", g.shade_ms + g.accumulate_ms);
+  s.add("secondary", g.secondary_ms);
   s.add("frame", animate_ms + t.total_ms);
-  s.add("traced_rays", double(t.rays));
-  s.add("shadow_rays", double(t.shadow_rays));
-  s.add("trace_mrays", mrays(double(t.rays + t.shadow_rays), t.trace_ms + t.shadow_ms));
+  s.add("traced_rays", double(g.rays));
+  s.add("shadow_rays", double(g.shadow_rays));
+  s.add("trace_mrays", mrays(double(g.rays + g.shadow_rays), g.trace_ms + g.shadow_ms));
 }
 
 struct BenchOptions {
@@ -245,12 +246,12 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, const BenchScene& bs, c
       if (timed) add_gpu_frame(gpu[c], animate_ms, ft);
     }
     if (embree) {
-      CpuFrameTimings ct;
+      FrameTimings ct;
       render_whitted_cpu(scene, view, settings, *embree, o.threads, &ct);
       if (timed) add_cpu_frame(emb, animate_ms, ct);
     }
     if (kd) {
-      CpuFrameTimings ct;
+      FrameTimings ct;
       render_whitted_cpu(scene, view, settings, *kd, o.threads, &ct);
       if (timed) add_cpu_frame(cpu, animate_ms, ct);
       kd_stats = kd->tree().stats;

@@ -7,9 +7,11 @@
 #include <map>
 #include <tuple>
 #include <type_traits>
+#include <utility>
 
 #include "core/error.h"
 #include "layout.h"
+#include "render/whitted.h"
 #include "scene/atlas.h"
 #include "texels.h"
 
@@ -105,8 +107,65 @@ struct Renderer::Data {
   std::map<std::tuple<int, int, int>, PassHandle> shade_passes;  // (lights, textures, colour)
 };
 
+// The frame loop's view of the passes: the tree built or kept once per frame, one traversal and one
+// shading pass (two for 16-bit colour) per generation.
+class Renderer::Engine final : public WhittedEngine {
+ public:
+  explicit Engine(Renderer& renderer) : r_(renderer) {}
+  const char* name() const override { return "mobirt fragment passes"; }
+
+  void begin_frame(const Scene& scene, const RenderSettings&, FrameTimings& t) override {
+    // Refuse a scene over a limit before any work.
+    choose_packing(scene.mesh.triangle_count(), r_.pass_lights(int(r_.shadow_lights(scene).size())),
+                   scene.source);
+    // The tree is rebuilt from scratch whenever the geometry changed (every frame of an animation,
+    // as in the paper); a static scene, or a frame whose triangles did not move, keeps it.
+    const auto stage = Clock::now();
+    Data& cache = *r_.data_;
+    const bool reuse = !r_.settings_.always_rebuild && cache.tree_valid &&
+                       cache.tree_positions == scene.mesh.positions;
+    if (!reuse) {
+      cache.tree = build_kdtree(scene.mesh.positions, r_.settings_.kd);
+      cache.tree_positions = scene.mesh.positions;
+      t.build_ms = elapsed_ms(stage);
+      r_.upload_tree(cache.tree);
+      cache.tree_valid = true;
+    }
+    t.tree_rebuilt = !reuse;
+    r_.upload_materials(scene);
+  }
+
+  const FlatKdTree& tree() const override { return r_.data_->tree; }
+
+  TracedGeneration trace(const Scene& scene, const RayBatch& rays, GenerationTimings& g) override {
+    TraceResult result = r_.trace_uploaded(scene, r_.data_->tree, rays);
+    g.upload_ms += result.timing.upload_ms;
+    g.trace_ms += result.timing.gpu_ms;
+    g.trace_readback_ms += result.timing.readback_ms;
+    g.bytes_read += result.timing.bytes_read;
+    TracedGeneration traced;
+    traced.form = TracedGeneration::Form::PackedTexels;
+    traced.texels = std::move(result.texels);
+    traced.packing = result.packing;
+    return traced;
+  }
+
+  std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, std::span<const SurfaceHit> hits,
+                               GenerationTimings& g) override {
+    return r_.shade(scene, rays, hits, g);
+  }
+
+  void order_rays(RayBatch& rays) const override {
+    order_in_simd_tiles(rays);  // 8 neighbouring rays per SIMD group of the traversal pass
+  }
+
+ private:
+  Renderer& r_;
+};
+
 Renderer::Renderer(Backend& backend, const RenderSettings& settings)
-    : backend_(backend), settings_(settings), data_(std::make_unique<Data>()) {
+    : backend_(backend), settings_(settings), data_(std::make_unique<Data>()),
+      engine_(std::make_unique<Engine>(*this)) {
   if (settings_.stack_depth < 0 || settings_.stack_depth > MOBIRT_MAX_STACK_DEPTH) {
     throw Error(ErrorKind::BadInput, "--stack " + std::to_string(settings_.stack_depth) +
                                          ": the short stack holds 0 to " +
@@ -290,7 +349,6 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   auto stage = Clock::now();
   std::vector<HitPositionTexel> position(rays.count());
   std::vector<HitNormalTexel> normal(rays.count());
-  const uint32_t all_lights = scene.lights.empty() ? 0u : (2u << (scene.lights.size() - 1)) - 1u;
   for (uint32_t i = 0; i < rays.count(); ++i) {
     const SurfaceHit& h = hits[i];
     if (!h.valid()) {
@@ -299,7 +357,7 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
       continue;
     }
     position[i] = HitPositionTexel{h.position, float(h.material)};
-    normal[i] = HitNormalTexel{h.normal, float(settings_.shadows ? h.mask : all_lights)};
+    normal[i] = HitNormalTexel{h.normal, float(h.mask)};
   }
   timings.decode_ms += elapsed_ms(stage);
 
@@ -354,91 +412,8 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   return colors;
 }
 
-GenerationTimings& GenerationTimings::operator+=(const GenerationTimings& g) {
-  rays += g.rays;
-  hits += g.hits;
-  capped += g.capped;
-  shadow_rays += g.shadow_rays;
-  upload_ms += g.upload_ms;
-  trace_ms += g.trace_ms;
-  trace_readback_ms += g.trace_readback_ms;
-  decode_ms += g.decode_ms;
-  shade_ms += g.shade_ms;
-  shade_readback_ms += g.shade_readback_ms;
-  accumulate_ms += g.accumulate_ms;
-  secondary_ms += g.secondary_ms;
-  bytes_read += g.bytes_read;
-  return *this;
-}
-
 Image Renderer::render(const Scene& scene, const Camera& camera, FrameTimings* timings) {
-  FrameTimings t;
-  const auto frame_start = Clock::now();
-  // Refuse a scene over a limit before any work.
-  choose_packing(scene.mesh.triangle_count(), pass_lights(int(shadow_lights(scene).size())),
-                 scene.source);
-
-  // The tree is rebuilt from scratch whenever the geometry changed (every frame of an animation,
-  // as in the paper); a static scene, or a frame whose triangles did not move, keeps it.
-  auto stage = Clock::now();
-  Data& cache = *data_;
-  const bool reuse = !settings_.always_rebuild && cache.tree_valid &&
-                     cache.tree_positions == scene.mesh.positions;
-  if (!reuse) {
-    cache.tree = build_kdtree(scene.mesh.positions, settings_.kd);
-    cache.tree_positions = scene.mesh.positions;
-    t.build_ms = elapsed_ms(stage);
-    upload_tree(cache.tree);
-    cache.tree_valid = true;
-  }
-  t.tree_rebuilt = !reuse;
-  const FlatKdTree& tree = cache.tree;
-  upload_materials(scene);
-
-  stage = Clock::now();
-  RayBatch rays = primary_rays(camera, settings_.width, settings_.height);
-  t.rays_ms = elapsed_ms(stage);
-
-  // Work a scene does not need is never done: no second generation without mirrors or glass.
-  const int depth = scene_has_secondary_rays(scene) ? settings_.depth : 0;
-  Image image(settings_.width, settings_.height);
-  for (int generation = 0; generation <= depth && rays.count() > 0; ++generation) {
-    GenerationTimings g;
-    g.rays = rays.count();
-    const TraceResult traced = trace_uploaded(scene, tree, rays);
-    g.upload_ms += traced.timing.upload_ms;
-    g.trace_ms = traced.timing.gpu_ms;
-    g.trace_readback_ms = traced.timing.readback_ms;
-    g.bytes_read += traced.timing.bytes_read;
-
-    stage = Clock::now();
-    DecodeStats stats;
-    const std::vector<SurfaceHit> hits =
-        decode_hits(scene, tree, rays, traced.texels, traced.packing, shadow_lights(scene),
-                    settings_.shadow_rays, &stats);
-    g.hits = stats.hits;
-    g.capped = stats.capped;
-    g.shadow_rays = stats.shadow_rays;
-    g.decode_ms = elapsed_ms(stage);
-
-    const std::vector<glm::vec3> colors = shade(scene, rays, hits, g);
-
-    stage = Clock::now();
-    for (uint32_t i = 0; i < rays.count(); ++i) image.pixels[rays.pixel[i]] += rays.weight[i] * colors[i];
-    g.accumulate_ms += elapsed_ms(stage);
-
-    if (generation < depth) {
-      stage = Clock::now();
-      rays = next_generation(scene, tree.bounds, rays, hits, settings_.secondary);
-      order_in_simd_tiles(rays);  // 8 neighbouring rays per SIMD group of the traversal pass
-      g.secondary_ms = elapsed_ms(stage);
-    }
-    t.generations.push_back(g);
-  }
-  for (const GenerationTimings& g : t.generations) t.sum += g;
-  t.total_ms = elapsed_ms(frame_start);
-  if (timings) *timings = t;
-  return image;
+  return render_whitted(scene, camera, settings_, *engine_, timings);
 }
 
 }  // namespace mobirt
