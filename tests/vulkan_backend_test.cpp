@@ -222,7 +222,9 @@ TEST_F(VulkanBackendTest, SpinHonoursTheCap) {
   std::printf("loop model: %s (a loop capped at 100000 ran %u iterations; %s)\n",
               budgeted ? "llvmpipe's 65535-iteration budget" : "the shader's cap only", probed,
               backend->device_info().driver.c_str());
-  if (budgeted) ASSERT_GE(probed, kLlvmpipeLoopBudget - 1) << "stopped below llvmpipe's budget";
+  if (budgeted) {
+    ASSERT_GE(probed, kLlvmpipeLoopBudget - 1) << "stopped below llvmpipe's budget";
+  }
   // The iterations ray `column` should report: [low, high].
   auto expected = [&](const Case& c, uint32_t column) -> std::pair<uint32_t, uint32_t> {
     const uint32_t first = c.odd_columns_skip_first && (column & 1) ? 0 : c.cap;

@@ -41,7 +41,6 @@ The render options have the same meaning and defaults as for mobirt render.
 )";
 
 constexpr const char* kHelp = "mobirt accuracy --help";
-[[noreturn]] void usage_error(const std::string& message) { cli::usage_error(message, kHelp); }
 
 const char* offset_name(OffsetMode mode) {
   return mode == OffsetMode::Fixed ? "fixed" : mode == OffsetMode::Scaled ? "scaled" : "normal-ulp";
