@@ -259,6 +259,8 @@ int cmd_info(Args args) {
   std::cout << "api:     " << info.api << "\n"
             << "device:  " << info.device << (info.is_software ? " (software)" : "") << "\n"
             << "driver:  " << info.driver << "\n"
+            << "version: " << info.driver_version << ", ray queries: "
+            << (info.ray_query ? "yes (VK_KHR_ray_query, VK_KHR_acceleration_structure)" : "no") << "\n"
             << "limits:\n";
   for (const std::string& line : info.limits) std::cout << "  " << line << "\n";
   return 0;
@@ -350,7 +352,7 @@ nlohmann::json timings_json(const FrameTimings& t) {
 int cmd_render(Args args) {
   std::string scene_path, output;
   RenderSettings settings;
-  BackendOptions backend_options;
+  VulkanOptions backend_options;  // the pipeline cache is Vulkan's
   std::string backend_name = "vulkan";
   std::vector<Light> lights;
   std::optional<Camera> camera;
