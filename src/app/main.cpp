@@ -29,6 +29,7 @@
 #include "scene/animation.h"
 #include "scene/loader.h"
 #include "scene/overrides.h"
+#include "scene/view_defaults.h"
 
 namespace mobirt {
 namespace {
@@ -361,6 +362,7 @@ int cmd_render(Args args) {
   std::string mtl;
   std::optional<double> fps, time;
   std::optional<std::pair<int, int>> frames;
+  bool sized = false;
   while (!args.empty()) {
     const std::string a = args.take();
     if (is_help(a)) {
@@ -369,6 +371,7 @@ int cmd_render(Args args) {
     } else if (a == "-o" || a == "--output") {
       output = args.value(a);
     } else if (cli::parse_render_setting(a, [&] { return args.value(a); }, settings, kHelp)) {
+      sized |= a == "--size";
     } else if (a == "--general") {
       settings.specialize = false;
     } else if (a == "--always-rebuild") {
@@ -429,12 +432,16 @@ int cmd_render(Args args) {
   Scene scene = animation.rest();
   // One camera for the whole sequence: the file's (animated with it), --camera, or one framing
   // the scene at rest, so that the view does not jump from frame to frame.
-  const Camera fallback_camera =
-      frame_box(scene.bounds(), 0.7854f, float(settings.width) / float(settings.height));
+  if (!sized && scene.image_size) {  // the file's own image size (NFF resolution) unless --size
+    settings.width = scene.image_size->x;
+    settings.height = scene.image_size->y;
+  }
+  const Camera fallback_camera = framing_camera(scene, float(settings.width) / float(settings.height));
   auto scene_at = [&](double seconds) {
     if (animation.animated()) animation.evaluate(seconds, scene);
     apply_overrides(scene, lights, camera);
     if (background) scene.background = *background;
+    add_headlight(scene, scene.camera ? *scene.camera : fallback_camera);
     return scene.camera ? *scene.camera : fallback_camera;
   };
 
