@@ -391,6 +391,52 @@ TEST(ViewDefaults, TheCommandLineLightsAnUnlitSceneAndSaysSo) {
   EXPECT_GT(image.at(16, 12).x, 0.5f) << "the quad faces the headlight";
 }
 
+TEST(NffCommandLine, TheFilesResolutionIsTheDefaultImageSize) {
+  const std::string path = write_file("sized.nff",
+                                      "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 40\nhither 0\nresolution 40 30\n"
+                                      "l 0 0 5\nf 1 1 1 1 0 1 0 1\ns 0 0 0 1\n");
+  const fs::path dir = fs::path(path).parent_path();
+  test::CommandResult r = test::run_mobirt("render " + path + " --depth 0 -o " + (dir / "own.png").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(r.output.find("headlight"), std::string::npos) << "the file has a light";
+  const Image own = read_image((dir / "own.png").string());
+  EXPECT_EQ(own.width, 40);
+  EXPECT_EQ(own.height, 30);
+  EXPECT_GT(own.at(20, 15).x, 0.2f) << "the lit sphere fills the centre";
+  r = test::run_mobirt("render " + path + " --depth 0 --size 20x10 -o " + (dir / "given.png").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const Image given = read_image((dir / "given.png").string());
+  EXPECT_EQ(given.width, 20);
+  EXPECT_EQ(given.height, 10);
+}
+
+// Truncated, malformed and over-limit NFF and PLY files: one line, exit 2, no output file.
+TEST(NffCommandLine, BadNffAndPlyFilesEndInOneLineWithoutOutput) {
+  const std::vector<std::pair<std::string, std::string>> files = {
+      {"truncated.nff", "f 1 1 1 1 0 1 0 1\np 4\n0 0 0\n1 0 0\n"},
+      {"malformed.nff", "s 0 0 zero 1\n"},
+      {"over-limit.nff", "p 70000\n0 0 0\n"},
+      {"truncated.ply", "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n"
+                        "property float y\nproperty float z\nend_header\n\1\2\3"},
+      {"malformed.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+                        "property float z\nend_header\n0 zero 0\n"},
+      {"over-limit.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                         "property float z\nelement face 1\nproperty list uint int vertex_indices\nend_header\n"
+                         "0 0 0\n1 0 0\n0 1 0\n70000 0 1 2\n"},
+  };
+  const fs::path dir = test::temp_dir();
+  for (const auto& [name, text] : files) {
+    SCOPED_TRACE(name);
+    std::ofstream(dir / name, std::ios::binary) << text;
+    const fs::path out = dir / "out.png";
+    const test::CommandResult r = test::run_mobirt("render " + (dir / name).string() + " -o " + out.string());
+    EXPECT_EQ(r.exit_code, 2) << r.output;
+    EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+    EXPECT_EQ(r.output.rfind("mobirt: error: " + (dir / name).string(), 0), 0u) << r.output;
+    EXPECT_FALSE(fs::exists(out));
+  }
+}
+
 // ---- the SPD scenes ---------------------------------------------------------------------------
 
 std::vector<fs::path> spd_scenes() {

@@ -137,9 +137,14 @@ class PlyReader {
     auto next_line = [&](std::string& line) {
       if (pos_ >= data_.size()) fail("header line " + std::to_string(line_no + 1) + ": unexpected end of file before end_header");
       size_t end = data_.find('\n', pos_);
-      if (end == std::string::npos) end = data_.size();
+      const bool last = end == std::string::npos;
+      if (last) end = data_.size();
       line.assign(data_, pos_, end - pos_);
       if (!line.empty() && line.back() == '\r') line.pop_back();
+      // A header cut off mid-line: say so rather than report the fragment as a keyword.
+      if (last && line != "end_header") {
+        fail("header line " + std::to_string(line_no + 1) + ": unexpected end of file before end_header");
+      }
       pos_ = std::min(end + 1, data_.size());
       ++line_no;
     };
