@@ -386,7 +386,7 @@ TEST(ViewDefaults, TheCommandLineLightsAnUnlitSceneAndSaysSo) {
   const fs::path out = fs::path(path).parent_path() / "unlit.png";
   const test::CommandResult r = test::run_mobirt("render " + path + " --size 32x24 --depth 0 -o " + out.string());
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  EXPECT_NE(r.output.find("no lights: a headlight at the camera"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("no lights: a headlight at the camera lit it"), std::string::npos) << r.output;
   const Image image = read_image(out.string());
   EXPECT_GT(image.at(16, 12).x, 0.5f) << "the quad faces the headlight";
 }

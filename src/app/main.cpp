@@ -437,11 +437,12 @@ int cmd_render(Args args) {
     settings.height = scene.image_size->y;
   }
   const Camera fallback_camera = framing_camera(scene, float(settings.width) / float(settings.height));
+  bool headlit = false;  // a scene without lights is lit from the camera (noted once it rendered)
   auto scene_at = [&](double seconds) {
     if (animation.animated()) animation.evaluate(seconds, scene);
     apply_overrides(scene, lights, camera);
     if (background) scene.background = *background;
-    add_headlight(scene, scene.camera ? *scene.camera : fallback_camera);
+    headlit |= add_headlight(scene, scene.camera ? *scene.camera : fallback_camera);
     return scene.camera ? *scene.camera : fallback_camera;
   };
 
@@ -496,6 +497,7 @@ int cmd_render(Args args) {
     }
     if (tty) std::fprintf(stderr, "\n");
   }
+  if (headlit) note_headlight(scene);
   if (timings && !measured.empty()) {
     std::printf("%s: %zu triangles, %zu lights, %dx%d, depth %d on %s\n", scene_path.c_str(),
                 scene.mesh.triangle_count(), scene.lights.size(), settings.width, settings.height,

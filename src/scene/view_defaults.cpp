@@ -1,7 +1,6 @@
 #include "scene/view_defaults.h"
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <iostream>
 
@@ -49,12 +48,12 @@ bool add_headlight(Scene& scene, const Camera& view) {
   const glm::vec3 d = view.target - view.eye;
   light.intensity = std::max(glm::dot(d, d), 1e-12f);
   scene.lights.push_back(light);
-  static std::atomic<bool> noted{false};
-  if (!noted.exchange(true)) {
-    std::cerr << "mobirt: note: " << (scene.source.empty() ? "" : scene.source + ": ")
-              << "the scene has no lights: a headlight at the camera lights it (--light gives others)\n";
-  }
   return true;
+}
+
+void note_headlight(const Scene& scene) {
+  std::cerr << "mobirt: note: " << (scene.source.empty() ? "" : scene.source + ": ")
+            << "the scene has no lights: a headlight at the camera lit it (--light gives others)\n";
 }
 
 }  // namespace mobirt

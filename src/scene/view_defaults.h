@@ -17,9 +17,13 @@ Camera default_camera(const Scene& scene, float aspect);
 
 // A scene without lights gets a headlight: a white point light at view.eye whose intensity is the
 // squared distance from the eye to view.target, so that it lights what the camera looks at with
-// irradiance 1 (as a directional light of intensity 1 would). Prints, once per process,
-// "mobirt: note: FILE: the scene has no lights: a headlight at the camera lights it (--light
-// gives others)". Returns whether it added one. A scene with lights is left as it is.
+// irradiance 1 (as a directional light of intensity 1 would). Returns whether it added one; a
+// scene with lights is left as it is. Silent: the caller prints note_headlight once the frame is
+// made, so that an error later on is still the only line a failed run prints.
 bool add_headlight(Scene& scene, const Camera& view);
+
+// Prints "mobirt: note: FILE: the scene has no lights: a headlight at the camera lit it (--light
+// gives others)" on stderr.
+void note_headlight(const Scene& scene);
 
 }  // namespace mobirt
