@@ -314,8 +314,8 @@ TEST(NffLoader, BadFilesNameTheFileAndTheLine) {
       {"\n\ns 0 0 x 1\n", {"bad.nff:3:", "expected a finite number", "'x'"}},
       {"s 0 0 1e999 1\n", {"bad.nff:1:", "finite number"}},
       {"s 0 0 0 0\n", {"bad.nff:1:", "radius 0"}},
-      {"p 2\n0 0 0\n1 0 0\n", {"bad.nff:1:", "integer in [3, 65536]", "'2'"}},
-      {"p 4000000000\n0 0 0\n", {"bad.nff:1:", "integer in [3, 65536]"}},
+      {"p 2\n0 0 0\n1 0 0\n", {"bad.nff:1:", "integer in [3, 16384]", "'2'"}},
+      {"p 4000000000\n0 0 0\n", {"bad.nff:1:", "integer in [3, 16384]"}},
       {"p 4\n0 0 0\n1 0 0\n1 1 0\n", {"bad.nff:4:", "unexpected end of file", "vertex 4 of 4"}},
       {"pp 3\n0 0 0 0 0 1\n1 0 0 0 0 1\n0 1 0 0 0\n", {"bad.nff:4:", "normal"}},
       {"c\n0 0 0 1\n0 0 0 1\n", {"bad.nff:1:", "base and apex are the same point"}},
@@ -415,7 +415,7 @@ TEST(NffCommandLine, BadNffAndPlyFilesEndInOneLineWithoutOutput) {
   const std::vector<std::pair<std::string, std::string>> files = {
       {"truncated.nff", "f 1 1 1 1 0 1 0 1\np 4\n0 0 0\n1 0 0\n"},
       {"malformed.nff", "s 0 0 zero 1\n"},
-      {"over-limit.nff", "p 70000\n0 0 0\n"},
+      {"over-limit.nff", "p 20000\n0 0 0\n"},
       {"truncated.ply", "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n"
                         "property float y\nproperty float z\nend_header\n\1\2\3"},
       {"malformed.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"

@@ -157,7 +157,7 @@ TEST(PlyLoader, MinimalFileGetsFlatNormalsAndTheDefaultMaterial) {
 TEST(PlyLoader, BadFilesNameTheFileAndTheElement) {
   const std::string header = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
                              "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
-  const std::vector<std::pair<std::string, std::vector<std::string>>> cases = {
+  std::vector<std::pair<std::string, std::vector<std::string>>> cases = {
       {"", {"bad.ply", "not a PLY file"}},
       {"solid cube\n", {"bad.ply", "not a PLY file"}},
       {"ply\nformat ascii 1.0\nelement vertex 3\n", {"bad.ply", "header line 4", "end_header"}},
@@ -180,8 +180,11 @@ TEST(PlyLoader, BadFilesNameTheFileAndTheElement) {
       {"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
        "0 0 0\n1 0 0\n0 1 0\n", {"bad.ply", "no triangles"}},
   };
+  std::string big_face = header + "0 0 0\n1 0 0\n0 1 0\n16385";
+  for (int i = 0; i < 16385; ++i) big_face += " 0";
+  cases.push_back({big_face + "\n", {"bad.ply", "element 'face' 0: 16385 vertices, more than the 16384"}});
   for (const auto& [text, parts] : cases) {
-    SCOPED_TRACE(text);
+    SCOPED_TRACE(text.substr(0, 400));
     const fs::path path = test::temp_dir() / "bad.ply";
     std::ofstream(path, std::ios::binary) << text;
     expect_bad_input([&] { load_scene(path.string()); }, parts);

@@ -64,17 +64,18 @@ Scene load_obj(const std::string& path, const LoadOptions& options);
 //   concave ones included;
 // - s and c: spheres, cylinders and cones, tessellated (LoadOptions::tessellation; cones without
 //   end caps, as the spec says; negative radii: inside visible).
-// Errors are "FILE:LINE: problem" (BadInput). Limits: 65,536 vertices a polygon, 2^24 - 1 triangles.
+// Errors are "FILE:LINE: problem" (BadInput). Limits: 16,384 vertices a polygon, 2^24 - 1 triangles.
 Scene load_nff(const std::string& path, const LoadOptions& options = {});
 
 // PLY (Stanford polygon file), ASCII and binary of either byte order: vertex x, y, z; nx, ny, nz;
 // texture coordinates (u, v / s, t / texture_u, texture_v / texture_s, texture_t; v flipped to
 // the glTF convention); vertex colours red, green, blue (integers scaled by their type's maximum,
 // floats as given), and face colours; faces from the list vertex_indices (or vertex_index),
-// triangulated by ear clipping. mobirt has no per-vertex colour: faces are grouped by their colour
-// (the face's own, else the mean of its vertices') quantised to 6 bits per channel, and each
-// group is one material whose diffuse is the group's mean colour. Other elements and properties
-// are read past. Errors name the file, the header line or the element and record (BadInput).
+// triangulated by ear clipping (at most 16,384 vertices a face). mobirt has no per-vertex colour:
+// faces are grouped by their colour (the face's own, else the mean of its vertices') quantised to
+// 6 bits per channel, and each group is one material whose diffuse is the group's mean colour.
+// Other elements and properties are read past. Errors name the file, the header line or the
+// element and record (BadInput).
 Scene load_ply(const std::string& path);
 
 // Throws Error(BadInput) "FILE: file not found" unless `path` names an existing file.

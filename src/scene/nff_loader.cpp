@@ -26,7 +26,6 @@ namespace {
 // The 24-bit hit index bounds any scene; checked before a primitive is tessellated so that a
 // small file cannot ask for gigabytes.
 constexpr size_t kMaxTriangles = (size_t(1) << 24) - 1;
-constexpr long kMaxPolygonVertices = 1 << 16;
 constexpr int kMaxResolution = 16384;
 
 // A field as it may appear in a message: printable, at most 40 characters.
@@ -278,7 +277,7 @@ class NffReader {
 
   void polygon(bool patch) {
     const char* what = patch ? "the patch's vertex count" : "the polygon's vertex count";
-    const size_t n = size_t(integer(what, 3, kMaxPolygonVertices));
+    const size_t n = size_t(integer(what, 3, long(kMaxPolygonVertices)));
     reserve(n - 2, patch ? "this patch" : "this polygon");
     std::vector<glm::vec3> points(n), normals(n);
     for (size_t i = 0; i < n; ++i) {

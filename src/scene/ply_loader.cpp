@@ -338,6 +338,10 @@ class PlyReader {
         }
       }
       face.count = face_indices_.size() - face.first;
+      if (face.count > kMaxPolygonVertices) {
+        fail("element 'face' " + std::to_string(r) + ": " + std::to_string(face.count) + " vertices, more than the " +
+             std::to_string(kMaxPolygonVertices) + " a face may have");
+      }
       face.coloured = face_colours;
       triangles_ += face.count >= 3 ? face.count - 2 : 0;
       if (triangles_ > kMaxTriangles) {
