@@ -460,11 +460,12 @@ size_t count_entities(const fs::path& path, const std::string& word) {
   return n;
 }
 
-class SpdScenes : public test::VulkanTest {};
+class SpdScenes : public test::VulkanTest {};  // and a GLES backend beside it
 
 TEST_F(SpdScenes, EveryNffLoadsWithItsCameraLightsAndMaterialsAndRenders) {
   const std::vector<fs::path> files = spd_scenes();
   if (files.empty()) GTEST_SKIP() << "../shared/scenes/spd is absent";
+  const std::unique_ptr<Backend> gles = create_gles_backend(test::validated_options());
   for (const fs::path& file : files) {
     SCOPED_TRACE(file.string());
     const Scene s = load_scene(file.string());
@@ -502,8 +503,15 @@ TEST_F(SpdScenes, EveryNffLoadsWithItsCameraLightsAndMaterialsAndRenders) {
     const ReferenceResult ref = render_reference(s, *s.camera, reference_settings(settings));
     const ImageDiff r = compare_images(shown(image), shown(ref.image));
     EXPECT_GE(r.psnr, 45.0) << "GPU against the reference";
-    std::printf("%s: %zu triangles, %.1f dB against the CPU frame, %.1f dB against the reference\n",
-                file.filename().c_str(), s.mesh.triangle_count(), d.psnr, r.psnr);
+    // The GLES backend renders the same image (parity as for the glTF scenes).
+    Renderer gles_renderer(*gles, settings);
+    const ImageDiff g = compare_images(gles_renderer.render(s, *s.camera), image, 1.0f / 255.0f);
+    EXPECT_GE(g.psnr, 45.0) << "GLES against Vulkan";
+    EXPECT_LE(g.share_over, 0.005) << "GLES against Vulkan: pixels off by more than 1/255";
+    const std::vector<std::string> messages = gles->take_debug_messages();
+    EXPECT_TRUE(messages.empty()) << "GLES debug messages:\n" << test::join(messages);
+    std::printf("%s: %zu triangles, %.1f dB against the CPU frame, %.1f dB against the reference, %.1f dB GLES "
+                "against Vulkan\n", file.filename().c_str(), s.mesh.triangle_count(), d.psnr, r.psnr, g.psnr);
   }
 }
 
