@@ -475,7 +475,8 @@ TEST_F(SpdScenes, EveryNffLoadsWithItsCameraLightsAndMaterialsAndRenders) {
     expect_vec3(s.background, {0.078f, 0.361f, 0.753f});
     EXPECT_EQ(s.lights.size(), count_entities(file, "l"));
     EXPECT_EQ(s.materials.size(), count_entities(file, "f"));
-    EXPECT_GE(s.mesh.triangle_count(), count_entities(file, "p") + count_entities(file, "pp") + 960 * count_entities(file, "s"));
+    EXPECT_GE(s.mesh.triangle_count(), count_entities(file, "p") + count_entities(file, "pp") +
+                                           sphere_triangle_count(Tessellation{}) * count_entities(file, "s"));
     EXPECT_LT(s.degenerate_triangles, s.mesh.triangle_count() / 100 + 1);
 
     RenderSettings settings;

@@ -18,10 +18,12 @@ namespace mobirt {
 // How finely curved surfaces are cut. `segments` is the number of facets around a sphere, a
 // cylinder or a cone (>= 3); a sphere has segments / 2 (at least 2) rings from pole to pole.
 // Normals are the analytic ones at each vertex, so shading is smooth; only the silhouette is
-// polygonal, off the true surface by at most r * (1 - cos(pi / segments)): 0.5 % of the radius
-// at the default 32, under a pixel for a sphere 200 pixels across.
+// polygonal, off the true surface by at most r * (1 - cos(pi / segments)): 0.12 % of the radius
+// at the default 64. Measured on the SPD sphereflake (balls_s2, 256x256, depth 2, the
+// reference tracer, against 192 segments): 8 -> 24.7 dB, 16 -> 29.9, 32 -> 35.5, 64 -> 42.0 dB;
+// mirror balls reflecting each other magnify the silhouettes, hence 64 (361,090 triangles there).
 struct Tessellation {
-  int segments = 32;
+  int segments = 64;
 };
 
 // Triangles a sphere, and a cylinder or cone, of `t` add to a mesh (for limits checked before
