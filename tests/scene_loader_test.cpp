@@ -577,7 +577,7 @@ TEST(SceneLoader, MissingFileAndUnknownExtension) {
   const fs::path xyz = dir / "cloud.xyz";
   std::ofstream(xyz) << "1 2 3\n";
   expect_bad_input([&] { load_scene(xyz.string()); },
-                   {"cloud.xyz", "unsupported scene format '.xyz': mobirt reads .gltf, .glb and .obj"});
+                   {"cloud.xyz", "unsupported scene format '.xyz': mobirt reads .gltf, .glb, .obj, .nff and .ply"});
   expect_bad_input([&] { load_scene(dir.string()); }, {"folder"});
 }
 

@@ -23,6 +23,7 @@
 #include "render/renderer.h"
 #include "scene/animation.h"
 #include "scene/loader.h"
+#include "scene/view_defaults.h"
 
 namespace mobirt {
 namespace {
@@ -98,7 +99,7 @@ int cmd_accuracy(const std::vector<std::string>& args) {
   cl.option("--ref-epsilon", "E", "the reference's ray-origin offset, times 1 + max|p| (default 1e-9)",
             [&](const cli::Value& v) { ref_epsilon = v.number(0.0, 1.0); });
   if (!cl.parse(args)) return 0;
-  const RenderSettings& settings = common.settings;
+  RenderSettings& settings = common.settings;
   const std::string scene_path = cl.scene();
   for (const std::string& out : {heatmap_path, gpu_out, ref_out}) {
     if (!out.empty()) check_image_output(out);
@@ -107,6 +108,7 @@ int cmd_accuracy(const std::vector<std::string>& args) {
   LoadOptions load_options;
   load_options.mtl = common.mtl;
   const AnimatedScene animation = load_animated_scene(scene_path, load_options);
+  apply_file_image_size(animation, common.size_given, settings);
   PosedScene posed(animation, common.edits, settings.width, settings.height);
   const Camera view = posed.at(common.time ? *common.time : 0.0);
   const Scene& scene = posed.scene;
@@ -241,6 +243,7 @@ int cmd_accuracy(const std::vector<std::string>& args) {
   }
   if (!gpu_out.empty()) write_image(gpu_out, gpu);
   if (!ref_out.empty()) write_image(ref_out, ref.image);
+  if (posed.headlit()) note_headlight(posed.scene);
   return 0;
 }
 

@@ -61,6 +61,7 @@ const Setting kSettings[] = {
     {"--size", "WxH", kViews, "image size in pixels (default 400x240)",
      [](CommonOptions& o, const Value& v) {
        std::tie(o.settings.width, o.settings.height) = parse_size(v.option, v.text, v.help);
+       o.size_given = true;
      }},
     {"--depth", "N", kViews,
      "bounces of the ray tree: 0 = ray casting; reflection and refraction\n"

@@ -21,6 +21,7 @@
 #include "core/image.h"
 #include "render/renderer.h"
 #include "scene/loader.h"
+#include "scene/view_defaults.h"
 
 namespace mobirt {
 namespace {
@@ -228,7 +229,7 @@ int cmd_render(const std::vector<std::string>& args) {
               timings = true;
             });
   if (!cl.parse(args)) return 0;
-  const RenderSettings& settings = common.settings;
+  RenderSettings& settings = common.settings;
   const std::string scene_path = cl.scene();
   common.backend.pipeline_cache_dir = default_pipeline_cache_dir();
   if (frames && common.time) usage_error("render: --frames and --time exclude each other");
@@ -240,6 +241,7 @@ int cmd_render(const std::vector<std::string>& args) {
   if (fps) load_options.fps = *fps;
   const AnimatedScene animation = load_animated_scene(scene_path, load_options);
   const double frame_rate = fps ? *fps : animation.fps();
+  apply_file_image_size(animation, common.size_given, settings);
   // One camera for the whole sequence: the file's (animated with it), --camera, or one framing
   // the scene at rest, so that the view does not jump from frame to frame.
   PosedScene posed(animation, common.edits, settings.width, settings.height);
@@ -296,6 +298,7 @@ int cmd_render(const std::vector<std::string>& args) {
     }
     if (tty) std::fprintf(stderr, "\n");
   }
+  if (posed.headlit()) note_headlight(scene);
   if (timings && !measured.empty()) {
     std::printf("%s: %zu triangles, %zu lights, %dx%d, depth %d on %s\n", scene_path.c_str(),
                 scene.mesh.triangle_count(), scene.lights.size(), settings.width, settings.height,

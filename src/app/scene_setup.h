@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "core/camera.h"
+#include "render/renderer.h"
 #include "scene/animation.h"
 #include "scene/scene.h"
 
@@ -20,15 +21,24 @@ struct SceneEdits {
   std::optional<glm::vec3> background;
 };
 
+// The image size a command renders at: --size when given, else the file's own (NFF's `v`
+// resolution), else the default 400x240 already in `settings`.
+void apply_file_image_size(const AnimatedScene& animation, bool size_given, RenderSettings& settings);
+
 class PosedScene {
  public:
-  // The fallback camera frames the scene at rest once, for WIDTH x HEIGHT, so that the view does
-  // not jump from frame to frame. `animation` must outlive this object.
+  // The fallback camera frames the scene at rest once, for WIDTH x HEIGHT, honouring the file's up
+  // axis (scene/view_defaults.h), so that the view does not jump from frame to frame. `animation`
+  // must outlive this object.
   PosedScene(const AnimatedScene& animation, SceneEdits edits, int width, int height);
 
   // Poses `scene` at `seconds` (a static scene stays as it is), applies the edits and returns the
-  // view to render it from.
+  // view to render it from. A scene left without lights gets a headlight at that view.
   Camera at(double seconds);
+
+  // Whether a headlight lit the scene; the command says so with note_headlight() once its output
+  // is written, so that a run failing later prints only its error.
+  bool headlit() const { return headlit_; }
 
   Scene scene;
 
@@ -36,6 +46,7 @@ class PosedScene {
   const AnimatedScene& animation_;
   SceneEdits edits_;
   Camera fallback_;
+  bool headlit_ = false;
 };
 
 }  // namespace mobirt

@@ -30,8 +30,10 @@ Scene load_scene(const std::string& path, const LoadOptions& options) {
                  [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   if (ext == ".gltf" || ext == ".glb") return load_gltf(path, options);
   if (ext == ".obj") return load_obj(path, options);
+  if (ext == ".nff") return load_nff(path, options);
+  if (ext == ".ply") return load_ply(path);
   throw input_error(path, "unsupported scene format '" + (ext.empty() ? std::string("") : ext) +
-                              "': mobirt reads .gltf, .glb and .obj");
+                              "': mobirt reads .gltf, .glb, .obj, .nff and .ply");
 }
 
 }  // namespace mobirt

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "scene/scene.h"
+#include "scene/tessellate.h"
 
 namespace mobirt {
 
@@ -15,10 +16,12 @@ struct LoadOptions {
   std::string mtl;    // OBJ: a .mtl file used instead of the one(s) the OBJ names (mtllib);
                       // its map_Kd paths are relative to its own folder. Empty: the OBJ's own.
   int animation = -1; // glTF: -1 plays all animations together; k plays animations[k] only
+  Tessellation tessellation;  // NFF spheres, cylinders and cones (scene/tessellate.h)
 };
 
-// Picks the loader by extension (case-insensitive): .gltf and .glb -> load_gltf, .obj -> load_obj;
-// anything else: "unsupported scene format '.xyz': mobirt reads .gltf, .glb and .obj". A missing
+// Picks the loader by extension (case-insensitive): .gltf and .glb -> load_gltf, .obj -> load_obj,
+// .nff -> load_nff, .ply -> load_ply; anything else: "unsupported scene format '.xyz': mobirt reads
+// .gltf, .glb, .obj, .nff and .ply". A missing
 // file: "FILE: file not found". The result is validated (scene/validate.h): finite positions and
 // normals, at least one triangle, in-range indices, at least one material, unit normals;
 // degenerate triangles are kept and counted in Scene::degenerate_triangles.
@@ -49,6 +52,31 @@ Scene load_gltf(const std::string& path, const LoadOptions& options);
 Scene load_obj(const std::string& path);
 // With LoadOptions::mtl: that .mtl replaces the OBJ's own (a missing one is an error).
 Scene load_obj(const std::string& path, const LoadOptions& options);
+
+// Eric Haines' Neutral File Format (NFF.TXT 3.9, the SPD's format), every entity:
+// - v: the camera (from, at, up; angle is the field of view between the centres of the outer pixel
+//   rows, hither -> znear) and Scene::image_size (resolution); Scene::up = the view's up;
+// - b: the background; l X Y Z [R G B]: point lights, intensity as README's NFF section tells
+//   (NFF lights have no falloff: each gets sqrt(n) / (2 n) times its squared distance to the
+//   look-at point, the SPD's suggested brightness where the view looks);
+// - f R G B Kd Ks Shine T ior: a material (README's materials table), used by what follows;
+// - p and pp: polygons (flat normal) and patches (normals given), triangulated by ear clipping,
+//   concave ones included;
+// - s and c: spheres, cylinders and cones, tessellated (LoadOptions::tessellation; cones without
+//   end caps, as the spec says; negative radii: inside visible).
+// Errors are "FILE:LINE: problem" (BadInput). Limits: 16,384 vertices a polygon, 2^24 - 1 triangles.
+Scene load_nff(const std::string& path, const LoadOptions& options = {});
+
+// PLY (Stanford polygon file), ASCII and binary of either byte order: vertex x, y, z; nx, ny, nz;
+// texture coordinates (u, v / s, t / texture_u, texture_v / texture_s, texture_t; v flipped to
+// the glTF convention); vertex colours red, green, blue (integers scaled by their type's maximum,
+// floats as given), and face colours; faces from the list vertex_indices (or vertex_index),
+// triangulated by ear clipping (at most 16,384 vertices a face). mobirt has no per-vertex colour:
+// faces are grouped by their colour (the face's own, else the mean of its vertices') quantised to
+// 6 bits per channel, and each group is one material whose diffuse is the group's mean colour.
+// Other elements and properties are read past. Errors name the file, the header line or the
+// element and record (BadInput).
+Scene load_ply(const std::string& path);
 
 // Throws Error(BadInput) "FILE: file not found" unless `path` names an existing file.
 void check_scene_file(const std::string& path);

@@ -78,6 +78,11 @@ struct Scene {
   std::vector<Light> lights;
   std::optional<Camera> camera;       // the file's first camera, if it has one
   glm::vec3 background{0.0f};
+  // The image size the file asks for (NFF's resolution), used when the command line gives none.
+  std::optional<glm::ivec2> image_size;
+  // The file's up axis, for a camera that frames a scene without one (NFF's `v` up; glTF, OBJ and
+  // PLY: +Y).
+  glm::vec3 up{0.0f, 1.0f, 0.0f};
   size_t degenerate_triangles = 0;    // zero-area triangles, kept (the tracer skips them), counted
 
   Aabb bounds() const;

@@ -2,7 +2,8 @@
 """Writes the fuzzer's seed corpus (tests/fuzz/corpus/) deterministically: small hand-made glTF,
 GLB and OBJ+MTL scenes in the layout of scene_fuzzer.cpp (byte 0 picks the format: '0' .gltf with
 an optional b.bin after a NUL byte, '1' .glb, '2' .obj with an optional m.mtl after a NUL byte,
-'3' the same with the .mtl passed as LoadOptions::mtl).  python3 tests/fuzz/make_corpus.py"""
+'3' the same with the .mtl passed as LoadOptions::mtl, '4' .nff, '5' .ply, ASCII or binary).
+python3 tests/fuzz/make_corpus.py"""
 import base64, json, os, struct, zlib
 
 OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "corpus")
@@ -161,6 +162,61 @@ illum 7
 map_Kd missing.png
 """
 
+# Every NFF entity: a view, a background, lights with and without colour, materials, a concave
+# polygon, a patch, spheres (one inside-out), a cylinder and a pointed cone.
+NFF = b"""# every entity
+v
+from 2 -6 3
+at 0 0 0.5
+up 0 0 1
+angle 45
+hither 0.1
+resolution 64 48
+b 0.1 0.3 0.7
+l 4 -3 6
+l -3 -2 5 1 0.8 0.6
+f 1 0.75 0.33 0.8 0.2 30 0 1
+p 6
+0 0 0
+3 0 0
+3 1 0
+1 1 0
+1 3 0
+0 3 0
+pp 3
+0 0 1 0 0 1
+1 0 1 0 0 1
+0 1 1 0.6 0 0.8
+f 1 0.6 0.4 0.2 0 100000 0.8 1.1
+s 0 0 1 0.5
+s 1 1 1 -0.25
+c
+2 2 0 0.3
+2 2 1 0.3
+c
+-1 2 0 0.5
+-1 2 1 0
+"""
+
+PLY_VERTS = [(0, 0, 0, 0, 0, 1, 0, 0, 255, 0, 0), (1, 0, 0, 0, 0, 1, 1, 0, 0, 255, 0),
+             (1, 1, 0, 0, 0, 1, 1, 1, 0, 0, 255), (0, 1, 0, 0, 0, 1, 0, 1, 255, 255, 255)]
+PLY_FACES = [(0, 1, 2, 3), (0, 2, 3)]
+
+def ply(fmt):
+    """A quad and a triangle with normals, texture coordinates and vertex colours."""
+    head = ("ply\nformat %s 1.0\ncomment fuzz seed\nelement vertex %d\n" % (fmt, len(PLY_VERTS)) +
+            "".join("property float %s\n" % n for n in ("x", "y", "z", "nx", "ny", "nz", "s", "t")) +
+            "property uchar red\nproperty uchar green\nproperty uchar blue\n" +
+            "element face %d\nproperty list uchar int vertex_indices\nend_header\n" % len(PLY_FACES)).encode()
+    if fmt == "ascii":
+        body = "".join(" ".join("%g" % x for x in v) + "\n" for v in PLY_VERTS)
+        body += "".join("%d %s\n" % (len(f), " ".join(map(str, f))) for f in PLY_FACES)
+        return head + body.encode()
+    e = "<" if fmt == "binary_little_endian" else ">"
+    body = b"".join(struct.pack(e + "8f3B", *v) for v in PLY_VERTS)
+    body += b"".join(struct.pack(e + "B%di" % len(f), len(f), *f) for f in PLY_FACES)
+    return head + body
+
 def write(name, data):
     with open(os.path.join(OUT, name), "wb") as f: f.write(data)
 
@@ -179,6 +235,11 @@ def main():
     write("obj_with_mtllib", b"2" + OBJ + b"\x00" + MTL)
     write("obj_plain", b"2v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     write("obj_mtl_option", b"3" + OBJ.replace(b"mtllib m.mtl\n", b"") + b"\x00" + MTL)
+    write("nff_every_entity", b"4" + NFF)
+    write("nff_truncated_polygon", b"4" + NFF[:NFF.index(b"3 1 0")])
+    for fmt in ("ascii", "binary_little_endian", "binary_big_endian"):
+        write("ply_" + fmt, b"5" + ply(fmt))
+    write("ply_truncated_binary", b"5" + ply("binary_big_endian")[:-7])
 
 if __name__ == "__main__":
     main()

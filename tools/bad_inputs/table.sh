@@ -51,6 +51,21 @@ row ".obj NaN vertex ('nan', which tinyobjloader would read as 0)" render $IN/na
 row ".obj infinite vertex (1e999)" render $IN/inf-vertex.obj -o $OUT/a.png
 row ".mtl map_Kd with a path name too long" render $IN/long-texture-name.obj -o $OUT/a.png
 row ".obj of binary garbage" render $IN/binary-garbage.obj -o $OUT/a.png
+row "empty .nff" render $IN/empty.nff -o $OUT/a.png
+row "truncated .nff (inside a polygon)" render $IN/truncated.nff -o $OUT/a.png
+row ".nff unknown entity" render $IN/unknown-entity.nff -o $OUT/a.png
+row ".nff field that is not a number" render $IN/bad-number.nff -o $OUT/a.png
+row ".nff polygon over the vertex limit" render $IN/polygon-too-many.nff -o $OUT/a.png
+row ".nff cone with base = apex" render $IN/cone-coincident.nff -o $OUT/a.png
+row ".nff view without an angle" render $IN/view-no-angle.nff -o $OUT/a.png
+row ".nff of binary garbage" render $IN/binary-garbage.nff -o $OUT/a.png
+row "empty .ply" render $IN/empty.ply -o $OUT/a.png
+row ".ply that is not PLY (STL text)" render $IN/not-ply.ply -o $OUT/a.png
+row "truncated .ply header" render $IN/truncated-header.ply -o $OUT/a.png
+row "truncated binary .ply" render $IN/truncated-binary.ply -o $OUT/a.png
+row ".ply element count over what the file holds" render $IN/count-over-limit.ply -o $OUT/a.png
+row ".ply face index out of range" render $IN/face-out-of-range.ply -o $OUT/a.png
+row ".ply unknown format" render $IN/unknown-format.ply -o $OUT/a.png
 row "--mtl file missing" render $IN/no-faces.obj --mtl $IN/missing.mtl -o $OUT/a.png
 row "OBJ sequence pattern matching no file" render "$IN/frame_%02d.obj" -o $OUT/a.png
 row "output folder missing" render $IN/ok-triangle.gltf -o $OUT/nofolder/a.png
