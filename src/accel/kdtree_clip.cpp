@@ -80,6 +80,11 @@ int split_polygon(const double (*poly)[3], int n, int axis, float split, Box& be
 
 }  // namespace
 
+int split_triangle(const glm::vec3* v, int split_axis, float split, Box& below, Box& above) {
+  const double poly[3][3] = {{v[0].x, v[0].y, v[0].z}, {v[1].x, v[1].y, v[1].z}, {v[2].x, v[2].y, v[2].z}};
+  return split_polygon(poly, 3, split_axis, split, below, above);
+}
+
 int clip_and_split(const glm::vec3* v, const Box& box, int split_axis, float split, Box& below, Box& above) {
   constexpr int kMax = 16;  // 3 vertices + at most one per clipping plane
   double poly_a[kMax][3];

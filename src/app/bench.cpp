@@ -57,7 +57,7 @@ Options:
   --shared DIR      the shared real scenes (default: ../shared/scenes beside that folder's parent)
   --backend B       the GPU columns: vulkan, gles or both (default both: Vulkan and OpenGL ES 2.0
                     on the same frames)
-  --device D, --bins N, --stack N, --max-steps N: as for render
+  --device D, --bins N, --build MODE, --stack N, --max-steps N: as for render
 )";
 
 constexpr const char* kHelp = "mobirt bench --help";
@@ -493,6 +493,9 @@ int cmd_bench(const std::vector<std::string>& args) {
       o.backend_options.device = value();
     } else if (a == "--bins") {
       o.settings.kd.bins = parse_int(a, value(), 2, 1024);
+    } else if (a == "--build") {
+      const std::string v = value();
+      if (!parse_kd_build_mode(v, o.settings.kd.build)) cli::usage_error("--build " + v + ": expected quality or fast", kHelp);
     } else if (a == "--stack") {
       o.settings.stack_depth = parse_int(a, value(), 0, MOBIRT_MAX_STACK_DEPTH);
     } else if (a == "--max-steps") {
@@ -553,6 +556,7 @@ int cmd_bench(const std::vector<std::string>& args) {
   result["settings"] = {{"frames", o.frames},
                         {"warmup", o.warmup},
                         {"bins", o.settings.kd.bins},
+                        {"build", kd_build_mode_name(o.settings.kd.build)},
                         {"stack", o.settings.stack_depth},
                         {"max_steps", o.settings.max_steps},
                         {"kd_rebuilt_every_frame", true}};
