@@ -20,7 +20,12 @@
 // exactly to each child: the triangle polygon is clipped against the node box and split by the
 // plane (Sutherland-Hodgman in double precision, bounds rounded outwards to float, then
 // intersected with the reference's box). A side the triangle misses, although its box overlaps
-// it, gets no reference. The cheaper alternative, clipping only the reference's box to the child
+// it, gets no reference. That is KdBuildMode::Quality; KdBuildMode::Fast (the default) splits the
+// whole triangle by the plane instead (kdclip::split_triangle: 3 edges against one plane, no
+// clipping to the node box first) and intersects its parts' bounds with the reference's box, a
+// superset of the exact bounds. Measured (callgrind, 2 threads, one build): fish 17.0M -> 13.2M
+// instructions, toaster 106.6M -> 85.6M, torus 100K 475M -> 397M; SAH cost 185.0 -> 185.7,
+// 223.7 -> 221.8, 3012 -> 2976; refs/tri +1 to +9%; traversal steps per ray within 0.2%. The cheaper alternative, clipping only the reference's box to the child
 // box, builds exactly the same tree as no clipping at all (the binning clamps to the node box and
 // the classification compares with a plane inside it), so exact clipping is the only one worth
 // having. Measured (-O2, one thread, 32 bins, pbrt costs, the first serial builder), clipping

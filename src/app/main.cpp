@@ -65,7 +65,7 @@ Options:
   --max-steps N           loop cap of one traversal in the shader; rays that reach it are traced
                           on the CPU instead, so the cap costs time, never pixels (default 2048)
   --bins N                SAH bins per axis of the kd-tree build (default 32)
-  --build MODE            kd-tree build: quality (exact split clipping) or fast (default quality)
+  --build MODE            kd-tree build: fast or quality (exact split clipping) (default fast)
   --leaf-size N           largest leaf the build may make without trying to split (default 1)
   --max-depth N           kd-tree depth limit, -1 = 8 + 1.3 log2(triangles) (default -1)
   --offset MODE           how shadow, mirror and refracted rays leave a surface, along its normal:
