@@ -495,7 +495,9 @@ int cmd_bench(const std::vector<std::string>& args) {
       o.settings.kd.bins = parse_int(a, value(), 2, 1024);
     } else if (a == "--build") {
       const std::string v = value();
-      if (!parse_kd_build_mode(v, o.settings.kd.build)) cli::usage_error("--build " + v + ": expected quality or fast", kHelp);
+      if (!parse_kd_build_mode(v, o.settings.kd.build)) {
+        cli::usage_error("--build " + v + ": expected one of fast, quality", kHelp);
+      }
     } else if (a == "--stack") {
       o.settings.stack_depth = parse_int(a, value(), 0, MOBIRT_MAX_STACK_DEPTH);
     } else if (a == "--max-steps") {

@@ -92,7 +92,9 @@ bool parse_render_setting(const std::string& a, const std::function<std::string(
     settings.kd.bins = parse_int(a, value(), 2, 1024, help);
   } else if (a == "--build") {
     const std::string v = value();
-    if (!parse_kd_build_mode(v, settings.kd.build)) usage_error("--build " + v + ": expected quality or fast", help);
+    if (!parse_kd_build_mode(v, settings.kd.build)) {
+      usage_error("--build " + v + ": expected one of fast, quality", help);
+    }
   } else if (a == "--leaf-size") {
     settings.kd.max_leaf_prims = parse_int(a, value(), 1, 1 << 20, help);
   } else if (a == "--max-depth") {
