@@ -70,6 +70,11 @@
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
+// The dense sweep also has an AVX2 twin, chosen at run time (the build targets baseline x86-64).
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define MOBIRT_KD_AVX2 1
+#include <immintrin.h>
+#endif
 
 #include <glm/glm.hpp>
 
@@ -277,10 +282,10 @@ struct Binner {
 };
 
 // Per axis, how many reference boxes have their min (row 2a) and their max (row 2a + 1) in each
-// bin. Rows are padded with 4 zeros: the sweep reads 4 bins at a time.
+// bin. Rows are padded with 8 zeros: the sweep reads 4 or 8 bins at a time.
 class Histogram {
  public:
-  explicit Histogram(int bins) : stride_(bins + 4), counts_(size_t(6 * stride_), 0u) {
+  explicit Histogram(int bins) : stride_(bins + 8), counts_(size_t(6 * stride_), 0u) {
     const int rows[6] = {0, 2, 4, 1, 3, 5};  // lo x, y, z, hi x, y, z
     for (int j = 0; j < 6; ++j) offsets_[j] = rows[j] * stride_;
   }
@@ -422,7 +427,11 @@ class Builder {
  public:
   Builder(std::span<const glm::vec3> positions, const KdBuildOptions& options)
       : positions_(positions), options_(options), bins_(std::max(2, options.bins)),
-        triangle_count_(positions.size() / 3) {}
+        triangle_count_(positions.size() / 3) {
+#if defined(MOBIRT_KD_AVX2)
+    avx2_ = __builtin_cpu_supports("avx2");
+#endif
+  }
 
   FlatKdTree build() {
     FlatKdTree tree;
@@ -752,7 +761,7 @@ class Builder {
   }
 
   struct SweepAxis {
-    const uint32_t* mins;  // per bin, then 4 zeros
+    const uint32_t* mins;  // per bin, then 8 zeros
     const uint32_t* maxs;
     int bins;
     uint32_t total;
@@ -827,6 +836,12 @@ class Builder {
   // below every earlier candidate's becomes the best (the order of the first builder's loop).
   void sweep(const SweepAxis& s, int axis, float& best_cost, Split& best) const {
     const int k = s.bins;
+#if defined(MOBIRT_KD_AVX2)
+    if (avx2_) {
+      sweep_avx2(s, axis, best_cost, best);
+      return;
+    }
+#endif
 #if defined(__SSE2__)
     const float trav = options_.traversal_cost;
     const float isect = options_.intersection_cost;
@@ -917,6 +932,95 @@ class Builder {
     }
 #endif
   }
+
+#if defined(MOBIRT_KD_AVX2)
+  // sweep() eight planes at a time: the same arithmetic per plane (no FMA: target avx2 alone
+  // does not enable it) and the same choice, the smallest cost and then the lowest plane, so the
+  // same tree as the SSE2 sweep on any CPU. Halves the dense sweep, a third of a 100K build.
+  __attribute__((target("avx2"))) void sweep_avx2(const SweepAxis& s, int axis, float& best_cost,
+                                                  Split& best) const {
+    const int k = s.bins;
+    const __m256i zero = _mm256_setzero_si256();
+    const __m256 one = _mm256_set1_ps(1.0f);
+    const __m256 inf = _mm256_set1_ps(kInfinity);
+    const __m256 kf = _mm256_set1_ps(float(k));
+    const __m256 c = _mm256_set1_ps(s.c);
+    const __m256 g = _mm256_set1_ps(s.g);
+    const __m256 min_bins = _mm256_set1_ps(options_.empty_bonus_min_width * float(k));
+    const __m256 factor = _mm256_set1_ps(1.0f - options_.empty_bonus);
+    const __m256 vtrav = _mm256_set1_ps(options_.traversal_cost);
+    const __m256 visect = _mm256_set1_ps(options_.intersection_cost);
+    const __m256 lo = _mm256_set1_ps(s.lo);
+    const __m256 hi = _mm256_set1_ps(s.hi);
+    const __m256 step = _mm256_set1_ps(s.step);
+    const __m256 min_width = _mm256_set1_ps(min_width_);
+    const __m256i total = _mm256_set1_epi32(static_cast<int32_t>(s.total));
+    const __m256i lane3 = _mm256_set1_epi32(3);
+    const __m256i lane7 = _mm256_set1_epi32(7);
+    __m256i below_before = zero;
+    __m256i ended_before = zero;
+    __m256 fi = _mm256_setr_ps(1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f, 8.0f);
+    __m256 lane_best = inf;
+    __m256 lane_plane = _mm256_setzero_ps();
+    for (int i = 1; i < k; i += 8, fi = _mm256_add_ps(fi, _mm256_set1_ps(8.0f))) {
+      const __m256i min_prev = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(s.mins + i - 1));
+      const __m256i max_prev = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(s.maxs + i - 1));
+      const __m256i min_cur = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(s.mins + i));
+      const __m256i max_cur = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(s.maxs + i));
+      // Inclusive prefix sums over the 8 lanes: within each half, then the low half's total
+      // added to the high half.
+      __m256i below = _mm256_add_epi32(min_prev, _mm256_slli_si256(min_prev, 4));
+      below = _mm256_add_epi32(below, _mm256_slli_si256(below, 8));
+      below = _mm256_add_epi32(below, _mm256_blend_epi32(zero, _mm256_permutevar8x32_epi32(below, lane3), 0xF0));
+      below = _mm256_add_epi32(below, below_before);
+      __m256i ended = _mm256_add_epi32(max_prev, _mm256_slli_si256(max_prev, 4));
+      ended = _mm256_add_epi32(ended, _mm256_slli_si256(ended, 8));
+      ended = _mm256_add_epi32(ended, _mm256_blend_epi32(zero, _mm256_permutevar8x32_epi32(ended, lane3), 0xF0));
+      ended = _mm256_add_epi32(ended, ended_before);
+      below_before = _mm256_permutevar8x32_epi32(below, lane7);
+      ended_before = _mm256_permutevar8x32_epi32(ended, lane7);
+      const __m256i above = _mm256_sub_epi32(total, ended);
+      const __m256 fk = _mm256_sub_ps(kf, fi);
+      const __m256 pb = _mm256_add_ps(c, _mm256_mul_ps(g, fi));
+      const __m256 pa = _mm256_add_ps(c, _mm256_mul_ps(g, fk));
+      __m256 cost = _mm256_add_ps(_mm256_mul_ps(pb, _mm256_cvtepi32_ps(below)),
+                                  _mm256_mul_ps(pa, _mm256_cvtepi32_ps(above)));
+      const __m256 empty = _mm256_or_ps(
+          _mm256_and_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(below, zero)), _mm256_cmp_ps(fi, min_bins, _CMP_GE_OQ)),
+          _mm256_and_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(above, zero)), _mm256_cmp_ps(fk, min_bins, _CMP_GE_OQ)));
+      cost = _mm256_blendv_ps(cost, _mm256_mul_ps(cost, factor), empty);
+      cost = _mm256_add_ps(vtrav, _mm256_mul_ps(visect, cost));
+      const __m256i events = _mm256_or_si256(_mm256_or_si256(min_prev, max_prev), _mm256_or_si256(min_cur, max_cur));
+      __m256 candidate = _mm256_or_ps(_mm256_cmp_ps(fi, one, _CMP_EQ_OQ), _mm256_cmp_ps(fk, one, _CMP_EQ_OQ));
+      candidate = _mm256_or_ps(candidate, _mm256_xor_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(events, zero)),
+                                                        _mm256_castsi256_ps(_mm256_set1_epi32(-1))));
+      candidate = _mm256_and_ps(candidate, _mm256_and_ps(_mm256_cmp_ps(fk, one, _CMP_GE_OQ),
+                                                         _mm256_cmp_ps(cost, cost, _CMP_ORD_Q)));
+      if (!s.all_valid) {
+        const __m256 position = _mm256_add_ps(lo, _mm256_mul_ps(fi, step));
+        candidate = _mm256_and_ps(
+            candidate, _mm256_and_ps(_mm256_cmp_ps(_mm256_sub_ps(position, lo), min_width, _CMP_GE_OQ),
+                                     _mm256_cmp_ps(_mm256_sub_ps(hi, position), min_width, _CMP_GE_OQ)));
+      }
+      const __m256 better = _mm256_and_ps(candidate, _mm256_cmp_ps(cost, lane_best, _CMP_LT_OQ));
+      lane_best = _mm256_blendv_ps(lane_best, cost, better);
+      lane_plane = _mm256_blendv_ps(lane_plane, fi, better);
+    }
+    alignas(32) float costs[8];
+    alignas(32) float planes[8];
+    _mm256_store_ps(costs, lane_best);
+    _mm256_store_ps(planes, lane_plane);
+    int lane = 0;
+    for (int j = 1; j < 8; ++j) {
+      if (costs[j] < costs[lane] || (costs[j] == costs[lane] && planes[j] < planes[lane])) lane = j;
+    }
+    if (costs[lane] < best_cost) {
+      best_cost = costs[lane];
+      best.axis = axis;
+      best.position = s.lo + planes[lane] * s.step;
+    }
+  }
+#endif
 
   // Sends each reference to the side(s) of the plane its box reaches, in order (so leaf lists stay
   // sorted by primitive index). Either output may be `refs` itself: each reference read adds at
@@ -1045,6 +1149,7 @@ class Builder {
   size_t triangle_count_;
   int max_depth_ = 0;
   float min_width_ = std::numeric_limits<float>::min();
+  bool avx2_ = false;  // the CPU runs sweep_avx2
   BufferPool pool_;
   tbb::enumerable_thread_specific<SubtreeScratch> scratch_;
 };
