@@ -911,15 +911,7 @@ class Builder {
     alignas(16) float planes[4];
     _mm_store_ps(costs, lane_best);
     _mm_store_ps(planes, lane_plane);
-    int lane = 0;
-    for (int j = 1; j < 4; ++j) {
-      if (costs[j] < costs[lane] || (costs[j] == costs[lane] && planes[j] < planes[lane])) lane = j;
-    }
-    if (costs[lane] < best_cost) {
-      best_cost = costs[lane];
-      best.axis = axis;
-      best.position = s.lo + planes[lane] * s.step;
-    }
+    take_best_lane(costs, planes, 4, s, axis, best_cost, best);
 #else
     uint32_t below = 0;
     uint32_t ended = 0;  // references whose max lies in a bin below the plane
@@ -931,6 +923,21 @@ class Builder {
       consider_plane(s, i, below, s.total - ended, axis, best_cost, best);
     }
 #endif
+  }
+
+  // The SIMD sweeps' lanes: the smallest cost, then the lowest plane, becomes the best plane of
+  // the axis when it is below best_cost.
+  static void take_best_lane(const float* costs, const float* planes, int lanes, const SweepAxis& s, int axis,
+                             float& best_cost, Split& best) {
+    int lane = 0;
+    for (int j = 1; j < lanes; ++j) {
+      if (costs[j] < costs[lane] || (costs[j] == costs[lane] && planes[j] < planes[lane])) lane = j;
+    }
+    if (costs[lane] < best_cost) {
+      best_cost = costs[lane];
+      best.axis = axis;
+      best.position = s.lo + planes[lane] * s.step;
+    }
   }
 
 #if defined(MOBIRT_KD_AVX2)
@@ -1010,15 +1017,7 @@ class Builder {
     alignas(32) float planes[8];
     _mm256_store_ps(costs, lane_best);
     _mm256_store_ps(planes, lane_plane);
-    int lane = 0;
-    for (int j = 1; j < 8; ++j) {
-      if (costs[j] < costs[lane] || (costs[j] == costs[lane] && planes[j] < planes[lane])) lane = j;
-    }
-    if (costs[lane] < best_cost) {
-      best_cost = costs[lane];
-      best.axis = axis;
-      best.position = s.lo + planes[lane] * s.step;
-    }
+    take_best_lane(costs, planes, 8, s, axis, best_cost, best);
   }
 #endif
 
