@@ -1,9 +1,12 @@
-// mobirt_kdprofile MESH [ITERATIONS] [THREADS] [quality|fast]: builds the kd-tree of one microbenchmark mesh
-// (fish, marbles, toaster, utah-toasters, torus100k, torus1m, soup100k) ITERATIONS times with the
-// default options and prints the median build time and the tree's statistics. A driver for
-// profilers (valgrind --tool=callgrind --toggle-collect='mobirt::build_kdtree*', perf record),
-// which need one process per mesh rather than Google Benchmark's loop over all of them. Then the
-// tree's cost on 20,000 fixed rays (steps per ray, CPU traversal Mrays/s), to compare builds.
+// mobirt_kdprofile MESH [ITERATIONS] [THREADS] [quality|fast]: builds the kd-tree of one
+// microbenchmark mesh (fish, marbles, toaster, utah-toasters, torus100k, torus1m, soup100k)
+// ITERATIONS times and prints the median build time (wall and CPU of all threads), the tree's
+// statistics and a hash of its arrays (to tell whether two builders made the same tree), then the
+// tree's cost on 20,000 fixed rays (steps per ray, CPU traversal Mrays/s), to compare builds. A
+// driver for profilers, which need one process per mesh rather than Google Benchmark's loop over
+// all of them: valgrind --tool=callgrind --toggle-collect='mobirt::build_kdtree*' with THREADS 1
+// (callgrind counts only the threads that enter build_kdtree). Environment knobs for experiments
+// are read below (MOBIRT_KD_ISECT, _LEAF, _FRAMES, _COLD, _PAUSE_MS).
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
