@@ -1,5 +1,5 @@
-// KdBuild/<mesh>/threads:<n>: build_kdtree (binned SAH, default options: 32 bins, pbrt costs,
-// split clipping) from the triangle positions to the flat texel arrays, as every frame does.
+// KdBuild/<mesh>/<quality|fast>/threads:<n>: build_kdtree (binned SAH, default options but the
+// build mode: 32 bins, pbrt costs, split clipping) from the triangle positions to the flat texel arrays, as every frame does.
 // Counters: SAH cost, nodes, leaf references per triangle, triangles/s, and cpu_ms, the CPU time
 // of all threads per build (compare with the real time to see how parallel a build ran).
 #include <benchmark/benchmark.h>
@@ -14,27 +14,31 @@ namespace mobirt::bench {
 
 void register_kdtree_benchmarks() {
   for (BenchMesh* mesh : build_meshes()) {
-    for (int threads : {1, 2}) {
-      const std::string name = "KdBuild/" + mesh->name() + "/threads:" + std::to_string(threads);
-      benchmark::RegisterBenchmark(name.c_str(), [mesh, threads](benchmark::State& state) {
-        const std::vector<glm::vec3>& positions = mesh->positions();
-        KdBuildOptions options;
-        options.threads = threads;
-        KdBuildStats stats;
-        const double cpu_start = process_cpu_ms();
-        for (auto _ : state) {
-          FlatKdTree tree = build_kdtree(positions, options);
-          benchmark::DoNotOptimize(tree.nodes.data());
-          stats = tree.stats;
-        }
-        state.counters["cpu_ms"] = benchmark::Counter(process_cpu_ms() - cpu_start, benchmark::Counter::kAvgIterations);
-        const double triangles = double(positions.size() / 3);
-        state.counters["tris"] = triangles;
-        state.counters["tris/s"] = benchmark::Counter(triangles, benchmark::Counter::kIsIterationInvariantRate);
-        state.counters["sah"] = stats.sah_cost;
-        state.counters["nodes"] = double(stats.nodes);
-        state.counters["refs/tri"] = triangles > 0 ? double(stats.prim_references) / triangles : 0.0;
-      })->Unit(benchmark::kMillisecond)->UseRealTime();
+    for (KdBuildMode mode : {KdBuildMode::Quality, KdBuildMode::Fast}) {
+      for (int threads : {1, 2}) {
+        const std::string name =
+            "KdBuild/" + mesh->name() + "/" + kd_build_mode_name(mode) + "/threads:" + std::to_string(threads);
+        benchmark::RegisterBenchmark(name.c_str(), [mesh, mode, threads](benchmark::State& state) {
+          const std::vector<glm::vec3>& positions = mesh->positions();
+          KdBuildOptions options;
+          options.build = mode;
+          options.threads = threads;
+          KdBuildStats stats;
+          const double cpu_start = process_cpu_ms();
+          for (auto _ : state) {
+            FlatKdTree tree = build_kdtree(positions, options);
+            benchmark::DoNotOptimize(tree.nodes.data());
+            stats = tree.stats;
+          }
+          state.counters["cpu_ms"] = benchmark::Counter(process_cpu_ms() - cpu_start, benchmark::Counter::kAvgIterations);
+          const double triangles = double(positions.size() / 3);
+          state.counters["tris"] = triangles;
+          state.counters["tris/s"] = benchmark::Counter(triangles, benchmark::Counter::kIsIterationInvariantRate);
+          state.counters["sah"] = stats.sah_cost;
+          state.counters["nodes"] = double(stats.nodes);
+          state.counters["refs/tri"] = triangles > 0 ? double(stats.prim_references) / triangles : 0.0;
+        })->Unit(benchmark::kMillisecond)->UseRealTime();
+      }
     }
   }
 }

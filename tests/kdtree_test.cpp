@@ -575,22 +575,28 @@ TEST(KdClip, ASideTheTriangleMissesGetsNothing) {
   EXPECT_EQ(kdclip::clip_and_split(v, away, 0, 2.0f, below, above), 0);
 }
 
+// A random triangle and box in [-5, 5]^3 and a split plane on `axis` inside the box (returned).
+float random_clip_case(std::mt19937& rng, int axis, glm::vec3 (&v)[3], kdclip::Box& box) {
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  for (glm::vec3& p : v) p = glm::vec3(u(rng), u(rng), u(rng)) * 10.0f - 5.0f;
+  for (int a = 0; a < 3; ++a) {
+    const float x = u(rng) * 10.0f - 5.0f;
+    const float y = u(rng) * 10.0f - 5.0f;
+    box.lo[a] = std::min(x, y);
+    box.hi[a] = std::max(x, y);
+  }
+  return box.lo[axis] + (box.hi[axis] - box.lo[axis]) * u(rng);
+}
+
 TEST(KdClip, BoundsContainEveryPointOfTheClippedParts) {
   std::mt19937 rng(77);
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
   int parts = 0;
   for (int trial = 0; trial < 3000; ++trial) {
     glm::vec3 v[3];
-    for (glm::vec3& p : v) p = glm::vec3(u(rng), u(rng), u(rng)) * 10.0f - 5.0f;
     kdclip::Box box;
-    for (int a = 0; a < 3; ++a) {
-      const float x = u(rng) * 10.0f - 5.0f;
-      const float y = u(rng) * 10.0f - 5.0f;
-      box.lo[a] = std::min(x, y);
-      box.hi[a] = std::max(x, y);
-    }
     const int axis = trial % 3;
-    const float split = box.lo[axis] + (box.hi[axis] - box.lo[axis]) * u(rng);
+    const float split = random_clip_case(rng, axis, v, box);
     kdclip::Box sides[2];
     const int result = kdclip::clip_and_split(v, box, axis, split, sides[0], sides[1]);
     // Points of the triangle inside the box must lie in the bounds of their side(s).
@@ -633,6 +639,79 @@ TEST(KdClip, BoundsContainEveryPointOfTheClippedParts) {
   EXPECT_GT(parts, 10000);
 }
 
+// --build fast's clip: the whole triangle split by the plane. Its bounds must contain the exact
+// clip's (so that, cut to the reference's box, they stay conservative), and a side it calls empty
+// must be one the exact clip calls empty too.
+TEST(KdClip, SplitTriangleContainsTheExactClip) {
+  std::mt19937 rng(78);
+  int compared = 0;
+  for (int trial = 0; trial < 3000; ++trial) {
+    glm::vec3 v[3];
+    kdclip::Box box;
+    const int axis = trial % 3;
+    const float split = random_clip_case(rng, axis, v, box);
+    kdclip::Box exact[2];
+    kdclip::Box loose[2];
+    const int exact_sides = kdclip::clip_and_split(v, box, axis, split, exact[0], exact[1]);
+    const int loose_sides = kdclip::split_triangle(v, axis, split, loose[0], loose[1]);
+    ASSERT_EQ(exact_sides & ~loose_sides, 0) << "trial " << trial << ": a side with a part was reported empty";
+    for (int side = 0; side < 2; ++side) {
+      if (!(exact_sides & (1 << side))) continue;
+      for (int k = 0; k < 3; ++k) {
+        EXPECT_LE(loose[side].lo[k], exact[side].lo[k]) << "trial " << trial;
+        EXPECT_GE(loose[side].hi[k], exact[side].hi[k]) << "trial " << trial;
+      }
+      ++compared;
+    }
+  }
+  EXPECT_GT(compared, 1000);
+}
+
+TEST(KdTree, BuildModesParseAndNameEachOther) {
+  for (KdBuildMode m : {KdBuildMode::Quality, KdBuildMode::Fast}) {
+    KdBuildMode parsed = m == KdBuildMode::Fast ? KdBuildMode::Quality : KdBuildMode::Fast;
+    ASSERT_TRUE(parse_kd_build_mode(kd_build_mode_name(m), parsed));
+    EXPECT_EQ(parsed, m);
+  }
+  KdBuildMode unchanged = KdBuildMode::Fast;
+  EXPECT_FALSE(parse_kd_build_mode("sah", unchanged));
+  EXPECT_EQ(unchanged, KdBuildMode::Fast);
+}
+
+// Every build mode, on every generated scene and with the options that change its work: the same
+// hits as brute force, and SAH costs near each other's (fast clips more loosely).
+TEST(KdTree, EveryBuildModeTraversesCorrectly) {
+  unsigned seed = 300;
+  for (const NamedScene& scene : all_scenes()) {
+    SCOPED_TRACE(scene.name);
+    KdBuildOptions quality;
+    quality.build = KdBuildMode::Quality;
+    KdBuildOptions fast = quality;
+    fast.build = KdBuildMode::Fast;
+    const FlatKdTree quality_tree = build_kdtree(scene.positions, quality);
+    const FlatKdTree fast_tree = build_kdtree(scene.positions, fast);
+    EXPECT_LE(fast_tree.stats.sah_cost, 1.10 * quality_tree.stats.sah_cost + 1e-6);
+    EXPECT_LE(quality_tree.stats.sah_cost, 1.10 * fast_tree.stats.sah_cost + 1e-6);
+    const std::vector<Ray> rays = make_rays(quality_tree, scene.positions, 3000, seed++);
+    for (KdBuildMode mode : {KdBuildMode::Quality, KdBuildMode::Fast}) {
+      for (bool clip : {true, false}) {
+        for (int leaf : {1, 4}) {
+          KdBuildOptions o;
+          o.build = mode;
+          o.split_clipping = clip;
+          o.max_leaf_prims = leaf;
+          const std::string what = scene.name + " " + kd_build_mode_name(mode) + (clip ? " clip" : " noclip") +
+                                   " leaf " + std::to_string(leaf);
+          SCOPED_TRACE(what);
+          const FlatKdTree tree = build_kdtree(scene.positions, o);
+          check_layout(tree, scene.positions, o);
+          ASSERT_EQ(check_rays(tree, rays, what), 0);
+        }
+      }
+    }
+  }
+}
+
 // The GPU and the CPU read the same arrays, and tests compare images across machines: the tree
 // must not depend on how many threads built it, nor on how their tasks were scheduled.
 TEST(KdTree, SameTreeForAnyThreadCount) {
@@ -645,37 +724,40 @@ TEST(KdTree, SameTreeForAnyThreadCount) {
                                           {"planar", planar(44)}};
   for (const NamedScene& scene : scenes) {
     for (int bins : {32, 128}) {
-      if (bins != 32 && scene.name != "soup 3000") continue;  // the sweep of more than 64 bins
-      SCOPED_TRACE(scene.name + " bins " + std::to_string(bins));
-      KdBuildOptions serial;
-      serial.bins = bins;
-      serial.threads = 1;
-      const FlatKdTree reference = build_kdtree(scene.positions, serial);
-      check_layout(reference, scene.positions, serial);
-      for (int threads : {2, 3, 0}) {
-        KdBuildOptions o = serial;
-        o.threads = threads;
-        for (int repeat = 0; repeat < 2; ++repeat) {  // different schedules
-          const FlatKdTree tree = build_kdtree(scene.positions, o);
-          ASSERT_EQ(tree.nodes.size(), reference.nodes.size()) << threads << " threads";
-          ASSERT_EQ(tree.prim_list.size(), reference.prim_list.size()) << threads << " threads";
-          ASSERT_EQ(tree.triangles.size(), reference.triangles.size()) << threads << " threads";
-          EXPECT_EQ(std::memcmp(tree.nodes.data(), reference.nodes.data(), tree.nodes.size() * sizeof(glm::vec4)), 0)
-              << threads << " threads";
-          EXPECT_EQ(std::memcmp(tree.prim_list.data(), reference.prim_list.data(),
-                                tree.prim_list.size() * sizeof(float)),
-                    0)
-              << threads << " threads";
-          EXPECT_EQ(std::memcmp(tree.triangles.data(), reference.triangles.data(),
-                                tree.triangles.size() * sizeof(glm::vec4)),
-                    0)
-              << threads << " threads";
-          EXPECT_EQ(std::memcmp(&tree.bounds, &reference.bounds, sizeof(Aabb)), 0);
-          EXPECT_EQ(tree.max_depth, reference.max_depth);
-          EXPECT_EQ(tree.stats.sah_cost, reference.stats.sah_cost);  // summed in the same order too
-          EXPECT_EQ(tree.stats.leaves, reference.stats.leaves);
-          EXPECT_EQ(tree.stats.prim_references, reference.stats.prim_references);
-          EXPECT_EQ(tree.stats.max_depth_reached, reference.stats.max_depth_reached);
+      for (KdBuildMode mode : {KdBuildMode::Quality, KdBuildMode::Fast}) {
+        if (bins != 32 && scene.name != "soup 3000") continue;  // the sweep of more than 64 bins
+        SCOPED_TRACE(scene.name + " bins " + std::to_string(bins) + " " + kd_build_mode_name(mode));
+        KdBuildOptions serial;
+        serial.bins = bins;
+        serial.build = mode;
+        serial.threads = 1;
+        const FlatKdTree reference = build_kdtree(scene.positions, serial);
+        check_layout(reference, scene.positions, serial);
+        for (int threads : {2, 3, 0}) {
+          KdBuildOptions o = serial;
+          o.threads = threads;
+          for (int repeat = 0; repeat < 2; ++repeat) {  // different schedules
+            const FlatKdTree tree = build_kdtree(scene.positions, o);
+            ASSERT_EQ(tree.nodes.size(), reference.nodes.size()) << threads << " threads";
+            ASSERT_EQ(tree.prim_list.size(), reference.prim_list.size()) << threads << " threads";
+            ASSERT_EQ(tree.triangles.size(), reference.triangles.size()) << threads << " threads";
+            EXPECT_EQ(std::memcmp(tree.nodes.data(), reference.nodes.data(), tree.nodes.size() * sizeof(glm::vec4)), 0)
+                << threads << " threads";
+            EXPECT_EQ(std::memcmp(tree.prim_list.data(), reference.prim_list.data(),
+                                  tree.prim_list.size() * sizeof(float)),
+                      0)
+                << threads << " threads";
+            EXPECT_EQ(std::memcmp(tree.triangles.data(), reference.triangles.data(),
+                                  tree.triangles.size() * sizeof(glm::vec4)),
+                      0)
+                << threads << " threads";
+            EXPECT_EQ(std::memcmp(&tree.bounds, &reference.bounds, sizeof(Aabb)), 0);
+            EXPECT_EQ(tree.max_depth, reference.max_depth);
+            EXPECT_EQ(tree.stats.sah_cost, reference.stats.sah_cost);  // summed in the same order too
+            EXPECT_EQ(tree.stats.leaves, reference.stats.leaves);
+            EXPECT_EQ(tree.stats.prim_references, reference.stats.prim_references);
+            EXPECT_EQ(tree.stats.max_depth_reached, reference.stats.max_depth_reached);
+          }
         }
       }
     }

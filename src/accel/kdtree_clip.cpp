@@ -80,6 +80,59 @@ int split_polygon(const double (*poly)[3], int n, int axis, float split, Box& be
 
 }  // namespace
 
+// split_polygon on the triangle itself, with the same result: its vertices are floats already
+// (no rounding), only the two edge crossings are computed in double and rounded outwards (round
+// down and up are monotone, so rounding each point equals rounding the bounds), and the crossing's
+// coordinate on the split axis is the plane itself.
+int split_triangle(const glm::vec3* v, int split_axis, float split, Box& below, Box& above) {
+  float p[3][3];
+  for (int i = 0; i < 3; ++i) {
+    p[i][0] = v[i].x;
+    p[i][1] = v[i].y;
+    p[i][2] = v[i].z;
+  }
+  constexpr float kInfF = std::numeric_limits<float>::infinity();
+  Box* out[2] = {&below, &above};
+  for (Box* b : out) {
+    for (int a = 0; a < 3; ++a) {
+      b->lo[a] = kInfF;
+      b->hi[a] = -kInfF;
+    }
+  }
+  const auto extend = [&](Box& b, const float* x) {
+    for (int a = 0; a < 3; ++a) {
+      b.lo[a] = std::min(b.lo[a], x[a]);
+      b.hi[a] = std::max(b.hi[a], x[a]);
+    }
+  };
+  const double s = split;
+  for (int i = 0; i < 3; ++i) {
+    const float* a = p[i];
+    const float* b = p[i == 2 ? 0 : i + 1];
+    if (a[split_axis] <= split) extend(below, a);
+    if (a[split_axis] >= split) extend(above, a);
+    const double da = double(a[split_axis]) - s;
+    const double db = double(b[split_axis]) - s;
+    if ((da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0)) {
+      const double t = da / (da - db);
+      for (int k = 0; k < 3; ++k) {
+        float lo = split;
+        float hi = split;
+        if (k != split_axis) {
+          const double x = double(a[k]) + t * (double(b[k]) - double(a[k]));
+          lo = round_down(x);
+          hi = round_up(x);
+        }
+        for (Box* side : out) {
+          side->lo[k] = std::min(side->lo[k], lo);
+          side->hi[k] = std::max(side->hi[k], hi);
+        }
+      }
+    }
+  }
+  return (below.lo[0] <= below.hi[0] ? 1 : 0) | (above.lo[0] <= above.hi[0] ? 2 : 0);
+}
+
 int clip_and_split(const glm::vec3* v, const Box& box, int split_axis, float split, Box& below, Box& above) {
   constexpr int kMax = 16;  // 3 vertices + at most one per clipping plane
   double poly_a[kMax][3];
@@ -107,7 +160,7 @@ int clip_and_split(const glm::vec3* v, const Box& box, int split_axis, float spl
     crossed[a][1] = tri_hi[a] > box.hi[a];
     inside = inside && !crossed[a][0] && !crossed[a][1];
   }
-  if (inside) return split_polygon(poly, 3, split_axis, split, below, above);
+  if (inside) return split_triangle(v, split_axis, split, below, above);
   int n = 3;
   for (int axis = 0; axis < 3; ++axis) {
     for (int side = 0; side < 2; ++side) {

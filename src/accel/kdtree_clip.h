@@ -20,4 +20,10 @@ struct Box {
 // empty, bit 2 when the above part is not (0: the triangle misses the box).
 int clip_and_split(const glm::vec3* v, const Box& box, int axis, float split, Box& below, Box& above);
 
+// The whole triangle v[0..2] split by the plane x[axis] = split, without clipping it to a box
+// first: the same bounds as clip_and_split with a box that contains the triangle. Intersected
+// with a reference's box, a conservative (looser) stand-in for clip_and_split at a fraction of
+// its cost: 3 edges against one plane instead of up to 6 planes of polygon clipping.
+int split_triangle(const glm::vec3* v, int axis, float split, Box& below, Box& above);
+
 }  // namespace mobirt::kdclip

@@ -534,6 +534,7 @@ int cmd_bench(const std::vector<std::string>& args) {
   result["settings"] = {{"frames", o.frames},
                         {"warmup", o.warmup},
                         {"bins", o.settings.kd.bins},
+                        {"build", kd_build_mode_name(o.settings.kd.build)},
                         {"stack", o.settings.stack_depth},
                         {"max_steps", o.settings.max_steps},
                         {"kd_rebuilt_every_frame", true}};

@@ -88,6 +88,15 @@ const Setting kSettings[] = {
      [](CommonOptions& o, const Value& v) { o.settings.max_steps = v.integer(1, 1 << 24); }},
     {"--bins", "N", kFrames, "SAH bins per axis of the kd-tree build (default 32)",
      [](CommonOptions& o, const Value& v) { o.settings.kd.bins = v.integer(2, 1024); }},
+    {"--build", "MODE", kFrames,
+     "kd-tree build: fast (straddling triangles split by the plane, their\n"
+     "parts' boxes cut to the node's) or quality (exact split clipping)\n"
+     "(default fast)",
+     [](CommonOptions& o, const Value& v) {
+       static constexpr std::pair<const char*, KdBuildMode> modes[] = {{"fast", KdBuildMode::Fast},
+                                                                       {"quality", KdBuildMode::Quality}};
+       o.settings.kd.build = v.choice(modes);
+     }},
     {"--leaf-size", "N", kFrames, "largest leaf the build may make without trying to split (default 1)",
      [](CommonOptions& o, const Value& v) { o.settings.kd.max_leaf_prims = v.integer(1, 1 << 20); }},
     {"--max-depth", "N", kFrames, "kd-tree depth limit, -1 = 8 + 1.3 log2(triangles) (default -1)",
