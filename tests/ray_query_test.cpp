@@ -312,7 +312,8 @@ TEST(RayQuery, ConstraintCheckerNamesWhatThePeerBreaks) {
   }
   EXPECT_EQ(RayQueryEngine::unavailable_reason(), "");
   const std::string info = join(engine->info());
-  EXPECT_NE(info.find("breaks the OpenGL ES 2.0 constraints: reads an acceleration structure"), std::string::npos) << info;
+  EXPECT_NE(info.find("breaks the OpenGL ES 2.0 constraints: reads an acceleration structure"), std::string::npos)
+      << info;
   EXPECT_NE(info.find("PREFER_FAST_BUILD"), std::string::npos) << info;
 }
 

@@ -76,8 +76,8 @@ struct DebugSink {
 };
 
 VKAPI_ATTR VkBool32 VKAPI_CALL debug_callback(VkDebugUtilsMessageSeverityFlagBitsEXT severity,
-                                              VkDebugUtilsMessageTypeFlagsEXT, const VkDebugUtilsMessengerCallbackDataEXT* data,
-                                              void* user) {
+                                              VkDebugUtilsMessageTypeFlagsEXT,
+                                              const VkDebugUtilsMessengerCallbackDataEXT* data, void* user) {
   const bool error = (severity & VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT) != 0;
   if (!error && !(severity & VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT)) return VK_FALSE;
   std::string text = error ? "validation error: " : "validation warning: ";
@@ -290,7 +290,8 @@ void RayQueryEngine::Impl::create_instance(bool validation) {
   // 1.2 has buffer device addresses and SPIR-V 1.5 in core; the 1.3 loader and layers know it all.
   app.apiVersion = VK_API_VERSION_1_2;
   VkDebugUtilsMessengerCreateInfoEXT messenger{VK_STRUCTURE_TYPE_DEBUG_UTILS_MESSENGER_CREATE_INFO_EXT};
-  messenger.messageSeverity = VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;
+  messenger.messageSeverity =
+      VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;
   messenger.messageType = VK_DEBUG_UTILS_MESSAGE_TYPE_GENERAL_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT |
                           VK_DEBUG_UTILS_MESSAGE_TYPE_PERFORMANCE_BIT_EXT;
   messenger.pfnUserCallback = debug_callback;
@@ -328,14 +329,15 @@ void RayQueryEngine::Impl::pick_physical_device(const std::string& wanted) {
   for (uint32_t i = 0; i < count; ++i) vkGetPhysicalDeviceProperties(devices[i], &props[i]);
   // The same choice as mobirt's backend (BackendOptions::device): empty = lavapipe, else the first.
   size_t chosen = count;
+  const bool numeric =
+      std::all_of(wanted.begin(), wanted.end(), [](char c) { return std::isdigit(static_cast<unsigned char>(c)); });
   if (wanted.empty()) {
     for (size_t i = 0; i < count && chosen == count; ++i) {
-      if (props[i].deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU || lower(props[i].deviceName).find("llvmpipe") != std::string::npos) {
-        chosen = i;
-      }
+      const bool cpu = props[i].deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
+      if (cpu || lower(props[i].deviceName).find("llvmpipe") != std::string::npos) chosen = i;
     }
     if (chosen == count) chosen = 0;
-  } else if (std::all_of(wanted.begin(), wanted.end(), [](char c) { return std::isdigit(static_cast<unsigned char>(c)); })) {
+  } else if (numeric) {
     const unsigned long index = std::strtoul(wanted.c_str(), nullptr, 10);
     if (index < count) chosen = size_t(index);
   } else {
@@ -356,7 +358,8 @@ void RayQueryEngine::Impl::pick_physical_device(const std::string& wanted) {
     vkGetPhysicalDeviceProperties2(physical, &p2);
     driver = std::string(d.driverName) + " / " + d.driverInfo;
     const std::string info = d.driverInfo;  // "Mesa 25.0.7 (LLVM 15.0.6)"
-    who = d.driverID == VK_DRIVER_ID_MESA_LLVMPIPE ? "lavapipe of " + info.substr(0, info.find(" (")) : who + " (" + driver + ")";
+    who = d.driverID == VK_DRIVER_ID_MESA_LLVMPIPE ? "lavapipe of " + info.substr(0, info.find(" ("))
+                                                   : who + " (" + driver + ")";
   } else if (lower(who).find("llvmpipe") != std::string::npos) {
     who = "lavapipe (Vulkan " + version_string(properties.apiVersion) + ")";
   }
@@ -369,7 +372,8 @@ std::string RayQueryEngine::Impl::support_problem() {
     return who + " supports Vulkan " + version_string(properties.apiVersion) + "; the ray-query peer needs 1.2";
   }
   uint32_t count = 0;
-  vk::check(vkEnumerateDeviceExtensionProperties(physical, nullptr, &count, nullptr), "vkEnumerateDeviceExtensionProperties");
+  vk::check(vkEnumerateDeviceExtensionProperties(physical, nullptr, &count, nullptr),
+            "vkEnumerateDeviceExtensionProperties");
   std::vector<VkExtensionProperties> available(count);
   vk::check(vkEnumerateDeviceExtensionProperties(physical, nullptr, &count, available.data()),
             "vkEnumerateDeviceExtensionProperties");
@@ -384,7 +388,8 @@ std::string RayQueryEngine::Impl::support_problem() {
     return who + " lacks " + join_and(missing) + (lavapipe ? newer + (missing.size() == 1 ? "it" : "them") : "");
   }
   VkPhysicalDeviceRayQueryFeaturesKHR ray_query{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_RAY_QUERY_FEATURES_KHR};
-  VkPhysicalDeviceAccelerationStructureFeaturesKHR as{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_ACCELERATION_STRUCTURE_FEATURES_KHR};
+  VkPhysicalDeviceAccelerationStructureFeaturesKHR as{
+      VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_ACCELERATION_STRUCTURE_FEATURES_KHR};
   as.pNext = &ray_query;
   VkPhysicalDeviceVulkan12Features v12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
   v12.pNext = &as;
@@ -422,7 +427,8 @@ std::string RayQueryEngine::Impl::support_problem() {
 void RayQueryEngine::Impl::create_device() {
   VkPhysicalDeviceRayQueryFeaturesKHR ray_query{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_RAY_QUERY_FEATURES_KHR};
   ray_query.rayQuery = VK_TRUE;
-  VkPhysicalDeviceAccelerationStructureFeaturesKHR as{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_ACCELERATION_STRUCTURE_FEATURES_KHR};
+  VkPhysicalDeviceAccelerationStructureFeaturesKHR as{
+      VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_ACCELERATION_STRUCTURE_FEATURES_KHR};
   as.accelerationStructure = VK_TRUE;
   as.pNext = &ray_query;
   VkPhysicalDeviceVulkan12Features v12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
@@ -451,10 +457,11 @@ void RayQueryEngine::Impl::create_device() {
       reinterpret_cast<PFN_vkCreateAccelerationStructureKHR>(load("vkCreateAccelerationStructureKHR"));
   destroy_acceleration_structure =
       reinterpret_cast<PFN_vkDestroyAccelerationStructureKHR>(load("vkDestroyAccelerationStructureKHR"));
-  build_sizes = reinterpret_cast<PFN_vkGetAccelerationStructureBuildSizesKHR>(load("vkGetAccelerationStructureBuildSizesKHR"));
+  build_sizes =
+      reinterpret_cast<PFN_vkGetAccelerationStructureBuildSizesKHR>(load("vkGetAccelerationStructureBuildSizesKHR"));
   cmd_build = reinterpret_cast<PFN_vkCmdBuildAccelerationStructuresKHR>(load("vkCmdBuildAccelerationStructuresKHR"));
-  as_address =
-      reinterpret_cast<PFN_vkGetAccelerationStructureDeviceAddressKHR>(load("vkGetAccelerationStructureDeviceAddressKHR"));
+  as_address = reinterpret_cast<PFN_vkGetAccelerationStructureDeviceAddressKHR>(
+      load("vkGetAccelerationStructureDeviceAddressKHR"));
   for (AccelerationStructure* a : {&blas, &tlas}) {
     a->device = device;
     a->destroy = destroy_acceleration_structure;
@@ -488,7 +495,9 @@ void RayQueryEngine::Impl::create_objects() {
 
   VkSamplerCreateInfo sampler_info{VK_STRUCTURE_TYPE_SAMPLER_CREATE_INFO};  // texelFetch only
   sampler_info.magFilter = sampler_info.minFilter = VK_FILTER_NEAREST;
-  sampler_info.addressModeU = sampler_info.addressModeV = sampler_info.addressModeW = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
+  sampler_info.addressModeU = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
+  sampler_info.addressModeV = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
+  sampler_info.addressModeW = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
   VkSampler s = VK_NULL_HANDLE;
   vk::check(vkCreateSampler(device, &sampler_info, nullptr, &s), "vkCreateSampler");
   sampler = vk::Sampler(device, s);
@@ -682,7 +691,8 @@ void RayQueryEngine::Impl::ensure_image(Image2D& image, uint32_t width, uint32_t
 void RayQueryEngine::Impl::ensure_target(uint32_t width, uint32_t height) {
   if (target.width == width && target.height >= height && framebuffer) return;
   framebuffer.reset();
-  ensure_image(target, width, height, kTargetFormat, VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT);
+  ensure_image(target, width, height, kTargetFormat,
+               VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT);
   VkImageView view = target.view.get();
   VkFramebufferCreateInfo info{VK_STRUCTURE_TYPE_FRAMEBUFFER_CREATE_INFO};
   info.renderPass = render_pass.get();
@@ -839,13 +849,15 @@ void RayQueryEngine::Impl::build(const Scene& scene, AsBuildTimings* timings) {
   triangles.bounds = scene.bounds();
   triangles.triangles.reserve(positions.size());
   for (const glm::vec3& p : positions) triangles.triangles.emplace_back(p, 0.0f);
-  const uint32_t rows = std::max<uint32_t>(1, uint32_t((triangles.triangles.size() + MOBIRT_DATA_WIDTH - 1) / MOBIRT_DATA_WIDTH));
+  const size_t texels = triangles.triangles.size();
+  const uint32_t rows = std::max<uint32_t>(1, uint32_t((texels + MOBIRT_DATA_WIDTH - 1) / MOBIRT_DATA_WIDTH));
   const VkDeviceSize texel_bytes = VkDeviceSize(rows) * MOBIRT_DATA_WIDTH * sizeof(glm::vec4);
   ensure_host(staging, texel_bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT);
   std::memcpy(staging.mapped, triangles.triangles.data(), triangles.triangles.size() * sizeof(glm::vec4));
   std::memset(static_cast<char*>(staging.mapped) + triangles.triangles.size() * sizeof(glm::vec4), 0,
               texel_bytes - triangles.triangles.size() * sizeof(glm::vec4));
-  ensure_image(triangle_texels, MOBIRT_DATA_WIDTH, rows, kRayFormat, VK_IMAGE_USAGE_SAMPLED_BIT | VK_IMAGE_USAGE_TRANSFER_DST_BIT);
+  ensure_image(triangle_texels, MOBIRT_DATA_WIDTH, rows, kRayFormat,
+               VK_IMAGE_USAGE_SAMPLED_BIT | VK_IMAGE_USAGE_TRANSFER_DST_BIT);
   const VkBufferUsageFlags input =
       VK_BUFFER_USAGE_ACCELERATION_STRUCTURE_BUILD_INPUT_READ_ONLY_BIT_KHR | VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT;
   ensure_host(vertices, std::max<VkDeviceSize>(1, n) * 3 * sizeof(glm::vec3), input);
@@ -865,12 +877,15 @@ void RayQueryEngine::Impl::build(const Scene& scene, AsBuildTimings* timings) {
   tri.vertexStride = sizeof(glm::vec3);
   tri.maxVertex = n > 0 ? 3 * n - 1 : 0;
   tri.indexType = VK_INDEX_TYPE_NONE_KHR;
-  const bool update = mode == AsBuildMode::Update && blas.handle != VK_NULL_HANDLE && blas_updatable && blas_triangles == n;
-  VkAccelerationStructureBuildGeometryInfoKHR blas_info{VK_STRUCTURE_TYPE_ACCELERATION_STRUCTURE_BUILD_GEOMETRY_INFO_KHR};
+  const bool update =
+      mode == AsBuildMode::Update && blas.handle != VK_NULL_HANDLE && blas_updatable && blas_triangles == n;
+  VkAccelerationStructureBuildGeometryInfoKHR blas_info{
+      VK_STRUCTURE_TYPE_ACCELERATION_STRUCTURE_BUILD_GEOMETRY_INFO_KHR};
   blas_info.type = VK_ACCELERATION_STRUCTURE_TYPE_BOTTOM_LEVEL_KHR;
   blas_info.flags = VK_BUILD_ACCELERATION_STRUCTURE_PREFER_FAST_BUILD_BIT_KHR |
                     (mode == AsBuildMode::Update ? VK_BUILD_ACCELERATION_STRUCTURE_ALLOW_UPDATE_BIT_KHR : 0);
-  blas_info.mode = update ? VK_BUILD_ACCELERATION_STRUCTURE_MODE_UPDATE_KHR : VK_BUILD_ACCELERATION_STRUCTURE_MODE_BUILD_KHR;
+  blas_info.mode =
+      update ? VK_BUILD_ACCELERATION_STRUCTURE_MODE_UPDATE_KHR : VK_BUILD_ACCELERATION_STRUCTURE_MODE_BUILD_KHR;
   blas_info.geometryCount = 1;
   blas_info.pGeometries = &geometry;
   VkAccelerationStructureBuildSizesInfoKHR blas_sizes{VK_STRUCTURE_TYPE_ACCELERATION_STRUCTURE_BUILD_SIZES_INFO_KHR};
@@ -878,7 +893,8 @@ void RayQueryEngine::Impl::build(const Scene& scene, AsBuildTimings* timings) {
   if (!update && n > 0) {
     // A fresh build: a new BLAS object when the old one is too small (its address changes).
     if (blas.handle == VK_NULL_HANDLE || blas_storage.size < blas_sizes.accelerationStructureSize) {
-      create_as(blas, blas_storage, VK_ACCELERATION_STRUCTURE_TYPE_BOTTOM_LEVEL_KHR, blas_sizes.accelerationStructureSize);
+      create_as(blas, blas_storage, VK_ACCELERATION_STRUCTURE_TYPE_BOTTOM_LEVEL_KHR,
+                blas_sizes.accelerationStructureSize);
     }
     blas_triangles = n;
     blas_updatable = mode == AsBuildMode::Update;
@@ -896,7 +912,8 @@ void RayQueryEngine::Impl::build(const Scene& scene, AsBuildTimings* timings) {
   top.geometryType = VK_GEOMETRY_TYPE_INSTANCES_KHR;
   top.geometry.instances.sType = VK_STRUCTURE_TYPE_ACCELERATION_STRUCTURE_GEOMETRY_INSTANCES_DATA_KHR;
   top.geometry.instances.data.deviceAddress = instances.address;
-  VkAccelerationStructureBuildGeometryInfoKHR tlas_info{VK_STRUCTURE_TYPE_ACCELERATION_STRUCTURE_BUILD_GEOMETRY_INFO_KHR};
+  VkAccelerationStructureBuildGeometryInfoKHR tlas_info{
+      VK_STRUCTURE_TYPE_ACCELERATION_STRUCTURE_BUILD_GEOMETRY_INFO_KHR};
   tlas_info.type = VK_ACCELERATION_STRUCTURE_TYPE_TOP_LEVEL_KHR;
   tlas_info.flags = VK_BUILD_ACCELERATION_STRUCTURE_PREFER_FAST_BUILD_BIT_KHR;
   tlas_info.mode = VK_BUILD_ACCELERATION_STRUCTURE_MODE_BUILD_KHR;
@@ -928,17 +945,18 @@ void RayQueryEngine::Impl::build(const Scene& scene, AsBuildTimings* timings) {
   VkBufferImageCopy region{};
   region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
   region.imageExtent = {MOBIRT_DATA_WIDTH, rows, 1};
-  vkCmdCopyBufferToImage(commands, staging.buffer.get(), triangle_texels.image.get(), VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
-                         1, &region);
+  vkCmdCopyBufferToImage(commands, staging.buffer.get(), triangle_texels.image.get(),
+                         VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &region);
   VkImageMemoryBarrier to_read =
       image_barrier(triangle_texels.image.get(), VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
                     VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL, VK_ACCESS_TRANSFER_WRITE_BIT, VK_ACCESS_SHADER_READ_BIT);
-  vkCmdPipelineBarrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, 0, 0, nullptr, 0,
-                       nullptr, 1, &to_read);
+  vkCmdPipelineBarrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, 0, 0, nullptr,
+                       0, nullptr, 1, &to_read);
   if (queries) vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries.get(), 1);
   VkMemoryBarrier built_barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER};  // BLAS (and scratch) before the TLAS build
   built_barrier.srcAccessMask = VK_ACCESS_ACCELERATION_STRUCTURE_WRITE_BIT_KHR;
-  built_barrier.dstAccessMask = VK_ACCESS_ACCELERATION_STRUCTURE_READ_BIT_KHR | VK_ACCESS_ACCELERATION_STRUCTURE_WRITE_BIT_KHR;
+  built_barrier.dstAccessMask =
+      VK_ACCESS_ACCELERATION_STRUCTURE_READ_BIT_KHR | VK_ACCESS_ACCELERATION_STRUCTURE_WRITE_BIT_KHR;
   if (n > 0) {
     const VkAccelerationStructureBuildRangeInfoKHR range{n, 0, 0, 0};
     const VkAccelerationStructureBuildRangeInfoKHR* ranges = &range;
@@ -974,12 +992,15 @@ Packing RayQueryEngine::Impl::trace(const RayBatch& rays, std::span<const Light>
                                         "mediump (drop --precision mediump)");
   }
   const uint32_t count = rays.count();
-  if (out.size() < count) throw Error(ErrorKind::Internal, "RayQueryEngine::trace: the output holds fewer texels than rays");
+  if (out.size() < count) {
+    throw Error(ErrorKind::Internal, "RayQueryEngine::trace: the output holds fewer texels than rays");
+  }
   if (lights.size() > size_t(MOBIRT_MAX_LIGHTS)) {
     throw input_error(scene_name, std::to_string(lights.size()) + " lights: a pass casts shadow rays to at most " +
                                       std::to_string(MOBIRT_MAX_LIGHTS));
   }
-  const Packing packing = choose_packing(triangles.triangles.size() / MOBIRT_TEXELS_PER_TRIANGLE, int(lights.size()), scene_name);
+  const Packing packing =
+      choose_packing(triangles.triangles.size() / MOBIRT_TEXELS_PER_TRIANGLE, int(lights.size()), scene_name);
   if (timings) *timings = RayQueryTimings{};
   if (count == 0) return packing;
   if (rays.width == 0) throw Error(ErrorKind::Internal, "RayQueryEngine::trace: a ray batch of width 0");
@@ -1000,11 +1021,13 @@ Packing RayQueryEngine::Impl::trace(const RayBatch& rays, std::span<const Light>
   ensure_target(width, rows);
   ensure_host(readback, VkDeviceSize(width) * rows * 4, VK_BUFFER_USAGE_TRANSFER_DST_BIT);
   const std::vector<float> params = trace_uniforms(triangles, lights, shadows, int(lights.size()));
-  std::memcpy(uniforms.mapped, params.data(), std::min(params.size() * sizeof(float), size_t(MOBIRT_MAX_PARAM_VEC4S * 16)));
+  std::memcpy(uniforms.mapped, params.data(),
+              std::min(params.size() * sizeof(float), size_t(MOBIRT_MAX_PARAM_VEC4S * 16)));
   const VkPipeline pass = pipeline(int(lights.size()), packing, shadows.offset.mode);
 
   VkDescriptorBufferInfo ubo{uniforms.buffer.get(), 0, MOBIRT_MAX_PARAM_VEC4S * 16};
-  VkWriteDescriptorSetAccelerationStructureKHR as_write{VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET_ACCELERATION_STRUCTURE_KHR};
+  VkWriteDescriptorSetAccelerationStructureKHR as_write{
+      VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET_ACCELERATION_STRUCTURE_KHR};
   as_write.accelerationStructureCount = 1;
   as_write.pAccelerationStructures = &tlas.handle;
   const VkDescriptorImageInfo images[] = {
@@ -1037,10 +1060,11 @@ Packing RayQueryEngine::Impl::trace(const RayBatch& rays, std::span<const Light>
   VkImageMemoryBarrier to_copy[2], to_read[2];
   const Image2D* targets[2] = {&ray_origin, &ray_direction};
   for (int i = 0; i < 2; ++i) {
-    to_copy[i] = image_barrier(targets[i]->image.get(), VK_IMAGE_LAYOUT_UNDEFINED, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 0,
+    const VkImage image = targets[i]->image.get();
+    to_copy[i] = image_barrier(image, VK_IMAGE_LAYOUT_UNDEFINED, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 0,
                                VK_ACCESS_TRANSFER_WRITE_BIT);
-    to_read[i] = image_barrier(targets[i]->image.get(), VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
-                               VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL, VK_ACCESS_TRANSFER_WRITE_BIT, VK_ACCESS_SHADER_READ_BIT);
+    to_read[i] = image_barrier(image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL,
+                               VK_ACCESS_TRANSFER_WRITE_BIT, VK_ACCESS_SHADER_READ_BIT);
   }
   vkCmdPipelineBarrier(commands, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 0, nullptr, 0,
                        nullptr, 2, to_copy);
@@ -1049,11 +1073,11 @@ Packing RayQueryEngine::Impl::trace(const RayBatch& rays, std::span<const Light>
     region.bufferOffset = VkDeviceSize(i) * ray_bytes;
     region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
     region.imageExtent = {width, rows, 1};
-    vkCmdCopyBufferToImage(commands, staging.buffer.get(), targets[i]->image.get(), VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1,
-                           &region);
+    vkCmdCopyBufferToImage(commands, staging.buffer.get(), targets[i]->image.get(),
+                           VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &region);
   }
-  vkCmdPipelineBarrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, 0, 0, nullptr, 0,
-                       nullptr, 2, to_read);
+  vkCmdPipelineBarrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, 0, 0, nullptr,
+                       0, nullptr, 2, to_read);
   if (queries) vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries.get(), 1);
 
   VkRenderPassBeginInfo rp{VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO};
@@ -1066,7 +1090,8 @@ Packing RayQueryEngine::Impl::trace(const RayBatch& rays, std::span<const Light>
   const VkRect2D scissor{{0, 0}, {width, rows}};
   vkCmdSetViewport(commands, 0, 1, &viewport);
   vkCmdSetScissor(commands, 0, 1, &scissor);
-  vkCmdBindDescriptorSets(commands, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline_layout.get(), 0, 1, &descriptor_set, 0, nullptr);
+  vkCmdBindDescriptorSets(commands, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline_layout.get(), 0, 1, &descriptor_set, 0,
+                          nullptr);
   vkCmdDraw(commands, 3, 1, 0, 0);
   vkCmdEndRenderPass(commands);
   if (queries) vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries.get(), 2);
@@ -1074,15 +1099,16 @@ Packing RayQueryEngine::Impl::trace(const RayBatch& rays, std::span<const Light>
   VkBufferImageCopy region{};
   region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
   region.imageExtent = {width, rows, 1};
-  vkCmdCopyImageToBuffer(commands, target.image.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, readback.buffer.get(), 1, &region);
+  vkCmdCopyImageToBuffer(commands, target.image.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, readback.buffer.get(), 1,
+                         &region);
   VkBufferMemoryBarrier to_host{VK_STRUCTURE_TYPE_BUFFER_MEMORY_BARRIER};
   to_host.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
   to_host.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
   to_host.srcQueueFamilyIndex = to_host.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
   to_host.buffer = readback.buffer.get();
   to_host.size = VK_WHOLE_SIZE;
-  vkCmdPipelineBarrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 0, nullptr, 1, &to_host, 0,
-                       nullptr);
+  vkCmdPipelineBarrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 0, nullptr, 1, &to_host,
+                       0, nullptr);
   if (queries) vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries.get(), 3);
   submit_and_wait("the ray-query pass");
   const auto copy_start = Clock::now();
