@@ -32,10 +32,12 @@ std::unique_ptr<RayQueryEngine> try_engine(const RayQueryOptions& options, std::
   }
 }
 
-// The validation layer on, as every Vulkan test of mobirt runs.
+// The validation layer on, as every Vulkan test of mobirt runs, with its synchronization
+// validation: the engine's barriers are its own.
 RayQueryOptions validated(AsBuildMode mode = AsBuildMode::Update) {
   RayQueryOptions options;
   options.validation = true;
+  options.sync_validation = true;
   options.build_mode = mode;
   return options;
 }

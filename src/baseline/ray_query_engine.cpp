@@ -184,7 +184,7 @@ struct RayQueryEngine::Impl {
   explicit Impl(const RayQueryOptions& options);
 
   // Instance, device choice and the reason the device cannot run the peer ("" = it can).
-  void create_instance(bool validation);
+  void create_instance(bool validation, bool sync_validation);
   void pick_physical_device(const std::string& wanted);
   std::string support_problem();
   void create_device();
@@ -254,7 +254,7 @@ struct RayQueryEngine::Impl {
 };
 
 RayQueryEngine::Impl::Impl(const RayQueryOptions& options) : mode(options.build_mode) {
-  create_instance(options.validation || validation_from_env());
+  create_instance(options.validation || options.sync_validation || validation_from_env(), options.sync_validation);
   pick_physical_device(options.device);
   const std::string problem = support_problem();
   if (!problem.empty()) throw Error(ErrorKind::Unsupported, problem);
@@ -262,7 +262,7 @@ RayQueryEngine::Impl::Impl(const RayQueryOptions& options) : mode(options.build_
   create_objects();
 }
 
-void RayQueryEngine::Impl::create_instance(bool validation) {
+void RayQueryEngine::Impl::create_instance(bool validation, bool sync_validation) {
   uint32_t loader = VK_API_VERSION_1_0;
   if (vkEnumerateInstanceVersion(&loader) != VK_SUCCESS || loader < VK_API_VERSION_1_2) {
     throw Error(ErrorKind::Unsupported, "the Vulkan loader supports Vulkan " + version_string(loader) +
@@ -298,6 +298,14 @@ void RayQueryEngine::Impl::create_instance(bool validation) {
   messenger.pUserData = &sink;
   VkInstanceCreateInfo info{VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO};
   info.pNext = validation ? &messenger : nullptr;
+  const VkValidationFeatureEnableEXT sync = VK_VALIDATION_FEATURE_ENABLE_SYNCHRONIZATION_VALIDATION_EXT;
+  VkValidationFeaturesEXT features{VK_STRUCTURE_TYPE_VALIDATION_FEATURES_EXT};
+  if (validation && sync_validation) {
+    features.enabledValidationFeatureCount = 1;
+    features.pEnabledValidationFeatures = &sync;
+    features.pNext = info.pNext;  // the messenger's create info stays unchained: it is reused below
+    info.pNext = &features;
+  }
   info.pApplicationInfo = &app;
   info.enabledLayerCount = uint32_t(layers.size());
   info.ppEnabledLayerNames = layers.data();

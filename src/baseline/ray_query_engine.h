@@ -34,6 +34,7 @@ enum class AsBuildMode { Fresh, Update };
 struct RayQueryOptions {
   std::string device;        // a Vulkan device index or part of its name; empty = lavapipe
   bool validation = false;   // Khronos validation layer (also MOBIRT_VALIDATION=1); see take_debug_messages()
+  bool sync_validation = false;  // with validation: also the layer's synchronization validation
   AsBuildMode build_mode = AsBuildMode::Update;
 };
 
