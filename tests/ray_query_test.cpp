@@ -263,11 +263,12 @@ TEST(RayQuery, EmptySceneMissesEveryRay) {
   Camera camera;
   camera.eye = glm::vec3(0.0f, 0.0f, 5.0f);
   camera.target = glm::vec3(0.0f);
-  const RayBatch rays = primary_rays(camera, 37, 5);  // a partial last row is padded, never traced
+  RayBatch rays = primary_rays(camera, 37, 5);
+  rays.width = 16;  // 185 rays: 11 rows and a partial one, padded with rays that never hit
   std::vector<uint32_t> texels(rays.count(), 0xdeadbeefu);
   engine->trace(rays, empty.lights, ShadowSettings{}, texels);
   for (size_t i = 0; i < texels.size(); ++i) ASSERT_EQ(texels[i], 0u) << "ray " << i;
-  // And back to a scene with triangles.
+  // And back to a scene with triangles (4000 rays in rows of 64: a partial last row again).
   const Scene fish = load_scene(std::string(MOBIRT_SOURCE_DIR) + "/scenes/fish.gltf");
   engine->build(fish, &t);
   EXPECT_GE(trace_and_compare(*engine, fish, random_rays(fish, *fish.camera, 4000, 64, 5), "fish after empty").share(),

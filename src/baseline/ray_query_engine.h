@@ -9,6 +9,13 @@
 // Self-contained: its own Vulkan instance and device (only when the driver has the extensions),
 // none of the Renderer's state. It is a peer, not mobirt: it breaks the OpenGL ES 2.0 constraints
 // mobirt keeps, and says which (broken_constraints()).
+//
+// One generation of a frame, as a Whitted loop would drive it:
+//   RayQueryEngine rq;                  // once; Error(Unsupported) where the driver lacks ray queries
+//   rq.build(scene, &build_timings);    // every frame
+//   std::vector<uint32_t> texels(rays.count());
+//   const Packing packing = rq.trace(rays, lights, settings.shadow_rays, texels, &trace_timings);
+//   hits = decode_hits(scene, rq.triangles(), rays, texels, packing, lights, settings.shadow_rays);
 #pragma once
 
 #include <cstdint>
