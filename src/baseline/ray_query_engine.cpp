@@ -1013,6 +1013,9 @@ Packing RayQueryEngine::Impl::trace(const RayBatch& rays, std::span<const Light>
   if (count == 0) return packing;
   if (rays.width == 0) throw Error(ErrorKind::Internal, "RayQueryEngine::trace: a ray batch of width 0");
   const uint32_t width = rays.width, rows = rays.rows();
+  // Made on first use (the shader compiles then): outside the upload's time.
+  const VkPipeline pass = pipeline(int(lights.size()), packing, shadows.offset.mode);
+  const auto upload_start = Clock::now();
 
   // The rays into staging, the last row padded with rays of length 0 (valid, never hitting).
   const VkDeviceSize ray_bytes = VkDeviceSize(width) * rows * sizeof(glm::vec4);
@@ -1031,7 +1034,6 @@ Packing RayQueryEngine::Impl::trace(const RayBatch& rays, std::span<const Light>
   const std::vector<float> params = trace_uniforms(triangles, lights, shadows, int(lights.size()));
   std::memcpy(uniforms.mapped, params.data(),
               std::min(params.size() * sizeof(float), size_t(MOBIRT_MAX_PARAM_VEC4S * 16)));
-  const VkPipeline pass = pipeline(int(lights.size()), packing, shadows.offset.mode);
 
   VkDescriptorBufferInfo ubo{uniforms.buffer.get(), 0, MOBIRT_MAX_PARAM_VEC4S * 16};
   VkWriteDescriptorSetAccelerationStructureKHR as_write{
@@ -1061,7 +1063,7 @@ Packing RayQueryEngine::Impl::trace(const RayBatch& rays, std::span<const Light>
     writes[2 + i].pImageInfo = &images[i];
   }
   vkUpdateDescriptorSets(device, uint32_t(std::size(writes)), writes, 0, nullptr);
-  const double upload_cpu_ms = ms_since(start);
+  const double upload_cpu_ms = ms_since(upload_start);
 
   begin();
   if (queries) vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, queries.get(), 0);
