@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "backend/shader_constraints.h"
 #include "baseline/ray_query_engine.h"
 #include "core/error.h"
 #include "core/parallel.h"
@@ -17,6 +18,11 @@
 #include "scene/animation.h"
 #include "scene/loader.h"
 #include "test_support.h"
+
+// SPIR-V built from glsl/ (build/spirv/).
+#include "ray_query.frag.h"
+#include "shade.frag.h"
+#include "trace.frag.h"
 
 namespace mobirt {
 namespace {
@@ -298,6 +304,23 @@ TEST(RayQuery, RefusesMediumPrecisionAndTraceBeforeBuild) {
     EXPECT_NE(std::string(e.what()).find("mediump"), std::string::npos) << e.what();
   }
   EXPECT_TRUE(engine->take_debug_messages().empty());
+}
+
+// The checker lists by name what a shader breaks: nothing for mobirt's passes, the scene as an
+// acceleration structure and the ray queries for the peer's, which mobirt's backend would refuse.
+TEST(RayQuery, ConstraintListIsEmptyForMobirtsPassesOnly) {
+  EXPECT_TRUE(es2_constraints_broken(spirv_trace_frag).empty()) << join(es2_constraints_broken(spirv_trace_frag));
+  EXPECT_TRUE(es2_constraints_broken(spirv_shade_frag).empty()) << join(es2_constraints_broken(spirv_shade_frag));
+  EXPECT_EQ(es2_constraints_broken(spirv_ray_query_frag), RayQueryEngine::broken_constraints());
+  try {
+    check_es2_constraints("ray_query.frag", spirv_ray_query_frag);
+    ADD_FAILURE() << "the ray-query pass passed the ES 2.0 check";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::Constraint);
+    EXPECT_NE(std::string(e.what()).find("acceleration structure"), std::string::npos) << e.what();
+  }
+  const uint32_t not_spirv[] = {1, 2, 3, 4, 5, 6};
+  EXPECT_EQ(es2_constraints_broken(not_spirv), std::vector<std::string>{"is not a valid SPIR-V module"});
 }
 
 // The peer breaks the OpenGL ES 2.0 constraints, and the checker names them (no device needed).
