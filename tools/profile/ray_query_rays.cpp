@@ -9,9 +9,13 @@
 // mobirt's is Renderer::trace's traversal pass (the `trace` stage of `mobirt render --timings`).
 //
 // Usage: mobirt_ray_query_rays SCENE [--camera SPEC] [--light SPEC]... [--mtl F] [--size WxH]
-//        [--repeat N] [--frames N]
+//        [--repeat N] [--frames N] [--shuffle]
+// --shuffle puts the triangles in a random order first (the same for every frame): mobirt's SAH
+// kd-tree does not depend on their order, a driver's BVH builder may.
 #include <algorithm>
 #include <cstdio>
+#include <numeric>
+#include <random>
 #include <cstring>
 #include <string>
 #include <vector>
@@ -26,6 +30,21 @@
 namespace mobirt {
 namespace {
 
+// The scene's triangles in the order `order` (order[i] = the triangle that goes to place i).
+void reorder(Scene& scene, const std::vector<uint32_t>& order) {
+  TriangleMesh& m = scene.mesh;
+  TriangleMesh out;
+  for (const uint32_t t : order) {
+    for (uint32_t k = 0; k < 3; ++k) {
+      out.positions.push_back(m.positions[3 * t + k]);
+      if (!m.normals.empty()) out.normals.push_back(m.normals[3 * t + k]);
+      if (!m.texcoords.empty()) out.texcoords.push_back(m.texcoords[3 * t + k]);
+    }
+    out.material_ids.push_back(m.material_ids[t]);
+  }
+  m = std::move(out);
+}
+
 double median(std::vector<double> v) {
   if (v.empty()) return 0.0;
   std::sort(v.begin(), v.end());
@@ -34,9 +53,12 @@ double median(std::vector<double> v) {
 
 int run(int argc, char** argv) {
   int frames = 12;
+  bool shuffle = false;
   std::vector<char*> args;
   for (int i = 0; i < argc; ++i) {
-    if (std::strcmp(argv[i], "--frames") == 0 && i + 1 < argc) {
+    if (std::strcmp(argv[i], "--shuffle") == 0) {
+      shuffle = true;
+    } else if (std::strcmp(argv[i], "--frames") == 0 && i + 1 < argc) {
       frames = std::max(2, std::atoi(argv[++i]));
     } else {
       args.push_back(argv[i]);
@@ -44,8 +66,15 @@ int run(int argc, char** argv) {
   }
   const char* usage =
       "usage: mobirt_ray_query_rays SCENE [--camera SPEC] [--light SPEC]... [--mtl F] [--size WxH] [--repeat N] "
-      "[--frames N]";
-  const profile::ProfileScene p = profile::load_profile_scene(int(args.size()), args.data(), usage);
+      "[--frames N] [--shuffle]";
+  profile::ProfileScene p = profile::load_profile_scene(int(args.size()), args.data(), usage);
+  std::vector<uint32_t> order(p.scene.mesh.triangle_count());
+  std::iota(order.begin(), order.end(), 0u);
+  if (shuffle) {
+    std::shuffle(order.begin(), order.end(), std::mt19937(1));
+    reorder(p.scene, order);
+    p.tree = build_kdtree(p.scene.mesh.positions);
+  }
   const int repeat = std::max(1, p.repeat);
 
   RayQueryOptions update_options, fresh_options;
@@ -61,10 +90,12 @@ int run(int argc, char** argv) {
     RayQueryEngine* engine;
     std::vector<double> blas, tlas, wall, trace;
   } modes[2] = {{&fresh, {}, {}, {}, {}}, {&updated, {}, {}, {}, {}}};
-  Scene frame_scene;
+  Scene evaluated, frame_scene;
   std::vector<uint32_t> frame_texels;
   for (int f = 0; f <= frames; ++f) {
-    animation.evaluate(animation.animated() ? double(f) / animation.fps() : 0.0, frame_scene);
+    animation.evaluate(animation.animated() ? double(f) / animation.fps() : 0.0, evaluated);
+    frame_scene = evaluated;  // evaluate() keeps the static parts it finds: reorder a copy
+    if (shuffle) reorder(frame_scene, order);
     const RayBatch frame_rays = primary_rays(frame_scene.camera ? *frame_scene.camera : p.camera, p.width, p.height);
     frame_texels.resize(frame_rays.count());
     for (int k = 0; k < 2; ++k) {
