@@ -209,7 +209,7 @@ struct RayQueryEngine::Impl {
                 std::span<uint32_t> out, RayQueryTimings* timings);
 
   AsBuildMode mode;
-  DebugSink sink;  // declared first: outlives the instance and hears its last messages
+  DebugSink sink;  // before the instance: outlives it and hears its last messages
   InstanceOwner instance;
   VkPhysicalDevice physical = VK_NULL_HANDLE;
   VkPhysicalDeviceProperties properties{};
