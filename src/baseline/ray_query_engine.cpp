@@ -7,6 +7,8 @@
 
 #include <vulkan/vulkan.h>
 
+#include <dlfcn.h>
+
 #include <algorithm>
 #include <cctype>
 #include <chrono>
@@ -67,6 +69,20 @@ std::string join_and(const std::vector<std::string>& items) {
   return s;
 }
 
+// The loader's vkGetInstanceProcAddr, looked up in libvulkan itself rather than bound by name: a
+// process that preloads the validation layer (the sanitizer run of .ci/run does, to keep it mapped)
+// gets the layer's exported vkGetInstanceProcAddr and vkGetDeviceProcAddr for those names, and
+// they know only the handles of their own chain (without validation: every extension function
+// came back null).
+PFN_vkGetInstanceProcAddr loader_proc_addr() {
+  static const PFN_vkGetInstanceProcAddr found = [] {
+    void* loader = dlopen("libvulkan.so.1", RTLD_NOW | RTLD_NOLOAD);  // linked, so already loaded
+    void* f = loader ? dlsym(loader, "vkGetInstanceProcAddr") : nullptr;
+    return f ? reinterpret_cast<PFN_vkGetInstanceProcAddr>(f) : &vkGetInstanceProcAddr;
+  }();
+  return found;
+}
+
 struct DebugSink {
   std::mutex mutex;
   std::vector<std::string> messages;
@@ -98,7 +114,7 @@ struct InstanceOwner {
   ~InstanceOwner() {
     if (messenger != VK_NULL_HANDLE) {
       auto destroy = reinterpret_cast<PFN_vkDestroyDebugUtilsMessengerEXT>(
-          vkGetInstanceProcAddr(instance, "vkDestroyDebugUtilsMessengerEXT"));
+          loader_proc_addr()(instance, "vkDestroyDebugUtilsMessengerEXT"));
       if (destroy) destroy(instance, messenger, nullptr);
     }
     if (instance != VK_NULL_HANDLE) vkDestroyInstance(instance, nullptr);
@@ -318,7 +334,7 @@ void RayQueryEngine::Impl::create_instance(bool validation, bool sync_validation
   vk::check(result, "vkCreateInstance");
   if (validation) {
     auto create = reinterpret_cast<PFN_vkCreateDebugUtilsMessengerEXT>(
-        vkGetInstanceProcAddr(instance.instance, "vkCreateDebugUtilsMessengerEXT"));
+        loader_proc_addr()(instance.instance, "vkCreateDebugUtilsMessengerEXT"));
     if (!create) throw Error(ErrorKind::Unsupported, "VK_EXT_debug_utils is missing: install vulkan-validationlayers");
     vk::check(create(instance.instance, &messenger, nullptr, &instance.messenger), "vkCreateDebugUtilsMessengerEXT");
   }
@@ -456,8 +472,10 @@ void RayQueryEngine::Impl::create_device() {
   vk::check(vkCreateDevice(physical, &info, nullptr, &device_owner.device), "vkCreateDevice");
   device = device_owner.device;
   vkGetDeviceQueue(device, queue_family, 0, &queue);
+  // The loader's trampolines, which dispatch on the device: vkGetDeviceProcAddr, even the one the
+  // loader hands out, was the preloaded layer's too (null for every extension function).
   auto load = [&](const char* name) {
-    const PFN_vkVoidFunction f = vkGetDeviceProcAddr(device, name);
+    const PFN_vkVoidFunction f = loader_proc_addr()(instance.instance, name);
     if (!f) throw Error(ErrorKind::Unsupported, who + " does not give " + name);
     return f;
   };
@@ -861,7 +879,8 @@ void RayQueryEngine::Impl::build(const Scene& scene, AsBuildTimings* timings) {
   const uint32_t rows = std::max<uint32_t>(1, uint32_t((texels + MOBIRT_DATA_WIDTH - 1) / MOBIRT_DATA_WIDTH));
   const VkDeviceSize texel_bytes = VkDeviceSize(rows) * MOBIRT_DATA_WIDTH * sizeof(glm::vec4);
   ensure_host(staging, texel_bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT);
-  std::memcpy(staging.mapped, triangles.triangles.data(), triangles.triangles.size() * sizeof(glm::vec4));
+  // (An empty scene's vectors have no data(): memcpy must not see a null source.)
+  if (texels > 0) std::memcpy(staging.mapped, triangles.triangles.data(), texels * sizeof(glm::vec4));
   std::memset(static_cast<char*>(staging.mapped) + triangles.triangles.size() * sizeof(glm::vec4), 0,
               texel_bytes - triangles.triangles.size() * sizeof(glm::vec4));
   ensure_image(triangle_texels, MOBIRT_DATA_WIDTH, rows, kRayFormat,
@@ -869,7 +888,7 @@ void RayQueryEngine::Impl::build(const Scene& scene, AsBuildTimings* timings) {
   const VkBufferUsageFlags input =
       VK_BUFFER_USAGE_ACCELERATION_STRUCTURE_BUILD_INPUT_READ_ONLY_BIT_KHR | VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT;
   ensure_host(vertices, std::max<VkDeviceSize>(1, n) * 3 * sizeof(glm::vec3), input);
-  std::memcpy(vertices.mapped, positions.data(), positions.size() * sizeof(glm::vec3));
+  if (n > 0) std::memcpy(vertices.mapped, positions.data(), positions.size() * sizeof(glm::vec3));
   ensure_host(instances, sizeof(VkAccelerationStructureInstanceKHR), input);
   const double upload_cpu_ms = ms_since(start);
 
