@@ -17,6 +17,7 @@ enum Op : uint32_t {
   OpTypePointer = 32, OpConstant = 43, OpVariable = 59, OpStore = 62, OpAccessChain = 65,
   OpDecorate = 71, OpImageWrite = 99,
   OpAtomicFirst = 227, OpAtomicLast = 242,  // OpAtomicLoad .. OpAtomicXor
+  OpTypeRayQueryKHR = 4472, OpTypeAccelerationStructureKHR = 5341,  // SPV_KHR_ray_query, _ray_tracing
 };
 enum StorageClass : uint32_t { UniformConstant = 0, Input = 1, Uniform = 2, Output = 3, StorageBuffer = 12 };
 enum Decoration : uint32_t { BufferBlock = 3, BuiltIn = 11, Location = 30 };
@@ -29,7 +30,7 @@ ShaderInterface reflect_spirv(std::span<const uint32_t> words) {
 
   std::unordered_map<uint32_t, std::pair<uint32_t, uint32_t>> pointers;  // id -> (class, type)
   std::unordered_map<uint32_t, uint32_t> image_sampled;                   // image type -> Sampled
-  std::unordered_set<uint32_t> sampled_image_types;
+  std::unordered_set<uint32_t> sampled_image_types, acceleration_structure_types;
   std::unordered_map<uint32_t, std::pair<uint32_t, uint32_t>> arrays;     // id -> (element, length id)
   std::unordered_map<uint32_t, uint32_t> constants;
   std::unordered_set<uint32_t> buffer_blocks, located, builtins;
@@ -45,6 +46,8 @@ ShaderInterface reflect_spirv(std::span<const uint32_t> words) {
     switch (op) {
       case OpTypeImage: image_sampled[w[1]] = w[7]; break;
       case OpTypeSampledImage: sampled_image_types.insert(w[1]); break;
+      case OpTypeAccelerationStructureKHR: acceleration_structure_types.insert(w[1]); break;
+      case OpTypeRayQueryKHR: result.ray_queries = true; break;
       case OpTypeArray: arrays[w[1]] = {w[2], w[3]}; break;
       case OpTypePointer: pointers[w[1]] = {w[2], w[3]}; break;
       case OpConstant: if (count >= 4) constants[w[2]] = w[3]; break;
@@ -95,6 +98,7 @@ ShaderInterface reflect_spirv(std::span<const uint32_t> words) {
     }
     if (v.storage == UniformConstant) {
       if (sampled_image_types.count(type)) result.sampled_textures += int(multiplicity);
+      if (acceleration_structure_types.count(type)) result.acceleration_structures += int(multiplicity);
       const auto image = image_sampled.find(type);
       if (image != image_sampled.end()) {
         if (image->second == 2) ++result.storage_resources;
@@ -106,22 +110,36 @@ ShaderInterface reflect_spirv(std::span<const uint32_t> words) {
   return result;
 }
 
-void check_es2_constraints(const std::string& shader, std::span<const uint32_t> words) {
+std::vector<std::string> es2_constraints_broken(std::span<const uint32_t> words) {
   const ShaderInterface s = reflect_spirv(words);
-  auto refuse = [&](const std::string& why) {
-    throw Error(ErrorKind::Constraint, "shader " + shader + ": " + why +
-                                           " (OpenGL ES 2.0 constraint mirrored by mobirt)");
-  };
-  if (!s.valid) refuse("is not a valid SPIR-V module");
+  if (!s.valid) return {"is not a valid SPIR-V module"};
+  std::vector<std::string> broken;
   if (s.color_outputs != 1) {
-    refuse("writes " + std::to_string(s.color_outputs) + " colour attachments; a pass writes exactly one RGBA8 texel");
+    broken.push_back("writes " + std::to_string(s.color_outputs) +
+                     " colour attachments; a pass writes exactly one RGBA8 texel");
   }
   if (s.storage_resources > 0 || s.storage_writes > 0) {
-    refuse("uses storage buffers, storage images or atomics; passes may only write their colour attachment");
+    broken.push_back("uses storage buffers, storage images or atomics; passes may only write their colour attachment");
   }
   if (s.sampled_textures > MOBIRT_MAX_SAMPLED_TEXTURES) {
-    refuse("samples " + std::to_string(s.sampled_textures) + " textures; at most " +
-           std::to_string(MOBIRT_MAX_SAMPLED_TEXTURES) + " are allowed (GL_MAX_TEXTURE_IMAGE_UNITS)");
+    broken.push_back("samples " + std::to_string(s.sampled_textures) + " textures; at most " +
+                     std::to_string(MOBIRT_MAX_SAMPLED_TEXTURES) + " are allowed (GL_MAX_TEXTURE_IMAGE_UNITS)");
+  }
+  if (s.acceleration_structures > 0) {
+    broken.push_back("reads an acceleration structure (VK_KHR_acceleration_structure); the scene must reach a pass "
+                     "as textures");
+  }
+  if (s.ray_queries) {
+    broken.push_back("traces rays with ray queries (SPV_KHR_ray_query); OpenGL ES 2.0 has no ray tracing");
+  }
+  return broken;
+}
+
+void check_es2_constraints(const std::string& shader, std::span<const uint32_t> words) {
+  const std::vector<std::string> broken = es2_constraints_broken(words);
+  if (!broken.empty()) {
+    throw Error(ErrorKind::Constraint, "shader " + shader + ": " + broken.front() +
+                                           " (OpenGL ES 2.0 constraint mirrored by mobirt)");
   }
 }
 

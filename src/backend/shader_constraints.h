@@ -1,11 +1,13 @@
 // The OpenGL ES 2.0 constraints that mobirt mirrors, checked on a compiled fragment shader's
 // SPIR-V rather than trusted by convention: exactly one vec4 colour output, no storage-buffer or
-// storage-image writes (no storage resources or atomics at all), at most 8 sampled textures.
+// storage-image writes (no storage resources or atomics at all), at most 8 sampled textures, and
+// the scene in textures: no acceleration structures, no ray queries.
 #pragma once
 
 #include <cstdint>
 #include <span>
 #include <string>
+#include <vector>
 
 namespace mobirt {
 
@@ -14,12 +16,19 @@ struct ShaderInterface {
   int sampled_textures = 0;     // combined image samplers and sampled images, arrays counted whole
   int storage_resources = 0;    // storage buffers and storage images
   int storage_writes = 0;       // OpImageWrite, OpAtomic*, stores through StorageBuffer pointers
+  int acceleration_structures = 0;  // VK_KHR_acceleration_structure variables
+  bool ray_queries = false;     // the module declares a ray query object (SPV_KHR_ray_query)
   bool valid = false;           // the words parsed as a SPIR-V module
 };
 
 ShaderInterface reflect_spirv(std::span<const uint32_t> words);
 
-// Throws Error(Constraint) naming the shader and the broken rule.
+// Every OpenGL ES 2.0 constraint the module breaks, one phrase each ("reads an acceleration
+// structure ..."); empty when it keeps them all. The peers of mobirt (src/baseline/) break some on
+// purpose and print this list rather than skip the check.
+std::vector<std::string> es2_constraints_broken(std::span<const uint32_t> words);
+
+// Throws Error(Constraint) naming the shader and the first broken rule.
 void check_es2_constraints(const std::string& shader, std::span<const uint32_t> words);
 
 }  // namespace mobirt
