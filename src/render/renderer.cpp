@@ -8,6 +8,7 @@
 
 #include "core/error.h"
 #include "layout.h"
+#include "raytree/ray_order.h"
 #include "scene/atlas.h"
 
 namespace mobirt {
@@ -430,7 +431,7 @@ Image Renderer::render(const Scene& scene, const Camera& camera, FrameTimings* t
     if (generation < depth) {
       stage = Clock::now();
       rays = next_generation(scene, tree.bounds, rays, hits, settings_.secondary);
-      order_in_simd_tiles(rays);  // 8 neighbouring rays per SIMD group of the traversal pass
+      order_for_traversal(rays, tree.bounds);  // coherent rays per SIMD group (raytree/ray_order.h)
       g.secondary_ms = elapsed_ms(stage);
     }
     t.generations.push_back(g);
