@@ -26,6 +26,14 @@
 #define MOBIRT_NODE_LEAF 3.0
 #define MOBIRT_NODE_BELOW_EMPTY 1.0
 #define MOBIRT_NODE_ABOVE_EMPTY 2.0
+// The node texel's components by name (0 = r ... 3 = a); C++ reads and writes them through
+// texels.h.
+#define MOBIRT_NODE_SPLIT 0        // interior: split position
+#define MOBIRT_NODE_ABOVE_CHILD 1  // interior: index of the above child
+#define MOBIRT_NODE_AXIS 2         // interior: split axis; leaf: MOBIRT_NODE_LEAF
+#define MOBIRT_NODE_EMPTY_FLAGS 3  // interior: empty-child flags; leaf: 0
+#define MOBIRT_LEAF_FIRST 0        // leaf: first prim-list entry, or the one primitive
+#define MOBIRT_LEAF_COUNT 1        // leaf: primitive count
 
 // Prim-list texture: one R32F texel per entry, a primitive index.
 // Triangle texture: three RGBA32F texels per primitive: v0, v1, v2 (xyz; w unused = 0).
@@ -54,11 +62,15 @@
 // ---- Shading-pass inputs (written by the CPU hit decoder) ------------------------------------
 // hit_position texture: xyz = hit point, w = material index (-1 = miss: background)
 // hit_normal texture:   xyz = shading normal (unit, facing the incoming ray), w = shadow mask
+#define MOBIRT_HIT_MATERIAL 3     // component of the hit_position texel
+#define MOBIRT_HIT_SHADOW_MASK 3  // component of the hit_normal texel
 // Material texture: MOBIRT_TEXELS_PER_MATERIAL RGBA32F texels per material, in one row:
 //   texel 0: diffuse rgb, texture index (-1 = none)
 //   texel 1: specular rgb, shininess
 //   texel 2: reflectance, transmittance, index of refraction, ambient factor
 #define MOBIRT_TEXELS_PER_MATERIAL 3
+// (C++: the structs of texels.h, one per texel kind and per uniform block, checked against these
+// sizes.)
 
 // ---- Binding slots (Vulkan: set 0; GLES: texture units) --------------------------------------
 // Traversal pass
@@ -117,7 +129,7 @@
 #define MOBIRT_SPEC_MAX_STEPS 2    // loop cap of the traversal (nodes visited + triangles tested)
 #define MOBIRT_SPEC_PACKING 3      // MOBIRT_PACKING_24_8 or MOBIRT_PACKING_16_16
 #define MOBIRT_SPEC_TEXTURE_COUNT 4  // shade: textures in the atlas, 0 = no atlas code at all
-#define MOBIRT_MAX_STACK_DEPTH 32  // the short stack's array size; depth beyond it is refused
+#define MOBIRT_MAX_STACK_DEPTH 32  // the short stack of traverse.glsl (an #error there ties the two); deeper is refused
 #define MOBIRT_SPEC_INTERSECT 5    // trace: MOBIRT_INTERSECT_* (--intersect)
 #define MOBIRT_SPEC_PRECISION 6    // trace: MOBIRT_PRECISION_* (--precision)
 #define MOBIRT_SPEC_OFFSET 7       // trace: MOBIRT_OFFSET_* (--offset), the shadow-ray origins

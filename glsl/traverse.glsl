@@ -13,6 +13,12 @@ SAMPLER(MOBIRT_BIND_NODES, u_nodes);
 SAMPLER(MOBIRT_BIND_PRIM_LIST, u_prim_list);
 SAMPLER(MOBIRT_BIND_TRIANGLES, u_triangles);
 
+// traverse()'s short stack is 16 vec4 of two entries each (s0 .. s15): the C++ refuses deeper
+// stacks against MOBIRT_MAX_STACK_DEPTH, so the two must change together.
+#if MOBIRT_MAX_STACK_DEPTH != 32
+#error the short stack s0 to s15 holds 32 entries: MOBIRT_MAX_STACK_DEPTH must be 32
+#endif
+
 // The ray/triangle test, by INTERSECT and PRECISION (specialization constants, glsl/layout.h):
 // the CPU mirror, operation for operation, is src/accel/kdtree_traverse.cpp. Each returns t of a
 // hit in [tmin, tmax], else -1; comparisons are written so that NaN rejects. Under mediump mp()

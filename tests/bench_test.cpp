@@ -23,6 +23,12 @@ TEST(Bench, OneSmallCellWithEveryColumn) {
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("Table 1"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("Embree 3."), std::string::npos) << r.output;
+  // One progress line per cell on stderr, with the cell, the count and each column's fps.
+  for (const char* line : {"bench: [1/2] fish, + shadow: Vulkan ", "bench: [2/2] fish, + 2 bounces: Vulkan "}) {
+    EXPECT_NE(r.output.find(line), std::string::npos) << line << "\n" << r.output;
+  }
+  EXPECT_NE(r.output.find(" fps, GLES 2.0 "), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find(" fps, CPU kd-tree "), std::string::npos) << r.output;
   std::ifstream in(json);
   const nlohmann::json j = nlohmann::json::parse(in);
   ASSERT_EQ(j["cells"].size(), 2u);

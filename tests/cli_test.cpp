@@ -7,12 +7,14 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "core/image.h"
 #include "test_support.h"
@@ -106,6 +108,83 @@ TEST(Cli, HelpAndInfo) {
   EXPECT_EQ(info.exit_code, 0) << info.output;
   EXPECT_NE(info.output.find("llvmpipe"), std::string::npos) << info.output;
   EXPECT_NE(info.output.find("maxPerStageDescriptorSampledImages"), std::string::npos) << info.output;
+}
+
+// --help comes from the option table: every command lists the shared render settings it takes,
+// with their values, beside its own options.
+TEST(Cli, HelpListsTheSharedSettings) {
+  const std::vector<std::string> frame_settings = {"--stack N", "--max-steps N", "--bins N", "--leaf-size N",
+                                                   "--max-depth N", "--offset MODE", "--epsilon E",
+                                                   "--intersect TEST", "--precision P", "--colour 8|16",
+                                                   "--min-weight W", "--general", "--device D", "--validation"};
+  const std::vector<std::string> view_settings = {"--size WxH", "--depth N", "--no-shadows", "--always-rebuild",
+                                                  "--light SPEC", "--camera SPEC", "--background R,G,B",
+                                                  "--time T", "--mtl FILE"};
+  for (const char* command : {"render", "accuracy", "bench"}) {
+    SCOPED_TRACE(command);
+    const CommandResult r = run(std::string(command) + " --help");
+    EXPECT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_EQ(r.output.rfind(std::string("Usage: mobirt ") + command, 0), 0u) << r.output;
+    EXPECT_NE(r.output.find("Render options:"), std::string::npos) << r.output;
+    for (const std::string& s : frame_settings) EXPECT_NE(r.output.find("  " + s + " "), std::string::npos) << s;
+    for (const std::string& s : view_settings) {
+      // bench sets each cell's view itself; its --size is for scenes given on the command line.
+      if (std::string(command) == "bench" && s != "--size WxH") {
+        EXPECT_EQ(r.output.find("  " + s + " "), std::string::npos) << s;
+      } else {
+        EXPECT_NE(r.output.find("  " + s + " "), std::string::npos) << s;
+      }
+    }
+  }
+  const CommandResult render = run("render --help");
+  EXPECT_NE(render.output.find("  -o, --output FILE       output image (required)\n"), std::string::npos)
+      << render.output;
+  EXPECT_NE(render.output.find("  --backend gles|vulkan   "), std::string::npos) << render.output;
+}
+
+// A bad value, an unknown option and an option without its value: one line naming the option and
+// where the options are described, exit 2, in every command, before any work is done.
+TEST(Cli, BadOptionsGiveTheDocumentedMessage) {
+  const std::string scene = MOBIRT_SOURCE_DIR "/scenes/default.gltf";
+  struct Case {
+    std::string args, message;
+  };
+  const Case cases[] = {
+      {"render " + scene + " --stack 99 -o x.png", "--stack 99: expected an integer in [0, 32] (see mobirt --help)"},
+      {"render " + scene + " --depth x -o x.png", "--depth x: expected an integer in [0, 64] (see mobirt --help)"},
+      {"render " + scene + " --intersect plucker -o x.png",
+       "--intersect plucker: expected one of mt, watertight (see mobirt --help)"},
+      {"render " + scene + " --frobnicate -o x.png", "render: unknown option --frobnicate (see mobirt --help)"},
+      {"render " + scene + " -o x.png --bins", "--bins needs a value (see mobirt --help)"},
+      {"render " + scene + " " + scene + " -o x.png", "render: more than one scene given"},
+      {"accuracy " + scene + " --max-steps 0",
+       "--max-steps 0: expected an integer in [1, 16777216] (see mobirt accuracy --help)"},
+      {"accuracy " + scene + " --frobnicate", "accuracy: unknown option --frobnicate (see mobirt accuracy --help)"},
+      {"accuracy " + scene + " --size 10", "--size 10: expected WxH with 1 <= W, H <= 16384, e.g. 400x240 "
+                                           "(see mobirt accuracy --help)"},
+      {"bench --bins 1", "--bins 1: expected an integer in [2, 1024] (see mobirt bench --help)"},
+      {"bench --colour 10", "--colour 10: expected one of 8, 16 (see mobirt bench --help)"},
+      {"bench --frobnicate", "bench: unknown option --frobnicate (see mobirt bench --help)"},
+      {"bench --depth 1", "bench: unknown option --depth (see mobirt bench --help)"},
+      {"bench --frames", "--frames needs a value (see mobirt bench --help)"},
+      {"info --frobnicate", "info: unknown option --frobnicate (see mobirt --help)"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.args);
+    const CommandResult r = run(c.args);
+    EXPECT_EQ(r.exit_code, 2) << r.output;
+    EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+    EXPECT_EQ(r.output.rfind("mobirt: error: " + c.message, 0), 0u) << r.output;
+  }
+}
+
+// A negative number is a value, not an option.
+TEST(Cli, NegativeValuesAreValues) {
+  const fs::path dir = test::temp_dir();
+  const CommandResult r = run("render " MOBIRT_SOURCE_DIR "/scenes/default.gltf --size 32x20 --max-depth -1 "
+                              "--time -0.5 -o " + quoted(dir / "a.png"));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(fs::exists(dir / "a.png"));
 }
 
 // scenes/ holds exactly what tools/make_scenes.cpp generates.

@@ -71,6 +71,7 @@
 #include "core/error.h"
 #include "core/half.h"
 #include "layout.h"
+#include "texels.h"
 
 namespace mobirt {
 
@@ -159,7 +160,7 @@ bool intersect_wt(const glm::vec4* texels, int32_t prim, const Ray& ray, Hit& hi
 }  // namespace
 
 bool intersect_triangle(const FlatKdTree& tree, int32_t prim, const Ray& ray, Hit& hit, const RayTest& test) {
-  const glm::vec4* texels = tree.triangles.data() + static_cast<size_t>(prim) * MOBIRT_TEXELS_PER_TRIANGLE;
+  const glm::vec4* texels = triangle_texel::of(tree.triangles, prim);
   const bool half = test.precision == Precision::Medium;
   if (test.test == IntersectTest::Watertight) {
     return half ? intersect_wt<Half>(texels, prim, ray, hit) : intersect_wt<Exact>(texels, prim, ray, hit);
@@ -305,23 +306,23 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
   for (;;) {
     const glm::vec4 n = nodes[node];
     recorder.node();
-    if (n.z != static_cast<float>(MOBIRT_NODE_LEAF)) {
+    if (!node_texel::is_leaf(n)) {
       if (stats.steps >= cap) {
         stats.capped = 1;
         return Hit{};
       }
       ++stats.steps;
       ++stats.nodes_visited;
-      const int a = checked_index(n.z, 3, "split axis");
-      const float s = n.x;
+      const int a = checked_index(node_texel::axis(n), 3, "split axis");
+      const float s = node_texel::split(n);
       const float tsplit = (s - o[a]) * inv[a];
       const bool below_first = o[a] < s || (o[a] == s && d[a] <= 0.0f);
       const int32_t below = checked_index(static_cast<float>(node + 1), tree.nodes.size(), "child");
-      const int32_t above = checked_index(n.y, tree.nodes.size(), "child");
+      const int32_t above = checked_index(node_texel::above_child(n), tree.nodes.size(), "child");
       const int32_t near_child = below_first ? below : above;
       const int32_t far_child = below_first ? above : below;
-      const bool below_empty = n.w == MOBIRT_NODE_BELOW_EMPTY || n.w == MOBIRT_NODE_BELOW_EMPTY + MOBIRT_NODE_ABOVE_EMPTY;
-      const bool above_empty = n.w >= MOBIRT_NODE_ABOVE_EMPTY;
+      const bool below_empty = node_texel::below_empty(n);
+      const bool above_empty = node_texel::above_empty(n);
       const bool near_empty = below_first ? below_empty : above_empty;
       const bool far_empty = below_first ? above_empty : below_empty;
       bool closed = false;
@@ -351,7 +352,7 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
     // Leaf: the node fetch shares a step with the first triangle test (an empty leaf: one step).
     ++stats.nodes_visited;
     ++stats.leaves_visited;
-    const int count = checked_index(n.y, tree.prim_list.size() + 2, "leaf count");
+    const int count = checked_index(node_texel::leaf_count(n), tree.prim_list.size() + 2, "leaf count");
     if (count == 0) {
       if (stats.steps >= cap) {
         stats.capped = 1;
@@ -366,8 +367,9 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
       }
       ++stats.steps;
       ++stats.triangles_tested;
+      const float first = node_texel::leaf_first(n);
       const int32_t prim = checked_index(
-          count == 1 ? n.x : prim_list[static_cast<size_t>(checked_index(n.x + float(i), tree.prim_list.size(), "prim-list entry"))],
+          count == 1 ? first : prim_list[static_cast<size_t>(checked_index(first + float(i), tree.prim_list.size(), "prim-list entry"))],
           tree.triangles.size() / MOBIRT_TEXELS_PER_TRIANGLE, "primitive");
       if (intersect_triangle(tree, prim, ray, best, test) && kAnyHit) {
         recorder.leaf(uint32_t(i + 1));
@@ -386,13 +388,12 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
 
 void mark_empty_children(FlatKdTree& tree) {
   auto empty_leaf = [&](size_t i) {
-    return i < tree.nodes.size() && tree.nodes[i].z == static_cast<float>(MOBIRT_NODE_LEAF) && tree.nodes[i].y == 0.0f;
+    return i < tree.nodes.size() && node_texel::is_leaf(tree.nodes[i]) && node_texel::leaf_count(tree.nodes[i]) == 0.0f;
   };
   for (size_t i = 0; i < tree.nodes.size(); ++i) {
     glm::vec4& n = tree.nodes[i];
-    if (n.z == static_cast<float>(MOBIRT_NODE_LEAF)) continue;
-    n.w = (empty_leaf(i + 1) ? MOBIRT_NODE_BELOW_EMPTY : 0.0f) +
-          (empty_leaf(static_cast<size_t>(n.y)) ? MOBIRT_NODE_ABOVE_EMPTY : 0.0f);
+    if (node_texel::is_leaf(n)) continue;
+    node_texel::set_empty_flags(n, empty_leaf(i + 1), empty_leaf(static_cast<size_t>(node_texel::above_child(n))));
   }
 }
 

@@ -15,6 +15,7 @@
 
 #include "app/commands.h"
 #include "app/options.h"
+#include "app/scene_setup.h"
 #include "backend/backend.h"
 #include "core/error.h"
 #include "core/image.h"
@@ -22,14 +23,11 @@
 #include "render/renderer.h"
 #include "scene/animation.h"
 #include "scene/loader.h"
-#include "scene/overrides.h"
 
 namespace mobirt {
 namespace {
 
-constexpr const char* kAccuracyUsage = R"(Usage: mobirt accuracy SCENE [options] [--json FILE] [--heatmap FILE.png]
-
-Renders SCENE with the GPU renderer under the given settings and with the reference tracer (the
+constexpr const char* kAccuracyAbout = R"(Renders SCENE with the GPU renderer under the given settings and with the reference tracer (the
 same Whitted model on the CPU in double precision: watertight intersection over a BVH, textures
 from the original images, no 8-bit quantisation), and reports:
   psnr_db          PSNR of the GPU image against the reference (both clamped to [0, 1], as shown)
@@ -39,29 +37,10 @@ from the original images, no 8-bit quantisation), and reports:
   shadow_mismatch  share of primary hits on the same triangle whose shadow masks differ
   frame_ms         GPU frame time (median of --repeat frames after a warm-up frame; frame_min_ms:
                    the fastest of them)
-
-Options (the render options, with the same meaning and defaults):
-  --size WxH, --depth N, --no-shadows, --min-weight W, --stack N, --max-steps N, --bins N,
-  --leaf-size N, --max-depth N, --epsilon E, --offset fixed|scaled|normal-ulp,
-  --intersect mt|watertight, --precision highp|mediump, --colour 8|16, --light SPEC,
-  --camera SPEC, --background R,G,B, --device D, --validation, --time T, --mtl FILE
-  --repeat N              frames timed (default 3)
-  --json FILE             write the numbers as JSON (- = standard output)
-  --csv FILE              append them as one CSV row (a header first when FILE is new), with
-                          --label TEXT in the first column
-  --heatmap FILE          the per-pixel error as a picture: black = exact, blue = 1/255,
-                          cyan = 2/255, green = 6/255, yellow = 15/255, red = 63/255, white >= 1
-  -o FILE                 also write the GPU image
-  --reference-out FILE    also write the reference image
-  --ref-epsilon E         the reference's ray-origin offset, times 1 + max|p| (default 1e-9)
+The render options have the same meaning and defaults as for mobirt render.
 )";
 
 constexpr const char* kHelp = "mobirt accuracy --help";
-[[noreturn]] void usage_error(const std::string& message) { cli::usage_error(message, kHelp); }
-int parse_int(const std::string& o, const std::string& v, int lo, int hi) { return cli::parse_int(o, v, lo, hi, kHelp); }
-double parse_number(const std::string& o, const std::string& v, double lo, double hi) {
-  return cli::parse_number(o, v, lo, hi, kHelp);
-}
 
 const char* offset_name(OffsetMode mode) {
   return mode == OffsetMode::Fixed ? "fixed" : mode == OffsetMode::Scaled ? "scaled" : "normal-ulp";
@@ -96,86 +75,44 @@ glm::vec3 heat(float error) {
 }  // namespace
 
 int cmd_accuracy(const std::vector<std::string>& args) {
-  std::string scene_path, json_path, csv_path, label, heatmap_path, gpu_out, ref_out, mtl;
-  RenderSettings settings;
-  BackendOptions backend_options;
-  std::vector<Light> lights;
-  std::optional<Camera> camera;
-  std::optional<glm::vec3> background;
-  std::optional<double> time;
+  std::string json_path, csv_path, label, heatmap_path, gpu_out, ref_out;
+  cli::CommonOptions common;
   double ref_epsilon = 1e-9;
   int repeat = 3;
-  for (size_t i = 0; i < args.size(); ++i) {
-    const std::string& a = args[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= args.size()) usage_error(a + " needs a value");
-      return args[++i];
-    };
-    if (a == "-h" || a == "--help") {
-      std::cout << kAccuracyUsage;
-      return 0;
-    } else if (cli::parse_render_setting(a, value, settings, kHelp)) {
-    } else if (a == "--ref-epsilon") {
-      ref_epsilon = parse_number(a, value(), 0.0, 1.0);
-    } else if (a == "--light") {
-      lights.push_back(parse_light(value()));
-    } else if (a == "--camera") {
-      camera = parse_camera(value());
-    } else if (a == "--background") {
-      const std::string v = value();
-      glm::vec3 c;
-      char extra = 0;
-      if (std::sscanf(v.c_str(), "%f,%f,%f%c", &c.x, &c.y, &c.z, &extra) != 3 || !(c.x >= 0 && c.y >= 0 && c.z >= 0)) {
-        usage_error("--background " + v + ": expected three non-negative numbers R,G,B");
-      }
-      background = c;
-    } else if (a == "--device") {
-      backend_options.device = value();
-    } else if (a == "--validation") {
-      backend_options.validation = true;
-    } else if (a == "--time") {
-      time = parse_number(a, value(), -1e6, 1e6);
-    } else if (a == "--mtl") {
-      mtl = value();
-    } else if (a == "--repeat") {
-      repeat = parse_int(a, value(), 1, 1000);
-    } else if (a == "--json") {
-      json_path = value();
-    } else if (a == "--csv") {
-      csv_path = value();
-    } else if (a == "--label") {
-      label = value();
-    } else if (a == "--heatmap") {
-      heatmap_path = value();
-    } else if (a == "-o" || a == "--output") {
-      gpu_out = value();
-    } else if (a == "--reference-out") {
-      ref_out = value();
-    } else if (!a.empty() && a[0] == '-') {
-      usage_error("accuracy: unknown option " + a);
-    } else if (scene_path.empty()) {
-      scene_path = a;
-    } else {
-      usage_error("accuracy: more than one scene given ('" + scene_path + "' and '" + a + "')");
-    }
-  }
-  if (scene_path.empty()) usage_error("accuracy: no scene given");
+  cli::CommandLine cl(cli::kAccuracy, "Usage: mobirt accuracy SCENE [options] [--json FILE] [--heatmap FILE.png]",
+                      kAccuracyAbout, kHelp, common);
+  cl.option("--repeat", "N", "frames timed (default 3)", [&](const cli::Value& v) { repeat = v.integer(1, 1000); });
+  cl.option("--json", "FILE", "write the numbers as JSON (- = standard output)",
+            [&](const cli::Value& v) { json_path = v.text; });
+  cl.option("--csv", "FILE",
+            "append them as one CSV row (a header first when FILE is new), with\n"
+            "--label TEXT in the first column",
+            [&](const cli::Value& v) { csv_path = v.text; });
+  cl.option("--label", "TEXT", "the first column of --csv", [&](const cli::Value& v) { label = v.text; });
+  cl.option("--heatmap", "FILE",
+            "the per-pixel error as a picture: black = exact, blue = 1/255,\n"
+            "cyan = 2/255, green = 6/255, yellow = 15/255, red = 63/255, white >= 1",
+            [&](const cli::Value& v) { heatmap_path = v.text; });
+  cl.option("-o,--output", "FILE", "also write the GPU image", [&](const cli::Value& v) { gpu_out = v.text; });
+  cl.option("--reference-out", "FILE", "also write the reference image", [&](const cli::Value& v) { ref_out = v.text; });
+  cl.option("--ref-epsilon", "E", "the reference's ray-origin offset, times 1 + max|p| (default 1e-9)",
+            [&](const cli::Value& v) { ref_epsilon = v.number(0.0, 1.0); });
+  if (!cl.parse(args)) return 0;
+  const RenderSettings& settings = common.settings;
+  const std::string scene_path = cl.scene();
   for (const std::string& out : {heatmap_path, gpu_out, ref_out}) {
     if (!out.empty()) check_image_output(out);
   }
 
   LoadOptions load_options;
-  load_options.mtl = mtl;
+  load_options.mtl = common.mtl;
   const AnimatedScene animation = load_animated_scene(scene_path, load_options);
-  Scene scene = animation.rest();
-  const Camera fallback = frame_box(scene.bounds(), 0.7854f, float(settings.width) / float(settings.height));
-  if (animation.animated()) animation.evaluate(time ? *time : 0.0, scene);
-  apply_overrides(scene, lights, camera);
-  if (background) scene.background = *background;
-  const Camera view = scene.camera ? *scene.camera : fallback;
+  PosedScene posed(animation, common.edits, settings.width, settings.height);
+  const Camera view = posed.at(common.time ? *common.time : 0.0);
+  const Scene& scene = posed.scene;
 
   // The GPU frame: a warm-up frame (shader compilation), then the median of `repeat`.
-  auto backend = create_vulkan_backend(backend_options);
+  auto backend = create_vulkan_backend(common.backend);
   Renderer renderer(*backend, settings);
   Image gpu = renderer.render(scene, view);
   std::vector<double> times;

@@ -1,7 +1,6 @@
 // mobirt bench: the MobiRT paper's Table 1 measured on this machine, with the baseline a user
 // would pick instead (Embree 3 on the CPU) and mobirt's own CPU traversal of the same kd-tree in
 // the same run, frame by frame interleaved, on the same scenes, frames, cores and settings.
-#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -20,6 +19,7 @@
 
 #include "app/commands.h"
 #include "app/options.h"
+#include "app/scene_setup.h"
 #include "baseline/embree_engine.h"
 #include "core/error.h"
 #include "render/cpu_render.h"
@@ -30,9 +30,7 @@
 namespace mobirt {
 namespace {
 
-constexpr const char* kBenchUsage = R"(Usage: mobirt bench [SCENE...] [options]
-
-The paper's Table 1 on this machine: for each scene, ray casting, + shadow rays, + 1 bounce and
+constexpr const char* kBenchAbout = R"(The paper's Table 1 on this machine: for each scene, ray casting, + shadow rays, + 1 bounce and
 + 2 bounces, animation playing and the kd-tree rebuilt every frame, warm-up frames and then timed
 frames (median and min-max FPS), with every stage of the frame and, in the same run and frame by
 frame interleaved, the same frames rendered on the CPU by Embree 3 (rtcIntersect1 / rtcOccluded1
@@ -42,22 +40,6 @@ Prints the table, the stages, and the ratios mobirt / Embree per cell, for the t
 
 Without SCENE: the paper's scenes (scenes/toaster.gltf 400x240, marbles 240x400, fish 400x240)
 and, when ../shared/scenes has them, the real Utah toasters and the wood doll.
-
-Options:
-  --frames N        timed frames per cell (default 30)
-  --warmup N        frames before timing starts, per cell (default 3)
-  --levels LIST     the columns, any of cast,shadow,bounce1,bounce2 (default all four)
-  --size WxH        image size for SCENEs given on the command line (default 400x240)
-  --threads N       CPU threads of the Embree and CPU kd-tree columns and of the kd-tree build
-                    (default: all cores); lavapipe's threads are set by LP_NUM_THREADS
-  --no-baseline     leave out the Embree and CPU kd-tree columns
-  --no-cpu          leave out the CPU kd-tree column only
-  --json FILE       every number as JSON (- = standard output)
-  --scenes DIR      the project's scenes (default: ./scenes, else the source tree's)
-  --shared DIR      the shared real scenes (default: ../shared/scenes beside that folder's parent)
-  --backend B       the GPU columns: vulkan, gles or both (default both: Vulkan and OpenGL ES 2.0
-                    on the same frames)
-  --device D, --bins N, --stack N, --max-steps N: as for render
 )";
 
 constexpr const char* kHelp = "mobirt bench --help";
@@ -79,8 +61,7 @@ struct BenchScene {
   std::string path;
   int width = 400, height = 240;
   std::string mtl;
-  std::vector<Light> lights;
-  std::optional<Camera> camera;
+  SceneEdits edits;  // the file's lights and camera replaced, as --light and --camera would
   double paper[4] = {NAN, NAN, NAN, NAN};
 };
 
@@ -88,19 +69,21 @@ struct BenchScene {
 // it is compared with ray casting.
 std::vector<BenchScene> paper_scenes(const std::filesystem::path& scenes, const std::filesystem::path& shared) {
   std::vector<BenchScene> list;
-  list.push_back({"toaster", (scenes / "toaster.gltf").string(), 400, 240, "", {}, {}, {24, 20, 15, 12}});
-  list.push_back({"marbles", (scenes / "marbles.gltf").string(), 240, 400, "", {}, {}, {26, NAN, NAN, NAN}});
-  list.push_back({"fish", (scenes / "fish.gltf").string(), 400, 240, "", {}, {}, {48, NAN, 26, 20}});
+  list.push_back({"toaster", (scenes / "toaster.gltf").string(), 400, 240, "", {}, {24, 20, 15, 12}});
+  list.push_back({"marbles", (scenes / "marbles.gltf").string(), 240, 400, "", {}, {26, NAN, NAN, NAN}});
+  list.push_back({"fish", (scenes / "fish.gltf").string(), 400, 240, "", {}, {48, NAN, 26, 20}});
   const std::filesystem::path toasters = shared / "utah-toasters" / "Toasters004.obj";
   if (std::filesystem::exists(toasters)) {
     list.push_back({"Utah toasters", toasters.string(), 400, 240, (scenes / "utah-toasters.mtl").string(),
-                    {parse_light("point pos=150,500,300 intensity=300000")},
-                    parse_camera("0,260,480:0,20,0:0,1,0:40"), {NAN, NAN, NAN, NAN}});
+                    {{parse_light("point pos=150,500,300 intensity=300000")},
+                     parse_camera("0,260,480:0,20,0:0,1,0:40"),
+                     {}},
+                    {NAN, NAN, NAN, NAN}});
   }
   const std::filesystem::path doll = shared / "utah-wooddoll";
   if (std::filesystem::exists(doll / "wooddoll_00.obj")) {
     list.push_back({"Utah wood doll", (doll / "wooddoll_%02d.obj").string(), 400, 240, "",
-                    {parse_light("point pos=5,20,20 intensity=400")}, {}, {NAN, NAN, NAN, NAN}});
+                    {{parse_light("point pos=5,20,20 intensity=400")}, {}, {}}, {NAN, NAN, NAN, NAN}});
   }
   return list;
 }
@@ -182,18 +165,19 @@ void add_gpu_frame(Samples& s, double animate_ms, const FrameTimings& t) {
   }
 }
 
-void add_cpu_frame(Samples& s, double animate_ms, const CpuFrameTimings& t) {
+void add_cpu_frame(Samples& s, double animate_ms, const FrameTimings& t) {
+  const GenerationTimings& g = t.sum;
   s.add("animate", animate_ms);
   s.add("build", t.build_ms);
   s.add("rays", t.rays_ms);
-  s.add("trace", t.trace_ms);
-  s.add("shadow", t.shadow_ms);
-  s.add("shade", t.shade_ms);
-  s.add("secondary", t.secondary_ms);
+  s.add("trace", g.trace_ms);
+  s.add("shadow", g.shadow_ms);
+  s.add("shade", g.shade_ms + g.accumulate_ms);
+  s.add("secondary", g.secondary_ms);
   s.add("frame", animate_ms + t.total_ms);
-  s.add("traced_rays", double(t.rays));
-  s.add("shadow_rays", double(t.shadow_rays));
-  s.add("trace_mrays", mrays(double(t.rays + t.shadow_rays), t.trace_ms + t.shadow_ms));
+  s.add("traced_rays", double(g.rays));
+  s.add("shadow_rays", double(g.shadow_rays));
+  s.add("trace_mrays", mrays(double(g.rays + g.shadow_rays), g.trace_ms + g.shadow_ms));
 }
 
 struct BenchOptions {
@@ -240,8 +224,8 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, const BenchScene& bs, c
   if (o.baseline) embree.emplace(EmbreeOptions{o.threads, true});
   if (o.baseline && o.cpu) kd.emplace(settings.kd, settings.shadow_rays.ray_test);
 
-  Scene scene = animation.rest();
-  const Camera fallback = frame_box(scene.bounds(), 0.7854f, float(bs.width) / float(bs.height));
+  PosedScene posed(animation, bs.edits, bs.width, bs.height);
+  const Scene& scene = posed.scene;
   std::vector<Samples> gpu(columns.size());
   Samples emb, cpu;
   const double fps = animation.fps() > 0 ? animation.fps() : 24.0;
@@ -250,10 +234,8 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, const BenchScene& bs, c
     const bool timed = f >= o.warmup;
     const double t = double(f) / fps;
     auto start = std::chrono::steady_clock::now();
-    if (animation.animated()) animation.evaluate(t, scene);
-    apply_overrides(scene, bs.lights, bs.camera);
+    const Camera view = posed.at(t);
     const double animate_ms = elapsed_ms(start);
-    const Camera view = scene.camera ? *scene.camera : fallback;
 
     for (size_t c = 0; c < columns.size(); ++c) {
       FrameTimings ft;
@@ -264,12 +246,12 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, const BenchScene& bs, c
       if (timed) add_gpu_frame(gpu[c], animate_ms, ft);
     }
     if (embree) {
-      CpuFrameTimings ct;
+      FrameTimings ct;
       render_whitted_cpu(scene, view, settings, *embree, o.threads, &ct);
       if (timed) add_cpu_frame(emb, animate_ms, ct);
     }
     if (kd) {
-      CpuFrameTimings ct;
+      FrameTimings ct;
       render_whitted_cpu(scene, view, settings, *kd, o.threads, &ct);
       if (timed) add_cpu_frame(cpu, animate_ms, ct);
       kd_stats = kd->tree().stats;
@@ -421,6 +403,24 @@ void print_tables(const nlohmann::json& result) {
   }
 }
 
+// One line on stderr per finished cell, so that a run of minutes shows where it is: the cell, how
+// many of the run's cells are done, and each column's median fps in it.
+void print_progress(const nlohmann::json& cell, size_t done, size_t total, double seconds) {
+  std::string line = "bench: [" + std::to_string(done) + "/" + std::to_string(total) + "] " +
+                     cell["scene"].get<std::string>() + ", " + cell["level_name"].get<std::string>() + ":";
+  for (const auto& [key, title] : {std::pair<const char*, const char*>{"mobirt", "Vulkan"},
+                                   {"mobirt_gles", "GLES 2.0"}, {"embree", "Embree 3"}, {"cpu_kd", "CPU kd-tree"}}) {
+    if (!cell.contains(key)) continue;
+    char buf[64];
+    std::snprintf(buf, sizeof buf, " %s %.1f fps,", title, cell[key]["fps"]["median"].get<double>());
+    line += buf;
+  }
+  line.pop_back();
+  char buf[48];
+  std::snprintf(buf, sizeof buf, " (%.0f s so far)\n", seconds);
+  std::fputs((line + buf).c_str(), stderr);
+}
+
 // The project's scenes: ./scenes when run from the repository, else the source tree's.
 std::filesystem::path default_scenes_dir() {
   if (std::filesystem::exists("scenes/toaster.gltf")) return "scenes";
@@ -431,78 +431,59 @@ std::filesystem::path default_scenes_dir() {
 
 int cmd_bench(const std::vector<std::string>& args) {
   BenchOptions o;
-  std::vector<std::string> paths;
   std::string json_path;
   std::filesystem::path scenes_dir, shared_dir;
   int width = 400, height = 240;
-  auto parse_int = [](const std::string& a, const std::string& v, int lo, int hi) {
-    return cli::parse_int(a, v, lo, hi, kHelp);
-  };
-  for (size_t i = 0; i < args.size(); ++i) {
-    const std::string& a = args[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= args.size()) cli::usage_error(a + " needs a value", kHelp);
-      return args[++i];
-    };
-    if (a == "-h" || a == "--help") {
-      std::cout << kBenchUsage;
-      return 0;
-    } else if (a == "--frames") {
-      o.frames = parse_int(a, value(), 1, 100000);
-    } else if (a == "--warmup") {
-      o.warmup = parse_int(a, value(), 0, 100000);
-    } else if (a == "--levels") {
-      o.levels.clear();
-      std::string list = value();
-      size_t p = 0;
-      while (p <= list.size()) {
-        const size_t q = std::min(list.find(',', p), list.size());
-        const std::string key = list.substr(p, q - p);
-        int found = -1;
-        for (int k = 0; k < 4; ++k) found = key == kLevels[k].key ? k : found;
-        if (found < 0) cli::usage_error("--levels: unknown level '" + key + "' (cast, shadow, bounce1, bounce2)", kHelp);
-        o.levels.push_back(found);
-        p = q + 1;
-      }
-    } else if (a == "--size") {
-      const std::string v = value();
-      char extra = 0;
-      if (std::sscanf(v.c_str(), "%dx%d%c", &width, &height, &extra) != 2 || width < 1 || height < 1 ||
-          width > 16384 || height > 16384) {
-        cli::usage_error("--size " + v + ": expected WxH with 1 <= W, H <= 16384, e.g. 400x240", kHelp);
-      }
-    } else if (a == "--threads") {
-      o.threads = unsigned(parse_int(a, value(), 1, 1024));
-    } else if (a == "--no-baseline") {
-      o.baseline = false;
-    } else if (a == "--no-cpu") {
-      o.cpu = false;
-    } else if (a == "--json") {
-      json_path = value();
-    } else if (a == "--scenes") {
-      scenes_dir = value();
-    } else if (a == "--shared") {
-      shared_dir = value();
-    } else if (a == "--backend") {
-      const std::string b = value();
-      if (b != "vulkan" && b != "gles" && b != "both") {
-        cli::usage_error("--backend " + b + ": expected vulkan, gles or both", kHelp);
-      }
-      o.backends = b == "both" ? std::vector<std::string>{"vulkan", "gles"} : std::vector<std::string>{b};
-    } else if (a == "--device") {
-      o.backend_options.device = value();
-    } else if (a == "--bins") {
-      o.settings.kd.bins = parse_int(a, value(), 2, 1024);
-    } else if (a == "--stack") {
-      o.settings.stack_depth = parse_int(a, value(), 0, MOBIRT_MAX_STACK_DEPTH);
-    } else if (a == "--max-steps") {
-      o.settings.max_steps = parse_int(a, value(), 1, 1 << 24);
-    } else if (!a.empty() && a[0] == '-') {
-      cli::usage_error("bench: unknown option " + a, kHelp);
-    } else {
-      paths.push_back(a);
-    }
-  }
+  cli::CommonOptions common;
+  cli::CommandLine cl(cli::kBench, "Usage: mobirt bench [SCENE...] [options]", kBenchAbout, kHelp, common);
+  cl.option("--frames", "N", "timed frames per cell (default 30)",
+            [&](const cli::Value& v) { o.frames = v.integer(1, 100000); });
+  cl.option("--warmup", "N", "frames before timing starts, per cell (default 3)",
+            [&](const cli::Value& v) { o.warmup = v.integer(0, 100000); });
+  cl.option("--levels", "LIST", "the columns, any of cast,shadow,bounce1,bounce2 (default all four)",
+            [&](const cli::Value& v) {
+              o.levels.clear();
+              size_t p = 0;
+              while (p <= v.text.size()) {
+                const size_t q = std::min(v.text.find(',', p), v.text.size());
+                const std::string key = v.text.substr(p, q - p);
+                int found = -1;
+                for (int k = 0; k < 4; ++k) found = key == kLevels[k].key ? k : found;
+                if (found < 0) {
+                  cli::usage_error("--levels: unknown level '" + key + "' (cast, shadow, bounce1, bounce2)", kHelp);
+                }
+                o.levels.push_back(found);
+                p = q + 1;
+              }
+            });
+  cl.option("--size", "WxH", "image size for SCENEs given on the command line (default 400x240)",
+            [&](const cli::Value& v) { std::tie(width, height) = cli::parse_size(v.option, v.text, kHelp); });
+  cl.option("--threads", "N",
+            "CPU threads of the Embree and CPU kd-tree columns and of the kd-tree build\n"
+            "(default: all cores); lavapipe's threads are set by LP_NUM_THREADS",
+            [&](const cli::Value& v) { o.threads = unsigned(v.integer(1, 1024)); });
+  cl.flag("--no-baseline", "leave out the Embree and CPU kd-tree columns", [&] { o.baseline = false; });
+  cl.flag("--no-cpu", "leave out the CPU kd-tree column only", [&] { o.cpu = false; });
+  cl.option("--json", "FILE", "every number as JSON (- = standard output)",
+            [&](const cli::Value& v) { json_path = v.text; });
+  cl.option("--scenes", "DIR", "the project's scenes (default: ./scenes, else the source tree's)",
+            [&](const cli::Value& v) { scenes_dir = v.text; });
+  cl.option("--shared", "DIR", "the shared real scenes (default: ../shared/scenes beside that folder's parent)",
+            [&](const cli::Value& v) { shared_dir = v.text; });
+  cl.option("--backend", "B",
+            "the GPU columns: vulkan, gles or both (default both: Vulkan and OpenGL ES 2.0\n"
+            "on the same frames)",
+            [&](const cli::Value& v) {
+              if (v.text != "vulkan" && v.text != "gles" && v.text != "both") {
+                cli::usage_error("--backend " + v.text + ": expected vulkan, gles or both", kHelp);
+              }
+              o.backends = v.text == "both" ? std::vector<std::string>{"vulkan", "gles"}
+                                            : std::vector<std::string>{v.text};
+            });
+  if (!cl.parse(args)) return 0;
+  const std::vector<std::string>& paths = cl.positionals();
+  o.settings = common.settings;  // each cell sets its size, depth, shadows and rebuilds
+  o.backend_options = common.backend;
   if (o.threads == 0) o.threads = std::max(1u, std::thread::hardware_concurrency());
   if (scenes_dir.empty()) scenes_dir = default_scenes_dir();
   if (shared_dir.empty()) shared_dir = (scenes_dir / ".." / ".." / "shared" / "scenes").lexically_normal();
@@ -564,13 +545,15 @@ int cmd_bench(const std::vector<std::string>& args) {
   std::fflush(stdout);
 
   nlohmann::json cells = nlohmann::json::array();
+  const size_t total = list.size() * o.levels.size();
+  const auto start = std::chrono::steady_clock::now();
   for (const BenchScene& bs : list) {
     LoadOptions load;
     load.mtl = bs.mtl;
     const AnimatedScene animation = load_animated_scene(bs.path, load);
     for (int k : o.levels) {
-      if (isatty(2)) std::fprintf(stderr, "  %s, %s...\n", bs.name.c_str(), kLevels[k].name);
       cells.push_back(run_cell(columns, bs, animation, kLevels[k], o));
+      print_progress(cells.back(), cells.size(), total, elapsed_ms(start) / 1000.0);
     }
   }
   result["cells"] = cells;

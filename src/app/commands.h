@@ -18,6 +18,13 @@ std::string default_pipeline_cache_dir();
 std::unique_ptr<Backend> create_backend(const std::string& name, const BackendOptions& options,
                                         const std::string& help = "mobirt --help");
 
+// mobirt render SCENE -o OUT [options]: one frame or a sequence of frames to image files.
+int cmd_render(const std::vector<std::string>& args);
+
+// SIGINT and SIGTERM end the process at once, except during an image write (render.cpp), which
+// completes first: no half-written or temporary file is ever left behind.
+void install_interrupt_handlers();
+
 // mobirt bench [SCENE...] [options]: the paper's Table 1 with the Embree baseline beside it.
 int cmd_bench(const std::vector<std::string>& args);
 

@@ -9,6 +9,7 @@
 #include "core/error.h"
 #include "core/half.h"
 #include "core/parallel.h"
+#include "texels.h"
 
 namespace mobirt {
 
@@ -69,10 +70,9 @@ namespace {
 template <class F>
 void for_each_shadow_ray(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
                          const Ray& ray, float t, const ShadowSettings& settings, F&& f) {
-  const size_t base = size_t(prim) * MOBIRT_TEXELS_PER_TRIANGLE;
-  const glm::vec3 v0(tree.triangles[base]);
-  const glm::vec3 e1 = glm::vec3(tree.triangles[base + 1]) - v0;
-  const glm::vec3 e2 = glm::vec3(tree.triangles[base + 2]) - v0;
+  const glm::vec3 v0 = triangle_texel::vertex(tree.triangles, prim, 0);
+  const glm::vec3 e1 = triangle_texel::vertex(tree.triangles, prim, 1) - v0;
+  const glm::vec3 e2 = triangle_texel::vertex(tree.triangles, prim, 2) - v0;
   const glm::vec3 ng = glm::cross(e1, e2);
   // Under mediump the pass sees its ray rounded to fp16, and rounds the hit point and the shadow
   // ray too.
@@ -165,8 +165,9 @@ SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ra
   if (!intersect_triangle(tree, prim, open, h, RayTest{test, Precision::High})) {
     // The GPU's test accepted it and ours does not (an edge hit, rounding, mediump): use the
     // closest point the barycentric clamp gives; t from the plane.
-    const size_t base = size_t(prim) * MOBIRT_TEXELS_PER_TRIANGLE;
-    const glm::vec3 v0(tree.triangles[base]), v1(tree.triangles[base + 1]), v2(tree.triangles[base + 2]);
+    const glm::vec3 v0 = triangle_texel::vertex(tree.triangles, prim, 0);
+    const glm::vec3 v1 = triangle_texel::vertex(tree.triangles, prim, 1);
+    const glm::vec3 v2 = triangle_texel::vertex(tree.triangles, prim, 2);
     const glm::vec3 n = glm::cross(v1 - v0, v2 - v0);
     const float denom = glm::dot(n, ray.direction);
     h.t = denom != 0.0f ? glm::dot(n, v0 - ray.origin) / denom : ray.tmin;

@@ -12,6 +12,7 @@
 
 #include "raytree/hits.h"
 #include "raytree/rays.h"
+#include "raytree/shading_math.h"  // schlick_fresnel(), refract_direction()
 #include "scene/scene.h"
 
 namespace mobirt {
@@ -29,14 +30,6 @@ struct SecondaryStats {
   uint32_t total_internal_reflections = 0;
   uint32_t culled = 0;             // rays dropped for a weight under min_weight
 };
-
-// Schlick's approximation of the Fresnel reflectance for a ray meeting a surface at cos_i, going
-// from a medium of index n1 into one of n2 (cos_t: the refracted angle's cosine, used when n1 > n2).
-float schlick_fresnel(float cos_i, float n1, float n2);
-
-// Refraction of unit direction d at unit normal n (facing against d), eta = n1 / n2. Returns false
-// on total internal reflection.
-bool refract_direction(const glm::vec3& d, const glm::vec3& n, float eta, glm::vec3& out);
 
 // The next generation from the hits of this one (hits[i] belongs to ray i). scene_bounds sizes
 // the self-intersection offset.

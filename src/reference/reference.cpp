@@ -11,6 +11,7 @@
 
 #include "core/error.h"
 #include "raytree/secondary.h"
+#include "raytree/shading_math.h"
 #include "scene/texture_images.h"
 
 namespace mobirt {
@@ -330,16 +331,6 @@ class Tracer {
     return mask;
   }
 
-  static double attenuation(double distance2, double range) {
-    double window = 1.0;
-    if (range > 0.0) {
-      const double r = distance2 / (range * range);
-      window = std::clamp(1.0 - r * r, 0.0, 1.0);
-      window *= window;
-    }
-    return window / std::max(distance2, 1e-8);
-  }
-
   // glsl/shade.glsl's shade_hit() in double.
   dvec3 phong(const SurfaceD& s, const dvec3& view_in, uint32_t mask) const {
     const dvec3 view = glm::normalize(view_in);
@@ -348,54 +339,7 @@ class Tracer {
     if (m.texture >= 0 && size_t(m.texture) < textures_.size()) {
       diffuse *= sample_texture(textures_[size_t(m.texture)], s.texcoord);
     }
-    dvec3 color = double(m.ambient) * diffuse;
-    for (size_t l = 0; l < scene_.lights.size(); ++l) {
-      if (!(mask & (1u << l))) continue;
-      const Light& light = scene_.lights[l];
-      dvec3 to_light = -dvec3(light.direction);
-      double falloff = 1.0;
-      if (light.type != LightType::Directional) {
-        to_light = dvec3(light.position) - s.position;
-        falloff = attenuation(glm::dot(to_light, to_light), double(light.range));
-      }
-      const dvec3 l_dir = glm::normalize(to_light);
-      if (light.type == LightType::Spot) {
-        const double cos_outer = std::cos(double(light.outer_cone));
-        const double cos_inner = std::cos(double(light.inner_cone));
-        const double cone = std::clamp(
-            (glm::dot(-l_dir, dvec3(light.direction)) - cos_outer) / std::max(cos_inner - cos_outer, 1e-4), 0.0, 1.0);
-        falloff *= cone * cone;
-      }
-      const double n_dot_l = glm::dot(s.normal, l_dir);
-      if (n_dot_l <= 0.0) continue;
-      const dvec3 r = 2.0 * n_dot_l * s.normal - l_dir;
-      const double spec = m.shininess > 0.0f ? std::pow(std::max(glm::dot(r, view), 0.0), double(m.shininess)) : 0.0;
-      color += falloff * dvec3(light.color) * double(light.intensity) *
-               (diffuse * n_dot_l + dvec3(m.specular) * spec);
-    }
-    return color;
-  }
-
-  static double schlick(double cos_i, double n1, double n2) {
-    double r0 = (n1 - n2) / (n1 + n2);
-    r0 *= r0;
-    double c = cos_i;
-    if (n1 > n2) {
-      const double eta = n1 / n2;
-      const double sin2_t = eta * eta * (1.0 - cos_i * cos_i);
-      if (sin2_t >= 1.0) return 1.0;
-      c = std::sqrt(1.0 - sin2_t);
-    }
-    const double m = 1.0 - c;
-    return r0 + (1.0 - r0) * m * m * m * m * m;
-  }
-
-  static bool refract(const dvec3& d, const dvec3& n, double eta, dvec3& out) {
-    const double cos_i = -glm::dot(d, n);
-    const double k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
-    if (k < 0.0) return false;
-    out = glm::normalize(eta * d + (eta * cos_i - std::sqrt(k)) * n);
-    return true;
+    return mobirt::phong<double>(scene_.lights, m, diffuse, s.position, s.normal, view, mask);
   }
 
   // raytree/secondary.cpp's next_generation() for one hit, traced at once.
@@ -406,33 +350,15 @@ class Tracer {
     const dvec3& ng = s.geometric;
     const dvec3& ns = s.normal;
     const double off = offset(s.position);
-    double reflect_share = m.reflectance;
-    double refract_share = m.transmittance;
-    dvec3 refracted(0.0);
-    if (m.transmittance > 0.0f) {
-      const double n1 = s.entering ? 1.0 : double(m.ior);
-      const double n2 = s.entering ? double(m.ior) : 1.0;
-      if (!refract(d, ns, n1 / n2, refracted) || glm::dot(refracted, ng) >= 0.0) {
-        reflect_share += refract_share;
-        refract_share = 0.0;
-      } else if (m.fresnel) {
-        const double f = schlick(std::clamp(-glm::dot(d, ns), 0.0, 1.0), n1, n2);
-        reflect_share += refract_share * f;
-        refract_share *= 1.0 - f;
-      }
-    }
+    const WeightSplit<double> split = split_weight(m, d, ns, ng, s.entering);
     dvec3 color(0.0);
     auto emit = [&](const dvec3& origin, const dvec3& dir, const dvec3& w) {
       const double largest = std::max(w.x, std::max(w.y, w.z));
       if (largest <= 0.0 || largest < settings_.min_weight) return;
       color += trace(DRay{origin, dir, 0.0, kInf}, s.prim, w, generation + 1, nullptr, nullptr);
     };
-    if (reflect_share > 0.0) {
-      dvec3 r = d - 2.0 * glm::dot(d, ns) * ns;
-      if (glm::dot(r, ng) <= 0.0) r = d - 2.0 * glm::dot(d, ng) * ng;
-      emit(s.position + off * ng, r, weight * reflect_share);
-    }
-    if (refract_share > 0.0) emit(s.position - off * ng, refracted, weight * refract_share);
+    if (split.reflect > 0.0) emit(s.position + off * ng, mirror_direction(d, ns, ng), weight * split.reflect);
+    if (split.refract > 0.0) emit(s.position - off * ng, split.refracted, weight * split.refract);
     return color;
   }
 

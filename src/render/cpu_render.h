@@ -10,6 +10,7 @@
 #include "core/camera.h"
 #include "core/image.h"
 #include "raytree/hits.h"
+#include "render/engine.h"
 #include "render/renderer.h"
 #include "scene/atlas.h"
 #include "scene/scene.h"
@@ -22,11 +23,10 @@ glm::vec3 shade_phong(const Scene& scene, const SurfaceHit& hit, const glm::vec3
 
 // What traces the rays of a CPU frame: mobirt's own kd-tree traversal (KdTreeEngine), or the
 // baseline a user would pick instead (the Embree engine in src/baseline/). closest() and
-// occluded() are called from several threads at once.
-class CpuRayEngine {
+// occluded() are called from several threads at once. As a WhittedEngine it traces a generation
+// with them (closest hits, then surface records and shadow rays) and shades it with shade_phong().
+class CpuRayEngine : public WhittedEngine {
  public:
-  virtual ~CpuRayEngine() = default;
-  virtual const char* name() const = 0;
   // (Re)builds the acceleration structure over scene.mesh, as it is now. Once per frame.
   virtual void build(const Scene& scene) = 0;
   virtual Hit closest(const Ray& ray) const = 0;  // in [ray.tmin, ray.tmax]; prim -1 = miss
@@ -38,6 +38,24 @@ class CpuRayEngine {
   virtual SurfaceHit surface(const Scene& scene, const Ray& ray, const Hit& hit) const {
     return surface_from_hit(scene, ray, hit);
   }
+
+  // The threads of each stage (0 = all cores), and whether shaded colours are quantised to
+  // settings.colour as the shading pass writes them (else clamped to [0, 1]).
+  void set_frame_options(unsigned threads, bool quantize);
+
+  void begin_frame(const Scene& scene, const RenderSettings& settings, FrameTimings& frame) override;
+  const FlatKdTree& tree() const override { return triangles(); }
+  TracedGeneration trace(const Scene& scene, const RayBatch& rays, GenerationTimings& g) override;
+  std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, std::span<const SurfaceHit> hits,
+                               GenerationTimings& g) override;
+
+ private:
+  unsigned threads_ = 0;
+  bool quantize_ = true;
+  bool shadows_ = true;
+  ShadowSettings shadow_rays_;
+  ColourDepth colour_ = ColourDepth::Bits8;
+  Atlas atlas_;  // the frame's textures
 };
 
 // mobirt's binned-SAH kd-tree, traversed with a full stack (src/accel) with the renderer's
@@ -52,7 +70,7 @@ class KdTreeEngine final : public CpuRayEngine {
   bool occluded(const Ray& ray) const override;
   const FlatKdTree& triangles() const override { return tree_; }
   SurfaceHit surface(const Scene& scene, const Ray& ray, const Hit& hit) const override;
-  const FlatKdTree& tree() const { return tree_; }
+  const FlatKdTree& tree() const override { return tree_; }
 
  private:
   KdBuildOptions options_;
@@ -60,26 +78,12 @@ class KdTreeEngine final : public CpuRayEngine {
   FlatKdTree tree_;
 };
 
-// Where a CPU frame's time went (milliseconds, wall clock; each stage runs on all the threads).
-struct CpuFrameTimings {
-  double build_ms = 0;      // engine build over the frame's triangles
-  double rays_ms = 0;       // primary rays
-  double trace_ms = 0;      // closest hits, all generations
-  double shadow_ms = 0;     // surface records and shadow rays, all generations
-  double shade_ms = 0;      // Phong and accumulation into the frame
-  double secondary_ms = 0;  // the next generations' rays
-  double total_ms = 0;
-  uint64_t rays = 0;        // rays traced for closest hits, all generations
-  uint64_t primary_rays = 0;
-  uint64_t shadow_rays = 0;
-  int generations = 0;
-};
-
 // The whole Whitted frame on the CPU with `engine`: the same primary rays, shadow rays, Phong
-// (shade_phong) and ray tree as the GPU renderer; width x height; threads 0 = all cores. With
-// quantize, each shaded colour is quantised to settings.colour as the shading pass writes it.
+// (shade_phong) and ray tree as the GPU renderer (render_whitted()); width x height; threads 0 =
+// all cores. With quantize, each shaded colour is quantised to settings.colour as the shading pass
+// writes it.
 Image render_whitted_cpu(const Scene& scene, const Camera& camera, const RenderSettings& settings,
-                         CpuRayEngine& engine, unsigned threads = 0, CpuFrameTimings* timings = nullptr,
+                         CpuRayEngine& engine, unsigned threads = 0, FrameTimings* timings = nullptr,
                          bool quantize = true);
 
 // The renderer's frame on the CPU: render_whitted_cpu with a KdTreeEngine built with settings.kd

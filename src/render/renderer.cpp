@@ -3,13 +3,18 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <map>
 #include <tuple>
+#include <type_traits>
+#include <utility>
 
 #include "core/error.h"
 #include "layout.h"
 #include "raytree/ray_order.h"
+#include "render/whitted.h"
 #include "scene/atlas.h"
+#include "texels.h"
 
 namespace mobirt {
 
@@ -23,12 +28,13 @@ uint32_t data_rows(size_t elements) {
   return std::max<uint32_t>(1, uint32_t((elements + kDataWidth - 1) / kDataWidth));
 }
 
-void put(std::vector<float>& u, size_t index, const glm::vec4& v) {
-  if (u.size() < 4 * (index + 1)) u.resize(4 * (index + 1), 0.0f);
-  u[4 * index + 0] = v.x;
-  u[4 * index + 1] = v.y;
-  u[4 * index + 2] = v.z;
-  u[4 * index + 3] = v.w;
+// Writes `v` (a vec4 or a uniform struct of texels.h) from vec4 number `index` on.
+template <class T>
+void put(std::vector<float>& u, size_t index, const T& v) {
+  static_assert(sizeof(T) % sizeof(glm::vec4) == 0 && std::is_trivially_copyable_v<T>);
+  const size_t end = 4 * index + sizeof(T) / sizeof(float);
+  if (u.size() < end) u.resize(end, 0.0f);
+  std::memcpy(&u[4 * index], &v, sizeof(T));
 }
 
 float light_type(LightType type) {
@@ -54,14 +60,13 @@ std::vector<float> trace_uniforms(const FlatKdTree& tree, std::span<const Light>
   put(u, MOBIRT_TP_BOUNDS_HI, glm::vec4(tree.bounds.hi, 0.0f));
   // Slots of a general pass beyond the scene's lights never light anything.
   for (size_t l = lights.size(); l < size_t(std::max(pass_lights, 0)); ++l) {
-    put(u, MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * l, glm::vec4(0.0f, 0.0f, 0.0f, float(MOBIRT_LIGHT_NONE)));
-    put(u, MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * l + 1, glm::vec4(0.0f));
+    put(u, MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * l,
+        TraceLightParams{glm::vec3(0.0f), float(MOBIRT_LIGHT_NONE), glm::vec3(0.0f), 0.0f});
   }
   for (size_t l = 0; l < lights.size(); ++l) {
     const Light& light = lights[l];
-    const size_t at = MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * l;
-    put(u, at, glm::vec4(light_where(light), light_type(light.type)));
-    put(u, at + 1, glm::vec4(light.direction, std::cos(light.outer_cone)));
+    put(u, MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * l,
+        TraceLightParams{light_where(light), light_type(light.type), light.direction, std::cos(light.outer_cone)});
   }
   return u;
 }
@@ -71,18 +76,15 @@ std::vector<float> shade_uniforms(const Scene& scene, int pass_lights) {
   put(u, MOBIRT_SP_BACKGROUND, glm::vec4(scene.background, 0.0f));
   // A general pass's unused light slots: zero radiance, and their mask bits are never set.
   for (size_t l = scene.lights.size(); l < size_t(std::max(pass_lights, 0)); ++l) {
-    for (size_t k = 0; k < MOBIRT_SP_VEC4S_PER_LIGHT; ++k) {
-      put(u, MOBIRT_SP_LIGHTS + MOBIRT_SP_VEC4S_PER_LIGHT * l + k,
-          k == 0 ? glm::vec4(0.0f, 0.0f, 0.0f, float(MOBIRT_LIGHT_NONE)) : glm::vec4(0.0f));
-    }
+    ShadeLightParams none{};
+    none.type = float(MOBIRT_LIGHT_NONE);
+    put(u, MOBIRT_SP_LIGHTS + MOBIRT_SP_VEC4S_PER_LIGHT * l, none);
   }
   for (size_t l = 0; l < scene.lights.size(); ++l) {
     const Light& light = scene.lights[l];
-    const size_t at = MOBIRT_SP_LIGHTS + MOBIRT_SP_VEC4S_PER_LIGHT * l;
-    put(u, at, glm::vec4(light_where(light), light_type(light.type)));
-    put(u, at + 1, glm::vec4(light.color * light.intensity, light.range));
-    put(u, at + 2, glm::vec4(light.direction, std::cos(light.inner_cone)));
-    put(u, at + 3, glm::vec4(std::cos(light.outer_cone), 0.0f, 0.0f, 0.0f));
+    put(u, MOBIRT_SP_LIGHTS + MOBIRT_SP_VEC4S_PER_LIGHT * l,
+        ShadeLightParams{light_where(light), light_type(light.type), light.color * light.intensity, light.range,
+                         light.direction, std::cos(light.inner_cone), std::cos(light.outer_cone), {0.0f, 0.0f, 0.0f}});
   }
   return u;
 }
@@ -106,8 +108,65 @@ struct Renderer::Data {
   std::map<std::tuple<int, int, int>, PassHandle> shade_passes;  // (lights, textures, colour)
 };
 
+// The frame loop's view of the passes: the tree built or kept once per frame, one traversal and one
+// shading pass (two for 16-bit colour) per generation.
+class Renderer::Engine final : public WhittedEngine {
+ public:
+  explicit Engine(Renderer& renderer) : r_(renderer) {}
+  const char* name() const override { return "mobirt fragment passes"; }
+
+  void begin_frame(const Scene& scene, const RenderSettings&, FrameTimings& t) override {
+    // Refuse a scene over a limit before any work.
+    choose_packing(scene.mesh.triangle_count(), r_.pass_lights(int(r_.shadow_lights(scene).size())),
+                   scene.source);
+    // The tree is rebuilt from scratch whenever the geometry changed (every frame of an animation,
+    // as in the paper); a static scene, or a frame whose triangles did not move, keeps it.
+    const auto stage = Clock::now();
+    Data& cache = *r_.data_;
+    const bool reuse = !r_.settings_.always_rebuild && cache.tree_valid &&
+                       cache.tree_positions == scene.mesh.positions;
+    if (!reuse) {
+      cache.tree = build_kdtree(scene.mesh.positions, r_.settings_.kd);
+      cache.tree_positions = scene.mesh.positions;
+      t.build_ms = elapsed_ms(stage);
+      r_.upload_tree(cache.tree);
+      cache.tree_valid = true;
+    }
+    t.tree_rebuilt = !reuse;
+    r_.upload_materials(scene);
+  }
+
+  const FlatKdTree& tree() const override { return r_.data_->tree; }
+
+  TracedGeneration trace(const Scene& scene, const RayBatch& rays, GenerationTimings& g) override {
+    TraceResult result = r_.trace_uploaded(scene, r_.data_->tree, rays);
+    g.upload_ms += result.timing.upload_ms;
+    g.trace_ms += result.timing.gpu_ms;
+    g.trace_readback_ms += result.timing.readback_ms;
+    g.bytes_read += result.timing.bytes_read;
+    TracedGeneration traced;
+    traced.form = TracedGeneration::Form::PackedTexels;
+    traced.texels = std::move(result.texels);
+    traced.packing = result.packing;
+    return traced;
+  }
+
+  std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, std::span<const SurfaceHit> hits,
+                               GenerationTimings& g) override {
+    return r_.shade(scene, rays, hits, g);
+  }
+
+  void order_rays(RayBatch& rays) const override {
+    order_for_traversal(rays, r_.data_->tree.bounds);  // coherent rays per SIMD group (raytree/ray_order.h)
+  }
+
+ private:
+  Renderer& r_;
+};
+
 Renderer::Renderer(Backend& backend, const RenderSettings& settings)
-    : backend_(backend), settings_(settings), data_(std::make_unique<Data>()) {
+    : backend_(backend), settings_(settings), data_(std::make_unique<Data>()),
+      engine_(std::make_unique<Engine>(*this)) {
   if (settings_.stack_depth < 0 || settings_.stack_depth > MOBIRT_MAX_STACK_DEPTH) {
     throw Error(ErrorKind::BadInput, "--stack " + std::to_string(settings_.stack_depth) +
                                          ": the short stack holds 0 to " +
@@ -273,34 +332,33 @@ std::span<const Light> Renderer::shadow_lights(const Scene& scene) const {
 }
 
 void Renderer::upload_materials(const Scene& scene) {
-  std::vector<glm::vec4> materials;
-  materials.reserve(scene.materials.size() * MOBIRT_TEXELS_PER_MATERIAL);
+  std::vector<MaterialTexels> materials;
+  materials.reserve(scene.materials.size());
   for (const Material& m : scene.materials) {
-    materials.emplace_back(m.diffuse, float(m.texture));
-    materials.emplace_back(m.specular, m.shininess);
-    materials.emplace_back(m.reflectance, m.transmittance, m.ior, m.ambient);
+    materials.push_back({m.diffuse, float(m.texture), m.specular, m.shininess, m.reflectance, m.transmittance, m.ior,
+                         m.ambient});
   }
   Data& d = *data_;
-  ensure_texture(d.materials.handle, d.materials.rows, kDataWidth, data_rows(materials.size()),
-                 TexelFormat::RGBA32F);
-  backend_.upload(d.materials.handle, materials.data(), materials.size() * sizeof(glm::vec4));
+  ensure_texture(d.materials.handle, d.materials.rows, kDataWidth,
+                 data_rows(materials.size() * MOBIRT_TEXELS_PER_MATERIAL), TexelFormat::RGBA32F);
+  backend_.upload(d.materials.handle, materials.data(), materials.size() * sizeof(MaterialTexels));
 }
 
 std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
                                        std::span<const SurfaceHit> hits, GenerationTimings& timings) {
   // The shading pass's inputs, one texel per ray in the ray layout.
   auto stage = Clock::now();
-  std::vector<glm::vec4> position(rays.count()), normal(rays.count());
-  const uint32_t all_lights = scene.lights.empty() ? 0u : (2u << (scene.lights.size() - 1)) - 1u;
+  std::vector<HitPositionTexel> position(rays.count());
+  std::vector<HitNormalTexel> normal(rays.count());
   for (uint32_t i = 0; i < rays.count(); ++i) {
     const SurfaceHit& h = hits[i];
     if (!h.valid()) {
-      position[i] = glm::vec4(0.0f, 0.0f, 0.0f, -1.0f);
-      normal[i] = glm::vec4(0.0f);
+      position[i] = HitPositionTexel::miss();
+      normal[i] = HitNormalTexel{glm::vec3(0.0f), 0.0f};
       continue;
     }
-    position[i] = glm::vec4(h.position, float(h.material));
-    normal[i] = glm::vec4(h.normal, float(settings_.shadows ? h.mask : all_lights));
+    position[i] = HitPositionTexel{h.position, float(h.material)};
+    normal[i] = HitNormalTexel{h.normal, float(h.mask)};
   }
   timings.decode_ms += elapsed_ms(stage);
 
@@ -308,19 +366,19 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   prepare_atlas(scene);
   ensure_texture(d.hit_position.handle, d.hit_position.rows, rays.width, rays.rows(), TexelFormat::RGBA32F);
   ensure_texture(d.hit_normal.handle, d.hit_normal.rows, rays.width, rays.rows(), TexelFormat::RGBA32F);
-  backend_.upload(d.hit_position.handle, position.data(), position.size() * sizeof(glm::vec4));
-  backend_.upload(d.hit_normal.handle, normal.data(), normal.size() * sizeof(glm::vec4));
+  backend_.upload(d.hit_position.handle, position.data(), position.size() * sizeof(HitPositionTexel));
+  backend_.upload(d.hit_normal.handle, normal.data(), normal.size() * sizeof(HitNormalTexel));
   // Texture coordinates only where the scene has textures (the CPU computed them in decoding).
   TextureHandle texcoords = d.hit_position.handle;
   if (d.has_atlas) {
     stage = Clock::now();
-    std::vector<glm::vec4> uv(rays.count(), glm::vec4(0.0f));
+    std::vector<HitTexcoordTexel> uv(rays.count(), HitTexcoordTexel{glm::vec2(0.0f), glm::vec2(0.0f)});
     for (uint32_t i = 0; i < rays.count(); ++i) {
-      if (hits[i].valid()) uv[i] = glm::vec4(hits[i].texcoord, 0.0f, 0.0f);
+      if (hits[i].valid()) uv[i].texcoord = hits[i].texcoord;
     }
     timings.decode_ms += elapsed_ms(stage);
     ensure_texture(d.hit_texcoord.handle, d.hit_texcoord.rows, rays.width, rays.rows(), TexelFormat::RGBA32F);
-    backend_.upload(d.hit_texcoord.handle, uv.data(), uv.size() * sizeof(glm::vec4));
+    backend_.upload(d.hit_texcoord.handle, uv.data(), uv.size() * sizeof(HitTexcoordTexel));
     texcoords = d.hit_texcoord.handle;
   }
 
@@ -355,91 +413,8 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   return colors;
 }
 
-GenerationTimings& GenerationTimings::operator+=(const GenerationTimings& g) {
-  rays += g.rays;
-  hits += g.hits;
-  capped += g.capped;
-  shadow_rays += g.shadow_rays;
-  upload_ms += g.upload_ms;
-  trace_ms += g.trace_ms;
-  trace_readback_ms += g.trace_readback_ms;
-  decode_ms += g.decode_ms;
-  shade_ms += g.shade_ms;
-  shade_readback_ms += g.shade_readback_ms;
-  accumulate_ms += g.accumulate_ms;
-  secondary_ms += g.secondary_ms;
-  bytes_read += g.bytes_read;
-  return *this;
-}
-
 Image Renderer::render(const Scene& scene, const Camera& camera, FrameTimings* timings) {
-  FrameTimings t;
-  const auto frame_start = Clock::now();
-  // Refuse a scene over a limit before any work.
-  choose_packing(scene.mesh.triangle_count(), pass_lights(int(shadow_lights(scene).size())),
-                 scene.source);
-
-  // The tree is rebuilt from scratch whenever the geometry changed (every frame of an animation,
-  // as in the paper); a static scene, or a frame whose triangles did not move, keeps it.
-  auto stage = Clock::now();
-  Data& cache = *data_;
-  const bool reuse = !settings_.always_rebuild && cache.tree_valid &&
-                     cache.tree_positions == scene.mesh.positions;
-  if (!reuse) {
-    cache.tree = build_kdtree(scene.mesh.positions, settings_.kd);
-    cache.tree_positions = scene.mesh.positions;
-    t.build_ms = elapsed_ms(stage);
-    upload_tree(cache.tree);
-    cache.tree_valid = true;
-  }
-  t.tree_rebuilt = !reuse;
-  const FlatKdTree& tree = cache.tree;
-  upload_materials(scene);
-
-  stage = Clock::now();
-  RayBatch rays = primary_rays(camera, settings_.width, settings_.height);
-  t.rays_ms = elapsed_ms(stage);
-
-  // Work a scene does not need is never done: no second generation without mirrors or glass.
-  const int depth = scene_has_secondary_rays(scene) ? settings_.depth : 0;
-  Image image(settings_.width, settings_.height);
-  for (int generation = 0; generation <= depth && rays.count() > 0; ++generation) {
-    GenerationTimings g;
-    g.rays = rays.count();
-    const TraceResult traced = trace_uploaded(scene, tree, rays);
-    g.upload_ms += traced.timing.upload_ms;
-    g.trace_ms = traced.timing.gpu_ms;
-    g.trace_readback_ms = traced.timing.readback_ms;
-    g.bytes_read += traced.timing.bytes_read;
-
-    stage = Clock::now();
-    DecodeStats stats;
-    const std::vector<SurfaceHit> hits =
-        decode_hits(scene, tree, rays, traced.texels, traced.packing, shadow_lights(scene),
-                    settings_.shadow_rays, &stats);
-    g.hits = stats.hits;
-    g.capped = stats.capped;
-    g.shadow_rays = stats.shadow_rays;
-    g.decode_ms = elapsed_ms(stage);
-
-    const std::vector<glm::vec3> colors = shade(scene, rays, hits, g);
-
-    stage = Clock::now();
-    for (uint32_t i = 0; i < rays.count(); ++i) image.pixels[rays.pixel[i]] += rays.weight[i] * colors[i];
-    g.accumulate_ms += elapsed_ms(stage);
-
-    if (generation < depth) {
-      stage = Clock::now();
-      rays = next_generation(scene, tree.bounds, rays, hits, settings_.secondary);
-      order_for_traversal(rays, tree.bounds);  // coherent rays per SIMD group (raytree/ray_order.h)
-      g.secondary_ms = elapsed_ms(stage);
-    }
-    t.generations.push_back(g);
-  }
-  for (const GenerationTimings& g : t.generations) t.sum += g;
-  t.total_ms = elapsed_ms(frame_start);
-  if (timings) *timings = t;
-  return image;
+  return render_whitted(scene, camera, settings_, *engine_, timings);
 }
 
 }  // namespace mobirt

@@ -1,6 +1,7 @@
 // One frame through the paper's passes: CPU kd-tree build and primary rays, the GPU traversal pass
 // (closest hit + shadow rays), CPU hit decoding, the GPU shading pass. The backend is only seen
-// through src/backend/backend.h, so the same renderer drives Vulkan and OpenGL ES.
+// through src/backend/backend.h, so the same renderer drives Vulkan and OpenGL ES. The passes are a
+// WhittedEngine (render/engine.h); the frame around them is render_whitted() (render/whitted.h).
 #pragma once
 
 #include <cstdint>
@@ -17,6 +18,7 @@
 #include "raytree/packing.h"
 #include "raytree/rays.h"
 #include "raytree/secondary.h"
+#include "render/engine.h"
 #include "scene/scene.h"
 
 namespace mobirt {
@@ -41,37 +43,6 @@ struct RenderSettings {
   SecondarySettings secondary;
 };
 
-// One generation of rays: its traversal and shading passes and the CPU work around them.
-struct GenerationTimings {
-  uint32_t rays = 0;
-  uint32_t hits = 0;
-  uint32_t capped = 0;          // rays the loop cap handed back to the CPU
-  uint64_t shadow_rays = 0;     // shadow rays the traversal pass cast
-  double upload_ms = 0;         // textures uploaded for the passes (generation 0: the tree too)
-  double trace_ms = 0;          // traversal pass (GPU timestamps)
-  double trace_readback_ms = 0; // its RGBA8 result back to the CPU
-  double decode_ms = 0;         // hit decoding, capped rays retraced (CPU)
-  double shade_ms = 0;          // shading pass (GPU timestamps)
-  double shade_readback_ms = 0;
-  double accumulate_ms = 0;     // RGBA8 colours into the float frame with the rays' weights (CPU)
-  double secondary_ms = 0;      // the next generation's rays (CPU)
-  uint64_t bytes_read = 0;      // bytes that left the GPU: 4 per ray and pass
-
-  GenerationTimings& operator+=(const GenerationTimings& g);
-};
-
-// Where one frame's time went, stage by stage (milliseconds); the per-generation stages summed.
-struct FrameTimings {
-  double build_ms = 0;          // kd-tree build + flattening (CPU); 0 when the tree was kept
-  bool tree_rebuilt = false;
-  double rays_ms = 0;           // primary ray generation (CPU)
-  GenerationTimings sum;        // all generations together
-  std::vector<GenerationTimings> generations;
-  double total_ms = 0;          // wall clock of the whole frame
-
-  uint32_t primary_rays() const { return generations.empty() ? 0 : generations[0].rays; }
-};
-
 // The read-back result of one traversal pass.
 struct TraceResult {
   std::vector<uint32_t> texels;  // one packed texel per ray
@@ -94,7 +65,8 @@ class Renderer {
   TraceResult trace(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays);
 
   // The shading pass alone over decoded hits (two passes for 16-bit colour); one colour per ray,
-  // as read back from the RGBA8 texels.
+  // as read back from the RGBA8 texels. Lights the hits by their masks as they are (the frame sets
+  // every light's bit without shadows).
   std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, std::span<const SurfaceHit> hits,
                                GenerationTimings& timings);
 
@@ -102,6 +74,7 @@ class Renderer {
 
  private:
   struct Data;  // textures and passes, kept across frames and resized when they are too small
+  class Engine;  // the passes as the frame loop drives them
   TextureHandle ensure_texture(TextureHandle& handle, uint32_t& capacity_rows, uint32_t width,
                                uint32_t rows, TexelFormat format);
   PassHandle trace_pass(int lights, Packing packing);
@@ -119,6 +92,7 @@ class Renderer {
   Backend& backend_;
   RenderSettings settings_;
   std::unique_ptr<Data> data_;
+  std::unique_ptr<Engine> engine_;
 };
 
 // The traversal and shading uniforms (vec4 arrays, indices in glsl/layout.h).

@@ -2,12 +2,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <numeric>
 #include <string>
 
 #include "core/error.h"
 #include "scene/validate.h"
+#include "texels.h"
 
 namespace mobirt {
 
@@ -156,10 +158,9 @@ void append_atlas_uniforms(const Atlas& atlas, int light_count, std::vector<floa
   if (uniforms.size() < end * 4) uniforms.resize(end * 4, 0.0f);
   for (size_t t = 0; t < atlas.tiles.size(); ++t) {
     const AtlasTile& tile = atlas.tiles[t];
-    float* at = &uniforms[(base + size_t(MOBIRT_SP_VEC4S_PER_TEXTURE) * t) * 4];
-    const float values[8] = {float(tile.x), float(tile.y), float(tile.width), float(tile.height),
-                             tile.wrap_s,   tile.wrap_t,   0.0f,              0.0f};
-    std::copy_n(values, 8, at);
+    const AtlasTileParams params{glm::vec2(float(tile.x), float(tile.y)), glm::vec2(float(tile.width), float(tile.height)),
+                                 tile.wrap_s, tile.wrap_t, {0.0f, 0.0f}};
+    std::memcpy(&uniforms[(base + size_t(MOBIRT_SP_VEC4S_PER_TEXTURE) * t) * 4], &params, sizeof(params));
   }
 }
 

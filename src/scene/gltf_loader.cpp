@@ -1,21 +1,13 @@
-// glTF 2.0 through tinygltf. tinygltf parses the JSON and the buffers; everything read from a
-// buffer is bounds-checked here, so that a broken file ends in a BadInput error, never a crash.
+// glTF 2.0 through tinygltf: the scene graph (node traversal, meshes and their primitives, skins,
+// materials, textures, lights and camera) read into the static Scene and the rig that poses it.
+// tinygltf parses the JSON and the buffers; buffer data is read only through the bounds-checked
+// AccessorReader (gltf_accessors.h), animations by gltf_animation.cpp, poses by gltf_pose.cpp.
 // Images are not decoded: their encoded bytes or paths go into Scene::textures.
 
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wshadow"
-#pragma GCC diagnostic ignored "-Wunused-parameter"
-#pragma GCC diagnostic ignored "-Wunused-function"
-#pragma GCC diagnostic ignored "-Wmissing-field-initializers"
 #define TINYGLTF_IMPLEMENTATION
-#define TINYGLTF_NO_STB_IMAGE
-#define TINYGLTF_NO_STB_IMAGE_WRITE
-#define TINYGLTF_NO_EXTERNAL_IMAGE
-#include <tiny_gltf.h>
-#pragma GCC diagnostic pop
+#include "scene/gltf_accessors.h"
 
 #include <glm/gtc/constants.hpp>
-#include <glm/gtc/matrix_inverse.hpp>
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <glm/gtc/type_ptr.hpp>
@@ -30,13 +22,13 @@
 #include <limits>
 #include <map>
 #include <memory>
-#include <optional>
-#include <set>
 #include <string>
 #include <vector>
 
 #include "core/error.h"
 #include "scene/animation.h"
+#include "scene/gltf_animation.h"
+#include "scene/gltf_rig.h"
 #include "scene/loader.h"
 #include "scene/validate.h"
 
@@ -44,15 +36,9 @@ namespace mobirt {
 
 namespace {
 
-constexpr size_t kMaxUnbackedCount = size_t(1) << 26;  // accessors without a bufferView
+using namespace gltf;
+
 constexpr size_t kMaxNodeVisits = size_t(1) << 22;
-
-std::string str(size_t v) { return std::to_string(v); }
-std::string str(int v) { return std::to_string(v); }
-
-std::string element(const char* array, size_t index) {
-  return std::string(array) + "[" + str(index) + "]";
-}
 
 const char* mode_name(int mode) {
   switch (mode) {
@@ -66,36 +52,6 @@ const char* mode_name(int mode) {
     default: return "unknown";
   }
 }
-
-std::string component_name(int ct) {
-  const char* name = "unknown";
-  switch (ct) {
-    case TINYGLTF_COMPONENT_TYPE_BYTE: name = "BYTE"; break;
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: name = "UNSIGNED_BYTE"; break;
-    case TINYGLTF_COMPONENT_TYPE_SHORT: name = "SHORT"; break;
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: name = "UNSIGNED_SHORT"; break;
-    case TINYGLTF_COMPONENT_TYPE_INT: name = "INT"; break;
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: name = "UNSIGNED_INT"; break;
-    case TINYGLTF_COMPONENT_TYPE_FLOAT: name = "FLOAT"; break;
-    case TINYGLTF_COMPONENT_TYPE_DOUBLE: name = "DOUBLE"; break;
-    default: break;
-  }
-  return std::string(name) + " (" + str(ct) + ")";
-}
-
-std::string type_name(int type) {
-  switch (type) {
-    case TINYGLTF_TYPE_SCALAR: return "SCALAR";
-    case TINYGLTF_TYPE_VEC2: return "VEC2";
-    case TINYGLTF_TYPE_VEC3: return "VEC3";
-    case TINYGLTF_TYPE_VEC4: return "VEC4";
-    case TINYGLTF_TYPE_MAT2: return "MAT2";
-    case TINYGLTF_TYPE_MAT3: return "MAT3";
-    case TINYGLTF_TYPE_MAT4: return "MAT4";
-    default: return "unknown type " + str(type);
-  }
-}
-
 
 std::string url_decode(const std::string& s) {
   std::string out;
@@ -126,113 +82,10 @@ double number_or(const tinygltf::Value& object, const char* key, double fallback
   return v.IsNumber() ? v.GetNumberAsDouble() : fallback;
 }
 
-// ---- The rig: what the file animates, in a form evaluate() walks without the tinygltf model ----
-
-enum class ChannelPath { Translation, Rotation, Scale, Weights };
-enum class Interpolation { Linear, Step, CubicSpline };
-
-struct AnimSampler {
-  std::vector<double> times;   // key times, non-decreasing
-  std::vector<double> values;  // per key `width` numbers (CUBICSPLINE: in-tangent, value, out-tangent)
-  Interpolation interpolation = Interpolation::Linear;
-  size_t width = 0;
-};
-
-struct AnimChannel {
-  size_t node = 0;
-  ChannelPath path = ChannelPath::Translation;
-  size_t sampler = 0;
-};
-
-// One triangle primitive in its mesh's space, ready to be posed.
-struct PrimData {
-  std::vector<glm::vec3> positions;                 // per vertex
-  std::vector<glm::vec3> normals;                   // per vertex; empty: flat normals
-  std::vector<std::vector<glm::vec3>> target_positions;  // per morph target (empty: none)
-  std::vector<std::vector<glm::vec3>> target_normals;    // per morph target (empty: none)
-  std::vector<glm::uvec4> joints;                   // JOINTS_0; empty: not skinnable
-  std::vector<glm::vec4> weights;                   // WEIGHTS_0, renormalised to sum 1
-  uint32_t max_joint = 0;
-  std::vector<uint32_t> triangles;                  // vertex indices, the file's winding
-  std::vector<glm::vec2> uvs;                       // per vertex; empty: none
-  uint32_t material = 0;
-};
-
-struct MeshData {
-  bool prepared = false;
-  std::vector<PrimData> prims;
-};
-
-struct SkinData {
-  std::vector<size_t> joints;         // node indices
-  std::vector<glm::dmat4> inverse_bind;
-};
-
-// A node as visited by the traversal of the scene (a node reached twice is two instances).
-struct Instance {
-  size_t node = 0;
-  int parent = -1;  // instance index
-};
-
-struct Draw {
-  size_t instance = 0;
-  size_t mesh = 0;
-  int skin = -1;
-  size_t first_corner = 0;  // where its triangles start in the scene's vertex arrays
-  bool flip = false;        // the rest pose mirrors (negative determinant): winding reversed
-};
-
-struct LightInstance {
-  size_t instance = 0;
-  Light light;  // everything but position and direction
-};
-
-struct CameraInstance {
-  size_t instance = 0;
-  size_t camera = 0;
-  double yfov = 0.0;
-  float znear = 0.0f;
-};
-
-class GltfRig : public detail::Animator {
- public:
-  void evaluate(double t, Scene& out) const override;
-
-  std::string file;
-  // Nodes.
-  std::vector<glm::dmat4> rest_local;         // the file's local transforms
-  std::vector<glm::dvec3> rest_translation;   // TRS (a matrix node that is animated: decomposed)
-  std::vector<glm::dquat> rest_rotation;
-  std::vector<glm::dvec3> rest_scale;
-  std::vector<uint8_t> animated_node;         // 1: its local transform comes from TRS at t
-  std::vector<size_t> weight_offset;          // into rest_weights; npos: no morph weights
-  std::vector<size_t> weight_count;
-  std::vector<double> rest_weights;
-  std::vector<int> node_parent;               // first parent, -1: root
-  std::vector<size_t> node_order;             // parents before children (for joint worlds)
-  // Scene traversal.
-  std::vector<Instance> instances;
-  std::vector<MeshData> meshes;
-  std::vector<SkinData> skins;
-  std::vector<Draw> draws;
-  std::vector<LightInstance> lights;
-  std::optional<CameraInstance> camera;
-  size_t corners = 0;
-  // Animation.
-  std::vector<AnimSampler> samplers;
-  std::vector<AnimChannel> channels;
-  double duration = 0.0;
-
- private:
-  [[noreturn]] void fail_at(double t, const std::string& message) const;
-};
-
 class GltfReader {
  public:
-  GltfReader(const std::string& file, const tinygltf::Model& model) : file_(file), model_(model) {
-    const auto& used = model.extensionsUsed;
-    quantized_ = std::find(used.begin(), used.end(), "KHR_mesh_quantization") != used.end();
-  }
+  GltfReader(const std::string& file, const tinygltf::Model& model)
+      : file_(file), model_(model), accessors_(file, model) {}
 
   // The static parts of the scene (materials, textures, texture coordinates, material ids) and
   // the rig that poses it.
@@ -240,15 +93,6 @@ class GltfReader {
 
  private:
   [[noreturn]] void fail(const std::string& message) const { throw input_error(file_, message); }
-
-  const uint8_t* view_bytes(int view_index, size_t offset, size_t count, size_t elem,
-                            size_t stride, const std::string& who) const;
-  std::vector<double> read_accessor(int index, const std::string& user,
-                                    bool matrix4 = false) const;
-  const tinygltf::Accessor& accessor(int index, const std::string& user) const;
-  std::vector<glm::vec3> read_vec3(int index, const std::string& user, const char* attribute) const;
-  std::vector<glm::vec2> read_texcoords(int index, const std::string& user) const;
-  std::vector<uint32_t> read_indices(int index, const std::string& user) const;
 
   glm::dmat4 local_transform(size_t node_index) const;
   void traverse(const std::vector<int>& roots, const std::string& roots_name);
@@ -259,7 +103,6 @@ class GltfReader {
   void add_camera(size_t instance);
   void add_light(size_t instance);
   void prepare_nodes();
-  void prepare_animations(int only, bool warn_overrides);
   size_t mesh_targets(size_t mesh_index) const;
   void convert_materials();
   int texture_for(int gltf_texture, const std::string& user);
@@ -267,7 +110,7 @@ class GltfReader {
 
   const std::string& file_;
   const tinygltf::Model& model_;
-  bool quantized_ = false;
+  const AccessorReader accessors_;
   bool warned_orthographic_ = false;
   Scene scene_;
   std::shared_ptr<GltfRig> rig_;
@@ -275,254 +118,6 @@ class GltfReader {
   std::map<int, int> skin_map_;     // glTF skin -> GltfRig::skins
   int default_material_ = -1;
 };
-
-const tinygltf::Accessor& GltfReader::accessor(int index, const std::string& user) const {
-  if (index < 0 || static_cast<size_t>(index) >= model_.accessors.size()) {
-    fail(user + ": accessor " + str(index) + " does not exist (the file has " +
-         str(model_.accessors.size()) + " accessors)");
-  }
-  return model_.accessors[static_cast<size_t>(index)];
-}
-
-// Bytes of `count` elements of `elem` bytes, `stride` apart, starting `offset` bytes into buffer
-// view `view_index`: every range checked against the view and the view against its buffer.
-const uint8_t* GltfReader::view_bytes(int view_index, size_t offset, size_t count, size_t elem,
-                                      size_t stride, const std::string& who) const {
-  if (view_index < 0 || static_cast<size_t>(view_index) >= model_.bufferViews.size()) {
-    fail(who + ": bufferView " + str(view_index) + " does not exist (the file has " +
-         str(model_.bufferViews.size()) + " buffer views)");
-  }
-  const tinygltf::BufferView& view = model_.bufferViews[static_cast<size_t>(view_index)];
-  const std::string view_name = element("bufferViews", static_cast<size_t>(view_index));
-  if (view.buffer < 0 || static_cast<size_t>(view.buffer) >= model_.buffers.size()) {
-    fail(view_name + ": buffer " + str(view.buffer) + " does not exist (the file has " +
-         str(model_.buffers.size()) + " buffers)");
-  }
-  const tinygltf::Buffer& buffer = model_.buffers[static_cast<size_t>(view.buffer)];
-  const size_t size = buffer.data.size();
-  if (view.byteOffset > size || view.byteLength > size - view.byteOffset) {
-    fail(view_name + ": bytes " + str(view.byteOffset) + ".." +
-         str(view.byteOffset + view.byteLength) + " lie outside buffers[" + str(view.buffer) +
-         "], which holds " + str(size) + " bytes (truncated buffer?)");
-  }
-  if (count == 0) return buffer.data.data() + view.byteOffset;
-  if (elem == 0 || stride == 0) fail(who + ": zero-sized elements");
-  const size_t length = view.byteLength;
-  if (offset > length || elem > length - offset ||
-      (count - 1) > (length - offset - elem) / stride) {
-    fail(who + ": " + str(count) + " elements of " + str(elem) + " bytes, " + str(stride) +
-         " bytes apart from byte " + str(offset) + ", do not fit in " + view_name + " (" +
-         str(length) + " bytes)");
-  }
-  return buffer.data.data() + view.byteOffset + offset;
-}
-
-double read_component(const uint8_t* p, int ct, bool normalized) {
-  switch (ct) {
-    case TINYGLTF_COMPONENT_TYPE_BYTE: {
-      int8_t v;
-      std::memcpy(&v, p, 1);
-      return normalized ? std::max(v / 127.0, -1.0) : v;
-    }
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: {
-      uint8_t v;
-      std::memcpy(&v, p, 1);
-      return normalized ? v / 255.0 : v;
-    }
-    case TINYGLTF_COMPONENT_TYPE_SHORT: {
-      int16_t v;
-      std::memcpy(&v, p, 2);
-      return normalized ? std::max(v / 32767.0, -1.0) : v;
-    }
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
-      uint16_t v;
-      std::memcpy(&v, p, 2);
-      return normalized ? v / 65535.0 : v;
-    }
-    case TINYGLTF_COMPONENT_TYPE_INT: {
-      int32_t v;
-      std::memcpy(&v, p, 4);
-      return normalized ? std::max(v / 2147483647.0, -1.0) : v;
-    }
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: {
-      uint32_t v;
-      std::memcpy(&v, p, 4);
-      return normalized ? v / 4294967295.0 : v;
-    }
-    case TINYGLTF_COMPONENT_TYPE_FLOAT: {
-      float v;
-      std::memcpy(&v, p, 4);
-      return v;
-    }
-    default: return 0.0;
-  }
-}
-
-// All components of an accessor as doubles (normalised integers mapped to [0, 1] or [-1, 1]),
-// sparse substitution applied.
-std::vector<double> GltfReader::read_accessor(int index, const std::string& user,
-                                              bool matrix4) const {
-  const tinygltf::Accessor& a = accessor(index, user);
-  const std::string name = element("accessors", static_cast<size_t>(index)) + " (" + user + ")";
-  const int ncomp = tinygltf::GetNumComponentsInType(static_cast<uint32_t>(a.type));
-  const int csize = tinygltf::GetComponentSizeInBytes(static_cast<uint32_t>(a.componentType));
-  if (ncomp <= 0 || csize <= 0 || a.componentType == TINYGLTF_COMPONENT_TYPE_DOUBLE) {
-    fail(name + ": unsupported type " + type_name(a.type) + " of " +
-         component_name(a.componentType));
-  }
-  if (matrix4) {
-    if (a.type != TINYGLTF_TYPE_MAT4 || a.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT) {
-      fail(name + ": type " + type_name(a.type) + " of " + component_name(a.componentType) +
-           ", expected MAT4 of FLOAT");
-    }
-  } else if (a.type != TINYGLTF_TYPE_SCALAR && a.type != TINYGLTF_TYPE_VEC2 &&
-             a.type != TINYGLTF_TYPE_VEC3 && a.type != TINYGLTF_TYPE_VEC4) {
-    fail(name + ": matrix accessors are not vertex data (type " + type_name(a.type) + ")");
-  }
-  const size_t n = static_cast<size_t>(ncomp);
-  const size_t elem = n * static_cast<size_t>(csize);
-  std::vector<double> out;
-
-  if (a.bufferView >= 0) {
-    const tinygltf::BufferView* view =
-        static_cast<size_t>(a.bufferView) < model_.bufferViews.size()
-            ? &model_.bufferViews[static_cast<size_t>(a.bufferView)]
-            : nullptr;
-    size_t stride = elem;
-    if (view != nullptr && view->byteStride != 0) {
-      stride = view->byteStride;
-      if (stride < elem || stride % static_cast<size_t>(csize) != 0) {
-        fail(name + ": byteStride " + str(stride) + " of " +
-             element("bufferViews", static_cast<size_t>(a.bufferView)) +
-             " is smaller than an element (" + str(elem) +
-             " bytes) or not a multiple of the component size");
-      }
-    }
-    const uint8_t* base = view_bytes(a.bufferView, a.byteOffset, a.count, elem, stride, name);
-    out.resize(a.count * n);
-    for (size_t i = 0; i < a.count; ++i) {
-      const uint8_t* p = base + i * stride;
-      for (size_t c = 0; c < n; ++c) {
-        out[i * n + c] = read_component(p + c * static_cast<size_t>(csize), a.componentType,
-                                        a.normalized);
-      }
-    }
-  } else {
-    if (!a.sparse.isSparse) {
-      scene_warning(file_, name + " has no bufferView: all its values are zero");
-    }
-    if (a.count > kMaxUnbackedCount) {
-      fail(name + ": count " + str(a.count) + " without a bufferView is too large");
-    }
-    out.assign(a.count * n, 0.0);
-  }
-
-  if (a.sparse.isSparse) {
-    const auto& sp = a.sparse;
-    const std::string sname = name + ".sparse";
-    if (sp.count <= 0 || static_cast<size_t>(sp.count) > a.count) {
-      fail(sname + ": count " + str(sp.count) + " must be in 1.." + str(a.count));
-    }
-    if (sp.indices.byteOffset < 0 || sp.values.byteOffset < 0) {
-      fail(sname + ": negative byteOffset");
-    }
-    const int ict = sp.indices.componentType;
-    if (ict != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
-        ict != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
-        ict != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT) {
-      fail(sname + ".indices: componentType " + component_name(ict) +
-           " must be UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT");
-    }
-    const size_t isize =
-        static_cast<size_t>(tinygltf::GetComponentSizeInBytes(static_cast<uint32_t>(ict)));
-    const size_t count = static_cast<size_t>(sp.count);
-    const uint8_t* ip = view_bytes(sp.indices.bufferView,
-                                   static_cast<size_t>(sp.indices.byteOffset), count, isize,
-                                   isize, sname + ".indices");
-    const uint8_t* vp = view_bytes(sp.values.bufferView, static_cast<size_t>(sp.values.byteOffset),
-                                   count, elem, elem, sname + ".values");
-    for (size_t i = 0; i < count; ++i) {
-      const double target = read_component(ip + i * isize, ict, false);
-      if (target >= static_cast<double>(a.count)) {
-        fail(sname + ".indices: index " + str(static_cast<size_t>(target)) + " at position " +
-             str(i) + " is out of range: the accessor has " + str(a.count) + " elements");
-      }
-      const size_t t = static_cast<size_t>(target);
-      for (size_t c = 0; c < n; ++c) {
-        out[t * n + c] = read_component(vp + i * elem + c * static_cast<size_t>(csize),
-                                        a.componentType, a.normalized);
-      }
-    }
-  }
-  return out;
-}
-
-std::vector<glm::vec3> GltfReader::read_vec3(int index, const std::string& user,
-                                             const char* attribute) const {
-  const tinygltf::Accessor& a = accessor(index, user);
-  const std::string name = element("accessors", static_cast<size_t>(index));
-  if (a.type != TINYGLTF_TYPE_VEC3) {
-    fail(name + " (" + user + " " + attribute + "): type " + type_name(a.type) +
-         ", expected VEC3");
-  }
-  if (!quantized_ && a.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT) {
-    fail(name + " (" + user + " " + attribute + "): component type " +
-         component_name(a.componentType) +
-         ", expected FLOAT (integer attributes need KHR_mesh_quantization)");
-  }
-  const std::vector<double> v = read_accessor(index, user + " " + attribute);
-  std::vector<glm::vec3> out(a.count);
-  for (size_t i = 0; i < a.count; ++i) {
-    out[i] = glm::vec3(static_cast<float>(v[3 * i]), static_cast<float>(v[3 * i + 1]),
-                       static_cast<float>(v[3 * i + 2]));
-  }
-  return out;
-}
-
-std::vector<glm::vec2> GltfReader::read_texcoords(int index, const std::string& user) const {
-  const tinygltf::Accessor& a = accessor(index, user);
-  const std::string name = element("accessors", static_cast<size_t>(index));
-  if (a.type != TINYGLTF_TYPE_VEC2) {
-    fail(name + " (" + user + " TEXCOORD_0): type " + type_name(a.type) + ", expected VEC2");
-  }
-  const int ct = a.componentType;
-  const bool ok = ct == TINYGLTF_COMPONENT_TYPE_FLOAT ||
-                  ((ct == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE ||
-                    ct == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT) &&
-                   (a.normalized || quantized_)) ||
-                  ((ct == TINYGLTF_COMPONENT_TYPE_BYTE || ct == TINYGLTF_COMPONENT_TYPE_SHORT) &&
-                   quantized_);
-  if (!ok) {
-    fail(name + " (" + user + " TEXCOORD_0): component type " + component_name(ct) +
-         (a.normalized ? "" : " (not normalized)") +
-         ", expected FLOAT or normalized UNSIGNED_BYTE / UNSIGNED_SHORT");
-  }
-  const std::vector<double> v = read_accessor(index, user + " TEXCOORD_0");
-  std::vector<glm::vec2> out(a.count);
-  for (size_t i = 0; i < a.count; ++i) {
-    out[i] = glm::vec2(static_cast<float>(v[2 * i]), static_cast<float>(v[2 * i + 1]));
-  }
-  return out;
-}
-
-std::vector<uint32_t> GltfReader::read_indices(int index, const std::string& user) const {
-  const tinygltf::Accessor& a = accessor(index, user);
-  const std::string name = element("accessors", static_cast<size_t>(index));
-  const int ct = a.componentType;
-  if (a.type != TINYGLTF_TYPE_SCALAR) {
-    fail(name + " (" + user + " indices): type " + type_name(a.type) + ", expected SCALAR");
-  }
-  if (ct != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE && ct != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
-      ct != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT) {
-    fail(name + " (" + user + " indices): component type " + component_name(ct) +
-         ", expected UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT");
-  }
-  if (a.normalized) fail(name + " (" + user + " indices): indices must not be normalized");
-  const std::vector<double> v = read_accessor(index, user + " indices");
-  std::vector<uint32_t> out(v.size());
-  for (size_t i = 0; i < v.size(); ++i) out[i] = static_cast<uint32_t>(v[i]);
-  return out;
-}
 
 glm::dmat4 GltfReader::local_transform(size_t node_index) const {
   const tinygltf::Node& node = model_.nodes[node_index];
@@ -592,7 +187,7 @@ bool GltfReader::prepare_primitive(size_t mesh_index, size_t prim_index, PrimDat
     scene_warning(file_, path + " has no POSITION attribute: skipped");
     return false;
   }
-  out.positions = read_vec3(pos_acc, path, "POSITION");
+  out.positions = accessors_.read_vec3(pos_acc, path, "POSITION");
   const size_t nverts = out.positions.size();
   auto check_count = [&](int acc, size_t count, const std::string& what) {
     if (count != nverts) {
@@ -601,11 +196,11 @@ bool GltfReader::prepare_primitive(size_t mesh_index, size_t prim_index, PrimDat
     }
   };
   if (const int acc = attr(prim.attributes, "NORMAL"); acc >= 0) {
-    out.normals = read_vec3(acc, path, "NORMAL");
+    out.normals = accessors_.read_vec3(acc, path, "NORMAL");
     check_count(acc, out.normals.size(), "NORMAL");
   }
   if (const int acc = attr(prim.attributes, "TEXCOORD_0"); acc >= 0) {
-    out.uvs = read_texcoords(acc, path);
+    out.uvs = accessors_.read_texcoords(acc, path);
     check_count(acc, out.uvs.size(), "TEXCOORD_0");
   }
 
@@ -615,11 +210,11 @@ bool GltfReader::prepare_primitive(size_t mesh_index, size_t prim_index, PrimDat
   for (size_t k = 0; k < prim.targets.size(); ++k) {
     const std::string tname = element("targets", k);
     if (const int acc = attr(prim.targets[k], "POSITION"); acc >= 0) {
-      out.target_positions[k] = read_vec3(acc, path, (tname + ".POSITION").c_str());
+      out.target_positions[k] = accessors_.read_vec3(acc, path, (tname + ".POSITION").c_str());
       check_count(acc, out.target_positions[k].size(), tname + ".POSITION");
     }
     if (const int acc = attr(prim.targets[k], "NORMAL"); acc >= 0 && !out.normals.empty()) {
-      out.target_normals[k] = read_vec3(acc, path, (tname + ".NORMAL").c_str());
+      out.target_normals[k] = accessors_.read_vec3(acc, path, (tname + ".NORMAL").c_str());
       check_count(acc, out.target_normals[k].size(), tname + ".NORMAL");
     }
   }
@@ -628,7 +223,7 @@ bool GltfReader::prepare_primitive(size_t mesh_index, size_t prim_index, PrimDat
   const int joints_acc = attr(prim.attributes, "JOINTS_0");
   const int weights_acc = attr(prim.attributes, "WEIGHTS_0");
   if (joints_acc >= 0 && weights_acc >= 0) {
-    const tinygltf::Accessor& ja = accessor(joints_acc, path);
+    const tinygltf::Accessor& ja = accessors_.accessor(joints_acc, path);
     if (ja.type != TINYGLTF_TYPE_VEC4 ||
         (ja.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
          ja.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT) ||
@@ -637,7 +232,7 @@ bool GltfReader::prepare_primitive(size_t mesh_index, size_t prim_index, PrimDat
            " JOINTS_0): " + type_name(ja.type) + " of " + component_name(ja.componentType) +
            ", expected VEC4 of UNSIGNED_BYTE or UNSIGNED_SHORT");
     }
-    const tinygltf::Accessor& wa = accessor(weights_acc, path);
+    const tinygltf::Accessor& wa = accessors_.accessor(weights_acc, path);
     const int wct = wa.componentType;
     if (wa.type != TINYGLTF_TYPE_VEC4 ||
         !(wct == TINYGLTF_COMPONENT_TYPE_FLOAT ||
@@ -648,8 +243,8 @@ bool GltfReader::prepare_primitive(size_t mesh_index, size_t prim_index, PrimDat
            " WEIGHTS_0): " + type_name(wa.type) + " of " + component_name(wct) +
            ", expected VEC4 of FLOAT or normalized UNSIGNED_BYTE / UNSIGNED_SHORT");
     }
-    const std::vector<double> j = read_accessor(joints_acc, path + " JOINTS_0");
-    const std::vector<double> w = read_accessor(weights_acc, path + " WEIGHTS_0");
+    const std::vector<double> j = accessors_.read_accessor(joints_acc, path + " JOINTS_0");
+    const std::vector<double> w = accessors_.read_accessor(weights_acc, path + " WEIGHTS_0");
     check_count(joints_acc, ja.count, "JOINTS_0");
     check_count(weights_acc, wa.count, "WEIGHTS_0");
     out.joints.resize(nverts);
@@ -682,7 +277,7 @@ bool GltfReader::prepare_primitive(size_t mesh_index, size_t prim_index, PrimDat
 
   std::vector<uint32_t> indices;
   if (prim.indices >= 0) {
-    indices = read_indices(prim.indices, path);
+    indices = accessors_.read_indices(prim.indices, path);
     for (size_t i = 0; i < indices.size(); ++i) {
       if (indices[i] >= nverts) {
         fail(element("accessors", static_cast<size_t>(prim.indices)) + " (" + path +
@@ -775,7 +370,7 @@ int GltfReader::prepare_skin(size_t node_index) {
   skin.inverse_bind.assign(skin.joints.size(), glm::dmat4(1.0));
   if (src.inverseBindMatrices >= 0) {
     const std::vector<double> m =
-        read_accessor(src.inverseBindMatrices, sname + ".inverseBindMatrices", true);
+        accessors_.read_accessor(src.inverseBindMatrices, sname + ".inverseBindMatrices", true);
     if (m.size() < 16 * skin.joints.size()) {
       fail(sname + ".inverseBindMatrices: " + str(m.size() / 16) + " matrices for " +
            str(skin.joints.size()) + " joints");
@@ -1026,461 +621,6 @@ void GltfReader::prepare_nodes() {
   }
 }
 
-// Channels and samplers of the animations played: all (only < 0) or animations[only].
-void GltfReader::prepare_animations(int only, bool warn_overrides) {
-  GltfRig& rig = *rig_;
-  const size_t nanim = model_.animations.size();
-  if (only >= 0 && static_cast<size_t>(only) >= nanim) {
-    fail("animation " + str(only) + " does not exist (the file has " + str(nanim) +
-         " animations)");
-  }
-  std::set<size_t> claimed;        // node * 4 + path
-  std::vector<size_t> overridden;  // animations with channels dropped
-  for (size_t a = 0; a < nanim; ++a) {
-    if (only >= 0 && a != static_cast<size_t>(only)) continue;
-    const tinygltf::Animation& anim = model_.animations[a];
-    const std::string aname = element("animations", a);
-    std::map<int, size_t> sampler_map;  // the animation's sampler -> rig.samplers
-    for (size_t c = 0; c < anim.channels.size(); ++c) {
-      const tinygltf::AnimationChannel& ch = anim.channels[c];
-      const std::string cname = aname + "." + element("channels", c);
-      if (ch.target_node < 0) continue;  // no target node: the channel is ignored (glTF 2.0)
-      if (static_cast<size_t>(ch.target_node) >= model_.nodes.size()) {
-        fail(cname + ": target node " + str(ch.target_node) + " does not exist (the file has " +
-             str(model_.nodes.size()) + " nodes)");
-      }
-      const size_t node = static_cast<size_t>(ch.target_node);
-      ChannelPath path;
-      size_t width;
-      int want_type;
-      if (ch.target_path == "translation") {
-        path = ChannelPath::Translation, width = 3, want_type = TINYGLTF_TYPE_VEC3;
-      } else if (ch.target_path == "rotation") {
-        path = ChannelPath::Rotation, width = 4, want_type = TINYGLTF_TYPE_VEC4;
-      } else if (ch.target_path == "scale") {
-        path = ChannelPath::Scale, width = 3, want_type = TINYGLTF_TYPE_VEC3;
-      } else if (ch.target_path == "weights") {
-        path = ChannelPath::Weights, width = rig.weight_count[node],
-        want_type = TINYGLTF_TYPE_SCALAR;
-        if (width == 0) {
-          scene_warning(file_, cname + ": animates the morph weights of " +
-                                   element("nodes", node) +
-                                   ", which has no mesh with morph targets: ignored");
-          continue;
-        }
-      } else {
-        scene_warning(file_, cname + ": target path '" + ch.target_path + "' is not supported: "
-                                 "ignored");
-        continue;
-      }
-      // Played together, the first channel that drives a property of a node wins.
-      const size_t claim = node * 4 + static_cast<size_t>(path);
-      if (!claimed.insert(claim).second) {
-        if (overridden.empty() || overridden.back() != a) overridden.push_back(a);
-        continue;
-      }
-      if (ch.sampler < 0 || static_cast<size_t>(ch.sampler) >= anim.samplers.size()) {
-        fail(cname + ": sampler " + str(ch.sampler) + " does not exist (the animation has " +
-             str(anim.samplers.size()) + " samplers)");
-      }
-      size_t sampler_index;
-      if (auto it = sampler_map.find(ch.sampler); it != sampler_map.end()) {
-        sampler_index = it->second;
-        if (rig.samplers[sampler_index].width != width) {
-          fail(cname + ": sampler " + str(ch.sampler) + " is shared by targets of different sizes");
-        }
-      } else {
-        const tinygltf::AnimationSampler& src = anim.samplers[static_cast<size_t>(ch.sampler)];
-        const std::string sname = aname + "." + element("samplers", static_cast<size_t>(ch.sampler));
-        AnimSampler s;
-        s.width = width;
-        if (src.interpolation.empty() || src.interpolation == "LINEAR") {
-          s.interpolation = Interpolation::Linear;
-        } else if (src.interpolation == "STEP") {
-          s.interpolation = Interpolation::Step;
-        } else if (src.interpolation == "CUBICSPLINE") {
-          s.interpolation = Interpolation::CubicSpline;
-        } else {
-          fail(sname + ": interpolation '" + src.interpolation +
-               "' must be LINEAR, STEP or CUBICSPLINE");
-        }
-        const tinygltf::Accessor& in = accessor(src.input, sname + ".input");
-        if (in.type != TINYGLTF_TYPE_SCALAR || in.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT) {
-          fail(element("accessors", static_cast<size_t>(src.input)) + " (" + sname +
-               ".input): " + type_name(in.type) + " of " + component_name(in.componentType) +
-               ", expected SCALAR of FLOAT (key times in seconds)");
-        }
-        s.times = read_accessor(src.input, sname + ".input");
-        if (s.times.empty()) fail(sname + ".input: no key times");
-        for (size_t k = 0; k < s.times.size(); ++k) {
-          if (!std::isfinite(s.times[k]) || s.times[k] < 0.0 ||
-              (k > 0 && s.times[k] < s.times[k - 1])) {
-            fail(sname + ".input: key time " + str(k) + " (" + std::to_string(s.times[k]) +
-                 ") is negative, not finite or smaller than the one before");
-          }
-        }
-        const tinygltf::Accessor& out = accessor(src.output, sname + ".output");
-        if (out.type != want_type) {
-          fail(element("accessors", static_cast<size_t>(src.output)) + " (" + sname +
-               ".output): type " + type_name(out.type) + ", expected " + type_name(want_type) +
-               " for " + ch.target_path);
-        }
-        const bool float_or_normalized =
-            out.componentType == TINYGLTF_COMPONENT_TYPE_FLOAT ||
-            (out.normalized && path != ChannelPath::Translation && path != ChannelPath::Scale);
-        if (!float_or_normalized) {
-          fail(element("accessors", static_cast<size_t>(src.output)) + " (" + sname +
-               ".output): component type " + component_name(out.componentType) +
-               ", expected FLOAT (or normalized integers for rotation and weights)");
-        }
-        s.values = read_accessor(src.output, sname + ".output");
-        const size_t per_key = s.interpolation == Interpolation::CubicSpline ? 3 : 1;
-        const size_t want = s.times.size() * per_key * (path == ChannelPath::Weights ? width : 1);
-        if (out.count != want) {
-          fail(element("accessors", static_cast<size_t>(src.output)) + " (" + sname +
-               ".output): " + str(out.count) + " elements, expected " + str(want) + " (" +
-               str(s.times.size()) + " key times" + (per_key == 3 ? " x 3 for CUBICSPLINE" : "") +
-               (path == ChannelPath::Weights ? " x " + str(width) + " morph targets" : "") + ")");
-        }
-        for (double v : s.values) {
-          if (!std::isfinite(v)) fail(sname + ".output: a value is not finite");
-        }
-        if (path == ChannelPath::Rotation) {
-          for (size_t k = 0; k < s.times.size(); ++k) {
-            const double* q = &s.values[(k * per_key + (per_key == 3 ? 1 : 0)) * 4];
-            if (q[0] == 0.0 && q[1] == 0.0 && q[2] == 0.0 && q[3] == 0.0) {
-              fail(sname + ".output: key " + str(k) + " is a zero quaternion");
-            }
-          }
-        }
-        rig.duration = std::max(rig.duration, s.times.back());
-        sampler_index = rig.samplers.size();
-        rig.samplers.push_back(std::move(s));
-        sampler_map[ch.sampler] = sampler_index;
-      }
-      if (path != ChannelPath::Weights) {
-        if (!model_.nodes[node].matrix.empty() && !rig.animated_node[node]) {
-          scene_warning(file_, cname + ": " + element("nodes", node) +
-                                   " has a matrix, which glTF forbids for animated nodes; it is "
-                                   "split into translation, rotation and scale");
-        }
-        rig.animated_node[node] = 1;
-      }
-      rig.channels.push_back({node, path, sampler_index});
-    }
-  }
-  if (!overridden.empty() && warn_overrides) {
-    std::string list;
-    for (size_t a : overridden) {
-      if (!list.empty()) list.append(", ");
-      list.append(element("animations", a));
-    }
-    scene_warning(file_, list + (overridden.size() == 1 ? " drives" : " drive") +
-                             " node properties that an earlier animation drives already; all "
-                             "animations play together and the earlier wins (choose one "
-                             "animation to see it alone)");
-  }
-}
-
-// ---- Evaluation -------------------------------------------------------------------------------
-
-glm::dquat slerp_shortest(glm::dquat a, glm::dquat b, double u) {
-  double d = glm::dot(a, b);
-  if (d < 0.0) {
-    b = -b;
-    d = -d;
-  }
-  if (d > 0.9995) return glm::normalize(a * (1.0 - u) + b * u);
-  const double theta = std::acos(std::min(d, 1.0));
-  const double s = std::sin(theta);
-  return a * (std::sin((1.0 - u) * theta) / s) + b * (std::sin(u * theta) / s);
-}
-
-// The sampler's value at time t into out[0 .. width).
-void sample(const AnimSampler& s, double t, bool quaternion, double* out) {
-  const size_t w = s.width;
-  const size_t n = s.times.size();
-  const bool cubic = s.interpolation == Interpolation::CubicSpline;
-  const size_t stride = cubic ? 3 * w : w;
-  const size_t value = cubic ? w : 0;  // offset of the value inside a key
-  auto key = [&](size_t k) { return &s.values[k * stride + value]; };
-  if (n == 1 || t <= s.times[0]) {
-    std::copy(key(0), key(0) + w, out);
-    return;
-  }
-  if (t >= s.times[n - 1]) {
-    std::copy(key(n - 1), key(n - 1) + w, out);
-    return;
-  }
-  const size_t k =
-      static_cast<size_t>(std::upper_bound(s.times.begin(), s.times.end(), t) - s.times.begin()) -
-      1;  // times[k] <= t < times[k + 1]
-  const double t0 = s.times[k];
-  const double td = s.times[k + 1] - t0;
-  const double u = td > 0.0 ? (t - t0) / td : 1.0;
-  const double* a = key(k);
-  const double* b = key(k + 1);
-  switch (s.interpolation) {
-    case Interpolation::Step:
-      std::copy(a, a + w, out);
-      return;
-    case Interpolation::Linear:
-      if (quaternion) {
-        const glm::dquat q = slerp_shortest(glm::dquat(a[3], a[0], a[1], a[2]),
-                                            glm::dquat(b[3], b[0], b[1], b[2]), u);
-        out[0] = q.x, out[1] = q.y, out[2] = q.z, out[3] = q.w;
-      } else {
-        for (size_t c = 0; c < w; ++c) out[c] = a[c] + (b[c] - a[c]) * u;
-      }
-      return;
-    case Interpolation::CubicSpline: {
-      // glTF 2.0 Appendix C: p(u) = (2u^3 - 3u^2 + 1) v_k + (u^3 - 2u^2 + u) td b_k
-      //                             + (-2u^3 + 3u^2) v_k+1 + (u^3 - u^2) td a_k+1
-      const double u2 = u * u;
-      const double u3 = u2 * u;
-      const double h00 = 2.0 * u3 - 3.0 * u2 + 1.0;
-      const double h10 = (u3 - 2.0 * u2 + u) * td;
-      const double h01 = -2.0 * u3 + 3.0 * u2;
-      const double h11 = (u3 - u2) * td;
-      const double* out_tangent = a + w;  // b_k
-      const double* in_tangent = b - w;   // a_k+1
-      for (size_t c = 0; c < w; ++c) {
-        out[c] = h00 * a[c] + h10 * out_tangent[c] + h01 * b[c] + h11 * in_tangent[c];
-      }
-      if (quaternion) {
-        const double len = std::sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2] +
-                                     out[3] * out[3]);
-        if (len > 0.0) {
-          for (size_t c = 0; c < 4; ++c) out[c] /= len;
-        } else {
-          out[0] = out[1] = out[2] = 0.0, out[3] = 1.0;
-        }
-      }
-      return;
-    }
-  }
-}
-
-glm::dmat4 trs_matrix(const glm::dvec3& t, const glm::dquat& r, const glm::dvec3& s) {
-  glm::dmat4 m(1.0);
-  m[3] = glm::dvec4(t, 1.0);
-  m = m * glm::mat4_cast(r);
-  return m * glm::scale(glm::dmat4(1.0), s);
-}
-
-// Inverse transpose of the upper 3x3 of m, up to the determinant's magnitude (normals are
-// normalised afterwards): the cofactor matrix, times the determinant's sign.
-glm::dmat3 normal_matrix_of(const glm::dmat3& m, double det) {
-  const glm::dmat3 cof(glm::cross(m[1], m[2]), glm::cross(m[2], m[0]), glm::cross(m[0], m[1]));
-  return det < 0.0 ? -cof : cof;
-}
-
-void GltfRig::fail_at(double t, const std::string& message) const {
-  throw input_error(file, message + (channels.empty() ? std::string()
-                                                      : " (at t = " + std::to_string(t) + " s)"));
-}
-
-struct Pose {
-  std::vector<glm::dvec3> translation;
-  std::vector<glm::dquat> rotation;
-  std::vector<glm::dvec3> scale;
-  std::vector<double> weights;
-  std::vector<glm::dmat4> instance_world;
-  std::vector<glm::dmat4> node_world;
-  std::vector<std::vector<glm::dmat4>> joint_matrices;  // per skin
-};
-
-void pose(const GltfRig& rig, double t, Pose& p) {
-  const size_t nnodes = rig.rest_local.size();
-  p.translation = rig.rest_translation;
-  p.rotation = rig.rest_rotation;
-  p.scale = rig.rest_scale;
-  p.weights = rig.rest_weights;
-  double v[4];
-  for (const AnimChannel& ch : rig.channels) {
-    const AnimSampler& s = rig.samplers[ch.sampler];
-    switch (ch.path) {
-      case ChannelPath::Translation:
-        sample(s, t, false, v);
-        p.translation[ch.node] = glm::dvec3(v[0], v[1], v[2]);
-        break;
-      case ChannelPath::Rotation: {
-        sample(s, t, true, v);
-        const glm::dquat q(v[3], v[0], v[1], v[2]);
-        const double len = glm::length(q);
-        p.rotation[ch.node] = len > 0.0 ? q / len : glm::dquat(1.0, 0.0, 0.0, 0.0);
-        break;
-      }
-      case ChannelPath::Scale:
-        sample(s, t, false, v);
-        p.scale[ch.node] = glm::dvec3(v[0], v[1], v[2]);
-        break;
-      case ChannelPath::Weights:
-        sample(s, t, false, &p.weights[rig.weight_offset[ch.node]]);
-        break;
-    }
-  }
-  auto local = [&](size_t node) {
-    return rig.animated_node[node]
-               ? trs_matrix(p.translation[node], p.rotation[node], p.scale[node])
-               : rig.rest_local[node];
-  };
-  p.instance_world.resize(rig.instances.size());
-  for (size_t i = 0; i < rig.instances.size(); ++i) {
-    const Instance& inst = rig.instances[i];
-    p.instance_world[i] =
-        inst.parent < 0 ? local(inst.node)
-                        : p.instance_world[static_cast<size_t>(inst.parent)] * local(inst.node);
-  }
-  p.joint_matrices.resize(rig.skins.size());
-  if (rig.skins.empty()) return;
-  p.node_world.assign(nnodes, glm::dmat4(1.0));
-  for (size_t node : rig.node_order) {
-    const int parent = rig.node_parent[node];
-    p.node_world[node] =
-        parent < 0 ? local(node) : p.node_world[static_cast<size_t>(parent)] * local(node);
-  }
-  for (size_t s = 0; s < rig.skins.size(); ++s) {
-    const SkinData& skin = rig.skins[s];
-    p.joint_matrices[s].resize(skin.joints.size());
-    for (size_t j = 0; j < skin.joints.size(); ++j) {
-      p.joint_matrices[s][j] = p.node_world[skin.joints[j]] * skin.inverse_bind[j];
-    }
-  }
-}
-
-void GltfRig::evaluate(double t, Scene& out) const {
-  Pose p;
-  pose(*this, t, p);
-  TriangleMesh& mesh = out.mesh;
-  mesh.positions.resize(corners);
-  mesh.normals.resize(corners);
-  // Per vertex of one primitive: posed position, and normal (zero: use the flat normal).
-  std::vector<glm::vec3> pos;
-  std::vector<glm::vec3> nrm;
-  for (const Draw& draw : draws) {
-    const MeshData& md = meshes[draw.mesh];
-    const size_t node = instances[draw.instance].node;
-    const double* weights =
-        weight_count[node] > 0 ? &p.weights[weight_offset[node]] : nullptr;
-    const glm::dmat4& world = p.instance_world[draw.instance];
-    const glm::dmat3 linear(world);
-    const double det = glm::determinant(linear);
-    const bool invertible = std::abs(det) > 1e-300 && std::isfinite(det);
-    const glm::dmat3 normal_matrix =
-        invertible ? glm::inverseTranspose(linear) : glm::dmat3(1.0);
-    size_t corner = draw.first_corner;
-    for (const PrimData& prim : md.prims) {
-      const size_t nv = prim.positions.size();
-      pos.resize(nv);
-      nrm.resize(nv);
-      const bool has_normals = !prim.normals.empty();
-      const bool skinned = draw.skin >= 0 && !prim.joints.empty();
-      const std::vector<glm::dmat4>* joints =
-          skinned ? &p.joint_matrices[static_cast<size_t>(draw.skin)] : nullptr;
-      for (size_t v = 0; v < nv; ++v) {
-        glm::vec3 lp = prim.positions[v];
-        glm::vec3 ln = has_normals ? prim.normals[v] : glm::vec3(0.0f);
-        if (weights != nullptr) {
-          for (size_t k = 0; k < prim.target_positions.size(); ++k) {
-            const float wk = static_cast<float>(weights[k]);
-            if (wk == 0.0f) continue;
-            if (!prim.target_positions[k].empty()) lp += wk * prim.target_positions[k][v];
-            if (has_normals && !prim.target_normals[k].empty()) {
-              ln += wk * prim.target_normals[k][v];
-            }
-          }
-        }
-        glm::dmat4 m;
-        glm::dmat3 nm;
-        bool ok;
-        if (skinned) {
-          const glm::vec4& w = prim.weights[v];
-          const glm::uvec4& j = prim.joints[v];
-          if (w.x + w.y + w.z + w.w > 0.0f) {
-            m = double(w.x) * (*joints)[j.x] + double(w.y) * (*joints)[j.y] +
-                double(w.z) * (*joints)[j.z] + double(w.w) * (*joints)[j.w];
-          } else {
-            m = glm::dmat4(1.0);
-          }
-          const glm::dmat3 l(m);
-          const double d = glm::determinant(l);
-          ok = std::abs(d) > 1e-300 && std::isfinite(d);
-          nm = normal_matrix_of(l, d);
-        } else {
-          m = world;
-          nm = normal_matrix;
-          ok = invertible;
-        }
-        pos[v] = glm::vec3(m * glm::dvec4(glm::dvec3(lp), 1.0));
-        glm::vec3 n(0.0f);
-        if (has_normals && ok) {
-          const glm::dvec3 wn = nm * glm::dvec3(ln);
-          const double len = glm::length(wn);
-          if (!std::isfinite(len)) {
-            n = glm::vec3(wn);  // NaN or infinite in the file: validation names the triangle
-          } else if (len > 0.0) {
-            n = glm::vec3(wn / len);
-          }
-        }
-        nrm[v] = n;
-      }
-      const size_t ntri = prim.triangles.size() / 3;
-      for (size_t tr = 0; tr < ntri; ++tr) {
-        uint32_t vi[3] = {prim.triangles[3 * tr], prim.triangles[3 * tr + 1],
-                          prim.triangles[3 * tr + 2]};
-        if (draw.flip && !skinned) std::swap(vi[1], vi[2]);
-        const glm::vec3 flat = geometric_normal(pos[vi[0]], pos[vi[1]], pos[vi[2]]);
-        for (int k = 0; k < 3; ++k) {
-          mesh.positions[corner] = pos[vi[k]];
-          const glm::vec3& n = nrm[vi[k]];
-          mesh.normals[corner] = (n.x == 0.0f && n.y == 0.0f && n.z == 0.0f) ? flat : n;
-          ++corner;
-        }
-      }
-    }
-  }
-
-  out.lights.resize(lights.size());
-  for (size_t i = 0; i < lights.size(); ++i) {
-    const glm::dmat4& world = p.instance_world[lights[i].instance];
-    Light light = lights[i].light;
-    light.position = glm::vec3(world[3]);
-    const glm::dvec3 dir = glm::dmat3(world) * glm::dvec3(0.0, 0.0, -1.0);
-    const double len = glm::length(dir);
-    if (light.type != LightType::Point && (!(len > 0.0) || !std::isfinite(len))) {
-      fail_at(t, element("nodes", instances[lights[i].instance].node) +
-                     ".extensions.KHR_lights_punctual: the node transform is singular: the "
-                     "light has no direction");
-    }
-    if (len > 0.0 && std::isfinite(len)) light.direction = glm::vec3(dir / len);
-    out.lights[i] = light;
-  }
-
-  out.camera.reset();
-  if (camera) {
-    const glm::dmat4& world = p.instance_world[camera->instance];
-    const glm::dmat3 linear(world);
-    const glm::dvec3 eye = glm::dvec3(world[3]);
-    const glm::dvec3 forward = linear * glm::dvec3(0.0, 0.0, -1.0);
-    const glm::dvec3 up = linear * glm::dvec3(0.0, 1.0, 0.0);
-    const double fl = glm::length(forward);
-    const double ul = glm::length(up);
-    if (!(fl > 0.0) || !(ul > 0.0) || !std::isfinite(fl) || !std::isfinite(ul) ||
-        glm::length(glm::cross(forward / fl, up / ul)) < 1e-9) {
-      fail_at(t, element("nodes", instances[camera->instance].node) + ": the transform of camera " +
-                     str(camera->camera) + " is singular (zero scale): no view direction");
-    }
-    Camera c;
-    c.eye = glm::vec3(eye);
-    c.target = glm::vec3(eye + forward / fl);
-    c.up = glm::vec3(up / ul);
-    c.yfov = static_cast<float>(camera->yfov);
-    c.znear = camera->znear;
-    out.camera = c;
-  }
-  validate_scene(out);
-}
 
 TextureWrap wrap_mode(int mode) {
   switch (mode) {
@@ -1518,7 +658,7 @@ int GltfReader::texture_for(int gltf_texture, const std::string& user) {
       fail(iname + ": bufferView " + str(image.bufferView) + " does not exist");
     }
     const size_t length = model_.bufferViews[static_cast<size_t>(image.bufferView)].byteLength;
-    const uint8_t* bytes = view_bytes(image.bufferView, 0, 1, length, length, iname);
+    const uint8_t* bytes = accessors_.view_bytes(image.bufferView, 0, 1, length, length, iname);
     ref.data.assign(bytes, bytes + length);
   } else if (!image.image.empty()) {
     ref.data = image.image;  // a data URI, kept encoded by keep_encoded_image
@@ -1637,7 +777,7 @@ std::shared_ptr<GltfRig> GltfReader::read(const LoadOptions& options, bool anima
   }
   traverse(roots, roots_name);
   prepare_nodes();
-  prepare_animations(options.animation, animated);
+  read_animations(accessors_, options.animation, animated, *rig_);
 
   // The winding is fixed at t = 0: a draw whose node mirrors at t = 0 has its triangles reversed
   // (and its texture coordinates with them) in every frame. Skinned primitives keep the file's.

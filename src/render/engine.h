@@ -1,0 +1,111 @@
+// What drives one Whitted frame (src/render/whitted.h): an engine traces each generation of rays
+// into hits and shadow masks and shades the decoded hits; the loop around it (primary rays,
+// decoding, accumulation, the ray tree) is the same for every engine. Implemented by the GPU
+// fragment passes of every backend (Renderer), by mobirt's CPU kd-tree (KdTreeEngine) and by
+// Embree (src/baseline). A new engine (a compute pass, the driver's ray queries) implements this
+// interface and returns hits in whichever form it has; the loop does not change.
+#pragma once
+
+#include <glm/glm.hpp>
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "accel/kdtree.h"
+#include "raytree/hits.h"
+#include "raytree/packing.h"
+#include "raytree/rays.h"
+#include "scene/scene.h"
+
+namespace mobirt {
+
+struct RenderSettings;
+
+// One generation of rays: where its time went (milliseconds) and what it traced. Each engine
+// fills the stages it has; the others stay 0.
+struct GenerationTimings {
+  uint32_t rays = 0;
+  uint32_t hits = 0;
+  uint32_t capped = 0;          // rays the loop cap handed back to the CPU
+  uint64_t shadow_rays = 0;     // shadow rays cast
+  double upload_ms = 0;         // textures uploaded for the passes (generation 0: the tree too)
+  double trace_ms = 0;          // closest hits (GPU timestamps; CPU engines: wall clock), with the
+                                // shadow rays where the engine casts them in the same pass
+  double trace_readback_ms = 0; // the traversal result back to the CPU
+  double shadow_ms = 0;         // CPU engines: surface records and shadow rays after the hits
+  double decode_ms = 0;         // hit decoding, capped rays retraced (CPU)
+  double shade_ms = 0;          // shading (GPU timestamps or CPU wall clock)
+  double shade_readback_ms = 0;
+  double accumulate_ms = 0;     // colours into the float frame with the rays' weights (CPU)
+  double secondary_ms = 0;      // the next generation's rays (CPU)
+  uint64_t bytes_read = 0;      // bytes that left the GPU: 4 per ray and pass
+
+  GenerationTimings& operator+=(const GenerationTimings& g);
+};
+
+// Where one frame's time went, stage by stage (milliseconds); the per-generation stages summed.
+struct FrameTimings {
+  double build_ms = 0;          // acceleration structure build (CPU); 0 when the tree was kept
+  bool tree_rebuilt = false;
+  double rays_ms = 0;           // primary ray generation (CPU)
+  GenerationTimings sum;        // all generations together (add() keeps it)
+  std::vector<GenerationTimings> generations;
+  double total_ms = 0;          // wall clock of the whole frame
+
+  uint32_t primary_rays() const { return generations.empty() ? 0 : generations[0].rays; }
+  // The one place a generation joins the frame: appended and summed.
+  void add(const GenerationTimings& g);
+};
+
+// What an engine's trace of one generation returns, one entry per ray, in one of three forms.
+struct TracedGeneration {
+  enum class Form {
+    // The fragment passes: one packed texel per ray (hit index and shadow mask, glsl/layout.h),
+    // decoded on the CPU against WhittedEngine::tree(), which intersects the hit triangle again
+    // and retraces the rays the loop cap stopped.
+    PackedTexels,
+    // Engines that know t and barycentrics (a compute pass, ray queries): `hits` and `masks`;
+    // the surface records are made from them without intersecting again.
+    Hits,
+    // Engines that made the surface records themselves, shadow masks included (the CPU engines).
+    Surfaces,
+  };
+  Form form = Form::Surfaces;
+  std::vector<uint32_t> texels;  // PackedTexels
+  Packing packing = Packing::Bits24_8;
+  std::vector<Hit> hits;         // Hits
+  std::vector<uint32_t> masks;   // Hits: shadow bits per ray
+  std::vector<SurfaceHit> surfaces;  // Surfaces
+  uint64_t shadow_rays = 0;      // Hits and Surfaces: shadow rays the engine cast
+};
+
+class WhittedEngine {
+ public:
+  virtual ~WhittedEngine() = default;
+  virtual const char* name() const = 0;
+
+  // Once per frame, before the first generation: builds (or keeps) the acceleration structure over
+  // scene.mesh as it is now and uploads what the passes read; fills frame.build_ms and
+  // frame.tree_rebuilt. A scene over one of the engine's limits is refused here, before any work.
+  virtual void begin_frame(const Scene& scene, const RenderSettings& settings, FrameTimings& frame) = 0;
+
+  // The frame's triangle texels and scene box (nodes too where hits come as PackedTexels): hits are
+  // decoded and the shadow and secondary rays offset against it.
+  virtual const FlatKdTree& tree() const = 0;
+
+  // One generation of rays: closest hits and, with settings.shadows, shadow masks (without, the
+  // loop lights every hit by every light). Fills the stages it runs in g.
+  virtual TracedGeneration trace(const Scene& scene, const RayBatch& rays, GenerationTimings& g) = 0;
+
+  // One colour per ray for the decoded hits (a miss: the background), quantised as the shading pass
+  // writes it. Fills the stages it runs in g.
+  virtual std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays,
+                                       std::span<const SurfaceHit> hits, GenerationTimings& g) = 0;
+
+  // The order of a new generation's rays that suits the engine (the fragment passes: neighbouring
+  // rays in one SIMD group); by default as the ray tree made them.
+  virtual void order_rays(RayBatch&) const {}
+};
+
+}  // namespace mobirt

@@ -1,0 +1,118 @@
+#include "render/whitted.h"
+
+#include <chrono>
+#include <utility>
+
+#include "raytree/secondary.h"
+
+namespace mobirt {
+
+GenerationTimings& GenerationTimings::operator+=(const GenerationTimings& g) {
+  rays += g.rays;
+  hits += g.hits;
+  capped += g.capped;
+  shadow_rays += g.shadow_rays;
+  upload_ms += g.upload_ms;
+  trace_ms += g.trace_ms;
+  trace_readback_ms += g.trace_readback_ms;
+  shadow_ms += g.shadow_ms;
+  decode_ms += g.decode_ms;
+  shade_ms += g.shade_ms;
+  shade_readback_ms += g.shade_readback_ms;
+  accumulate_ms += g.accumulate_ms;
+  secondary_ms += g.secondary_ms;
+  bytes_read += g.bytes_read;
+  return *this;
+}
+
+void FrameTimings::add(const GenerationTimings& g) {
+  generations.push_back(g);
+  sum += g;
+}
+
+uint32_t all_lights_mask(const Scene& scene) {
+  return scene.lights.empty() ? 0u : (2u << (scene.lights.size() - 1)) - 1u;
+}
+
+std::vector<SurfaceHit> decode_generation(const Scene& scene, const RenderSettings& settings,
+                                          const FlatKdTree& tree, const RayBatch& rays,
+                                          TracedGeneration&& traced, GenerationTimings& g) {
+  const std::span<const Light> lights = settings.shadows ? std::span<const Light>(scene.lights)
+                                                         : std::span<const Light>();
+  std::vector<SurfaceHit> hits;
+  switch (traced.form) {
+    case TracedGeneration::Form::PackedTexels: {
+      DecodeStats stats;
+      hits = decode_hits(scene, tree, rays, traced.texels, traced.packing, lights, settings.shadow_rays, &stats);
+      g.hits += stats.hits;  // the pass's hits, counted as decoded
+      g.capped += stats.capped;
+      g.shadow_rays += stats.shadow_rays;
+      break;
+    }
+    case TracedGeneration::Form::Hits:
+      hits.resize(rays.count());
+      for (uint32_t i = 0; i < rays.count(); ++i) {
+        if (!traced.hits[i].valid()) continue;
+        hits[i] = surface_from_hit(scene, rays.ray(i), traced.hits[i]);
+        hits[i].mask = traced.masks[i];
+      }
+      g.shadow_rays += traced.shadow_rays;
+      break;
+    case TracedGeneration::Form::Surfaces:
+      hits = std::move(traced.surfaces);
+      g.shadow_rays += traced.shadow_rays;
+      break;
+  }
+  const uint32_t all_lights = all_lights_mask(scene);
+  const bool count = traced.form != TracedGeneration::Form::PackedTexels;
+  for (SurfaceHit& h : hits) {
+    if (!h.valid()) continue;
+    if (count) ++g.hits;
+    if (!settings.shadows) h.mask = all_lights;
+  }
+  return hits;
+}
+
+Image render_whitted(const Scene& scene, const Camera& camera, const RenderSettings& settings,
+                     WhittedEngine& engine, FrameTimings* timings) {
+  FrameTimings t;
+  const std::chrono::steady_clock::time_point frame_start = std::chrono::steady_clock::now();
+  engine.begin_frame(scene, settings, t);
+  const FlatKdTree& tree = engine.tree();
+
+  std::chrono::steady_clock::time_point stage = std::chrono::steady_clock::now();
+  RayBatch rays = primary_rays(camera, settings.width, settings.height);
+  t.rays_ms = elapsed_ms(stage);
+
+  // Work a scene does not need is never done: no second generation without mirrors or glass.
+  const int depth = scene_has_secondary_rays(scene) ? settings.depth : 0;
+  Image image(settings.width, settings.height);
+  for (int generation = 0; generation <= depth && rays.count() > 0; ++generation) {
+    GenerationTimings g;
+    g.rays = rays.count();
+    TracedGeneration traced = engine.trace(scene, rays, g);
+
+    stage = std::chrono::steady_clock::now();
+    const std::vector<SurfaceHit> hits = decode_generation(scene, settings, tree, rays, std::move(traced), g);
+    g.decode_ms += elapsed_ms(stage);
+
+    const std::vector<glm::vec3> colors = engine.shade(scene, rays, hits, g);
+
+    stage = std::chrono::steady_clock::now();
+    for (uint32_t i = 0; i < rays.count(); ++i) image.pixels[rays.pixel[i]] += rays.weight[i] * colors[i];
+    g.accumulate_ms += elapsed_ms(stage);
+
+    if (generation < depth) {
+      stage = std::chrono::steady_clock::now();
+      rays = next_generation(scene, tree.bounds, rays, hits, settings.secondary);
+      engine.order_rays(rays);
+      g.secondary_ms += elapsed_ms(stage);
+    }
+    t.add(g);
+  }
+  t.total_ms = elapsed_ms(frame_start);
+  if (timings) *timings = t;
+  return image;
+}
+
+}  // namespace mobirt
