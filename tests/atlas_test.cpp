@@ -23,6 +23,7 @@
 #include "scene/texture_images.h"
 #include "test_support.h"
 #include "vulkan_fixture.h"
+#include "test_shader_ids.h"  // the test-only shaders (TestShader)
 
 namespace mobirt {
 namespace {
@@ -477,7 +478,7 @@ class AtlasGpuTest : public test::VulkanTest {
     std::vector<float> uniforms(size_t(MOBIRT_SP_TEXTURES(lights)) * 4, 123.0f);  // junk lights
     append_atlas_uniforms(atlas, lights, uniforms);
     PassDesc desc;
-    desc.shader = ShaderId::TestAtlasLookup;
+    desc.shader = test_shader(TestShader::AtlasLookup);
     desc.specialization = {{MOBIRT_SPEC_LIGHT_COUNT, lights}, {MOBIRT_SPEC_TEXTURE_COUNT, int32_t(atlas.tiles.size())}};
     desc.uniform_vec4s = uint32_t(uniforms.size() / 4);
     desc.texture_bindings = {MOBIRT_BIND_HIT_TEXCOORD, MOBIRT_BIND_ATLAS};

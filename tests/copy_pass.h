@@ -11,6 +11,7 @@
 
 #include "backend/backend.h"
 #include "core/error.h"
+#include "test_shader_ids.h"  // the test-only shaders (TestShader)
 
 namespace mobirt::test {
 
@@ -21,7 +22,7 @@ inline uint32_t pack_rgba8(uint32_t r, uint32_t g, uint32_t b, uint32_t a) {
 // A copy pass on `backend` that reads texture binding 1 and declares `uniform_vec4s` uniforms.
 inline PassHandle create_copy_pass(Backend& backend, uint32_t uniform_vec4s = 1) {
   PassDesc desc;
-  desc.shader = ShaderId::TestCopyInput;
+  desc.shader = test_shader(TestShader::CopyInput);
   desc.uniform_vec4s = uniform_vec4s;
   desc.texture_bindings = {1};
   return backend.create_pass(desc);

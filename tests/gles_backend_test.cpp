@@ -14,6 +14,7 @@
 #include "copy_pass.h"
 #include "core/error.h"
 #include "vulkan_fixture.h"
+#include "test_shader_ids.h"  // the test-only shaders (TestShader)
 
 namespace mobirt {
 namespace {
@@ -29,17 +30,17 @@ class GlesBackendTest : public ::testing::Test {
     EXPECT_TRUE(messages.empty()) << "KHR_debug messages:\n" << test::join(messages);
   }
 
-  void expect_refused(ShaderId shader, const std::string& part, size_t textures = 0) {
+  void expect_refused(const ShaderSource& shader, const std::string& part, size_t textures = 0) {
     PassDesc desc;
     desc.shader = shader;
     for (uint32_t i = 1; i <= textures; ++i) desc.texture_bindings.push_back(i);
     try {
       backend->create_pass(desc);
-      ADD_FAILURE() << shader_name(shader) << " was not refused";
+      ADD_FAILURE() << shader.name << " was not refused";
     } catch (const Error& e) {
       EXPECT_EQ(e.kind(), ErrorKind::Constraint) << e.what();
       EXPECT_NE(std::string(e.what()).find(part), std::string::npos) << e.what();
-      EXPECT_NE(std::string(e.what()).find(shader_name(shader)), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(shader.name), std::string::npos) << e.what();
     }
   }
 
@@ -53,6 +54,8 @@ TEST_F(GlesBackendTest, ContextIsOpenGlEsOnLlvmpipe) {
   EXPECT_EQ(info.api.rfind("OpenGL ES ", 0), 0u) << info.api;
   EXPECT_NE(info.device.find("llvmpipe"), std::string::npos) << info.device;
   EXPECT_TRUE(info.is_software);
+  EXPECT_EQ(info.driver_version.rfind("Mesa ", 0), 0u) << info.driver_version;
+  EXPECT_FALSE(info.ray_query);  // OpenGL ES has no ray tracing
   auto has = [&](const std::string& prefix) {
     for (const std::string& line : info.limits) {
       if (line.rfind(prefix, 0) == 0) return true;
@@ -65,18 +68,22 @@ TEST_F(GlesBackendTest, ContextIsOpenGlEsOnLlvmpipe) {
   EXPECT_TRUE(has("GL_MAX_FRAGMENT_UNIFORM_VECTORS: "));
 }
 
-TEST_F(GlesBackendTest, TwoOutputsAreRefused) { expect_refused(ShaderId::TestTwoOutputs, "colour outputs"); }
+TEST_F(GlesBackendTest, TwoOutputsAreRefused) {
+  expect_refused(test_shader(TestShader::TwoOutputs), "colour outputs");
+}
 
-TEST_F(GlesBackendTest, StorageWritesAreRefused) { expect_refused(ShaderId::TestStorageWrite, "storage"); }
+TEST_F(GlesBackendTest, StorageWritesAreRefused) {
+  expect_refused(test_shader(TestShader::StorageWrite), "storage");
+}
 
 TEST_F(GlesBackendTest, NineTexturesAreRefused) {
-  expect_refused(ShaderId::TestNineTextures, "GL_MAX_TEXTURE_IMAGE_UNITS", 8);
-  expect_refused(ShaderId::TestNineTextures, "GL_MAX_TEXTURE_IMAGE_UNITS", 9);
+  expect_refused(test_shader(TestShader::NineTextures), "GL_MAX_TEXTURE_IMAGE_UNITS", 8);
+  expect_refused(test_shader(TestShader::NineTextures), "GL_MAX_TEXTURE_IMAGE_UNITS", 9);
 }
 
 TEST_F(GlesBackendTest, SpinShaderIsVulkanOnly) {
   PassDesc desc;
-  desc.shader = ShaderId::TestSpin;
+  desc.shader = test_shader(TestShader::Spin);
   try {
     backend->create_pass(desc);
     ADD_FAILURE() << "expected Error";

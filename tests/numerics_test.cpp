@@ -20,6 +20,7 @@
 #include "raytree/packing.h"
 #include "test_support.h"
 #include "vulkan_fixture.h"
+#include "test_shader_ids.h"  // the test-only shaders (TestShader)
 
 namespace mobirt {
 namespace {
@@ -99,7 +100,7 @@ class NumericsOnGpu : public ::testing::TestWithParam<Api> {
     };
     const TextureHandle textures[3] = {texture(input), texture(operand), texture(expected)};
     PassDesc desc;
-    desc.shader = ShaderId::TestNumerics;
+    desc.shader = test_shader(TestShader::Numerics);
     desc.specialization = {{MOBIRT_SPEC_PACKING, int(packing)}};
     desc.uniform_vec4s = 1;
     desc.texture_bindings = {1, 2, 3};

@@ -83,7 +83,7 @@ TEST(SceneValidation, UnparsableObjCoordinatesAreRefused) {
 // The Khronos layer with synchronization validation: a whole frame with shadows, a mirror bounce
 // and a second frame reusing the textures and passes reports nothing.
 TEST(SyncValidation, RenderReportsNothing) {
-  BackendOptions options;
+  VulkanOptions options;
   options.validation = true;
   options.sync_validation = true;
   auto backend = create_vulkan_backend(options);

@@ -71,7 +71,7 @@ namespace {
 // next start; a file from another device or a broken one is ignored, never handed to the driver.
 TEST(PipelineCache, SavedOnCloseAndReloaded) {
   const std::filesystem::path dir = test::temp_dir();
-  BackendOptions options = test::validated_options();
+  VulkanOptions options{test::validated_options()};
   options.pipeline_cache_dir = dir.string();
   const Scene scene = test::box_grid_scene();
   RenderSettings settings;

@@ -10,11 +10,13 @@
 #include <vector>
 
 #include "backend/backend.h"
+#include "backend/vulkan/vk_util.h"
 #include "backend/vulkan/vulkan_backend.h"
 #include "copy_pass.h"
 #include "core/error.h"
 #include "layout.h"
 #include "vulkan_fixture.h"
+#include "test_shader_ids.h"  // the test-only shaders (TestShader)
 
 namespace mobirt {
 namespace {
@@ -79,12 +81,81 @@ TEST_F(VulkanBackendTest, DeviceInfoListsLavapipe) {
   EXPECT_TRUE(info.is_software);
   EXPECT_EQ(info.api.rfind("Vulkan 1.", 0), 0u) << info.api;
   EXPECT_NE(info.driver.find("Mesa"), std::string::npos) << info.driver;
+  // What `mobirt info` prints for a ray-query engine: the Mesa version, and the two extensions
+  // (lavapipe has them from Mesa 25, not in 22.3).
+  std::printf("driver version: %s, ray queries: %d\n", info.driver_version.c_str(), int(info.ray_query));
+  EXPECT_EQ(info.driver_version.rfind("Mesa ", 0), 0u) << info.driver_version;
+  if (info.driver_version.rfind("Mesa 22.", 0) == 0) {
+    EXPECT_FALSE(info.ray_query);
+  }
+  if (info.driver_version.rfind("Mesa 25.", 0) == 0) {
+    EXPECT_TRUE(info.ray_query);
+  }
   const std::string limits = join(info.limits);
   for (const char* name : {"maxImageDimension2D", "maxPerStageDescriptorSampledImages", "maxFragmentOutputAttachments",
                            "maxColorAttachments", "maxUniformBufferRange", "timestampPeriod",
                            "timestampComputeAndGraphics"}) {
     EXPECT_NE(limits.find(name), std::string::npos) << name;
   }
+}
+
+// A failed Vulkan call names itself, where it was made and the VkResult.
+TEST(VkCheck, NamesTheCallThePlaceAndTheResult) {
+  try {
+    vk::check(VK_ERROR_OUT_OF_DEVICE_MEMORY, "vkAllocateMemory(device, &info, nullptr, &memory)",
+              "/home/x/mobirt/src/backend/vulkan/vk_resources.cpp", 42);
+    ADD_FAILURE() << "expected Error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::Internal);
+    EXPECT_STREQ(e.what(),
+                 "vkAllocateMemory failed (src/backend/vulkan/vk_resources.cpp:42): VK_ERROR_OUT_OF_DEVICE_MEMORY");
+  }
+  try {
+    VK_CHECK_RESULT(VK_ERROR_DEVICE_LOST, "vkQueueSubmit");
+    ADD_FAILURE() << "expected Error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("vkQueueSubmit failed (vulkan_backend_test.cpp:"), std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("): VK_ERROR_DEVICE_LOST"), std::string::npos) << e.what();
+  }
+  EXPECT_NO_THROW(VK_CHECK(VK_SUCCESS));
+}
+
+TEST(DeviceInfo, MesaVersionFromDriverStrings) {
+  EXPECT_EQ(mesa_version("Mesa 22.3.6 (LLVM 15.0.6)"), "Mesa 22.3.6");             // lavapipe's driverInfo
+  EXPECT_EQ(mesa_version("OpenGL ES 3.2 Mesa 25.0.7-2~bpo12+1"), "Mesa 25.0.7");  // GL_VERSION, backports
+  EXPECT_EQ(mesa_version("NVIDIA 535.104.05"), "");
+  EXPECT_EQ(mesa_version("Mesa Project"), "");  // EGL_VENDOR: no version
+}
+
+// The pass-description rules both backends apply before building anything (check_pass_desc).
+TEST(PassDesc, SharedChecksRefuseBadDescriptions) {
+  auto refused = [](const PassDesc& desc, ErrorKind kind, const std::string& part) {
+    try {
+      check_pass_desc(desc);
+      ADD_FAILURE() << "accepted; expected: " << part;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), kind) << e.what();
+      EXPECT_NE(std::string(e.what()).find(part), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("copy_input.frag"), std::string::npos) << e.what();
+    }
+  };
+  PassDesc desc;
+  desc.shader = test_shader(TestShader::CopyInput);
+  desc.texture_bindings = {1, 2};
+  EXPECT_NO_THROW(check_pass_desc(desc));
+  desc.texture_bindings = {0};  // the uniforms' slot, with or without uniforms
+  refused(desc, ErrorKind::Internal, "binding 0");
+  desc.texture_bindings = {1, 3, 1};
+  refused(desc, ErrorKind::Internal, "binding 1 is used twice");
+  desc.texture_bindings = {1, 2, 3, 4, 5, 6, 7, 8, 9};
+  refused(desc, ErrorKind::Constraint, "at most 8");
+  desc.texture_bindings = {1};
+  desc.uniform_vec4s = MOBIRT_MAX_PARAM_VEC4S + 1;
+  refused(desc, ErrorKind::Internal, "uniform vec4");
+  desc.uniform_vec4s = 1;
+  desc.specialization = {{MOBIRT_SPEC_PACKING, 0}, {MOBIRT_SPEC_PACKING, 1}};
+  refused(desc, ErrorKind::Internal, "set twice");
 }
 
 TEST_F(VulkanBackendTest, CopyRoundTripIsExact) {
@@ -160,26 +231,26 @@ TEST_F(VulkanBackendTest, BadSizesAreRefused) {
   EXPECT_THROW(backend->upload(TextureHandle{12345}, nullptr, 0), Error);
 }
 
-void expect_refused(Backend& backend, ShaderId shader, const std::string& rule) {
+void expect_refused(Backend& backend, const ShaderSource& shader, const std::string& rule) {
   PassDesc desc;
   desc.shader = shader;
   desc.uniform_vec4s = 1;
   try {
     backend.create_pass(desc);
-    ADD_FAILURE() << shader_name(shader) << " was accepted";
+    ADD_FAILURE() << shader.name << " was accepted";
   } catch (const Error& e) {
     EXPECT_EQ(e.kind(), ErrorKind::Constraint) << e.what();
     EXPECT_NE(std::string(e.what()).find(rule), std::string::npos) << e.what();
-    EXPECT_NE(std::string(e.what()).find(shader_name(shader)), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(shader.name), std::string::npos) << e.what();
     std::printf("refused: %s\n", e.what());
   }
 }
 
 TEST_F(VulkanBackendTest, ConstraintShadersAreRefused) {
   const long objects = vulkan_live_objects();
-  expect_refused(*backend, ShaderId::TestTwoOutputs, "writes 2 colour attachments");
-  expect_refused(*backend, ShaderId::TestStorageWrite, "storage buffers");
-  expect_refused(*backend, ShaderId::TestNineTextures, "samples 9 textures; at most 8");
+  expect_refused(*backend, test_shader(TestShader::TwoOutputs), "writes 2 colour attachments");
+  expect_refused(*backend, test_shader(TestShader::StorageWrite), "storage buffers");
+  expect_refused(*backend, test_shader(TestShader::NineTextures), "samples 9 textures; at most 8");
   EXPECT_EQ(vulkan_live_objects(), objects) << "a refused pass left Vulkan objects behind";
 }
 
@@ -199,7 +270,7 @@ TEST_F(VulkanBackendTest, SpinHonoursTheCap) {
   struct Case { uint32_t cap, second; bool odd_columns_skip_first; };
   auto spin = [&](const Case& c, std::vector<uint32_t>& out, PassTiming* first_run) {
     PassDesc desc;
-    desc.shader = ShaderId::TestSpin;
+    desc.shader = test_shader(TestShader::Spin);
     desc.specialization = {{MOBIRT_SPEC_MAX_STEPS, int32_t(c.cap)}, {16, int32_t(c.second)},
                            {17, c.odd_columns_skip_first ? 1 : 0}};
     desc.texture_bindings = {1};
@@ -281,7 +352,7 @@ TEST_F(VulkanBackendTest, ValidationErrorsThrow) {
   // copy_input.frag reads the uniform block, but this pass declares none: the pipeline layout
   // lacks binding 0, which the validation layer reports and the backend turns into an Error.
   PassDesc desc;
-  desc.shader = ShaderId::TestCopyInput;
+  desc.shader = test_shader(TestShader::CopyInput);
   desc.uniform_vec4s = 0;
   desc.texture_bindings = {1};
   const long objects = vulkan_live_objects();

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "backend/backend.h"
+#include "backend/vulkan/vulkan_backend.h"
 
 namespace mobirt::test {
 

@@ -13,11 +13,16 @@ std::string default_pipeline_cache_dir() {
   return "";
 }
 
-std::unique_ptr<Backend> create_backend(const std::string& name, const BackendOptions& options,
+std::unique_ptr<Backend> create_backend(const std::string& name, const VulkanOptions& options,
                                         const std::string& help) {
   if (name == "gles") return create_gles_backend(options);
   if (name == "vulkan") return create_vulkan_backend(options);
   cli::usage_error("--backend " + name + ": expected gles or vulkan", help);
+}
+
+std::unique_ptr<Backend> create_backend(const std::string& name, const BackendOptions& options,
+                                        const std::string& help) {
+  return create_backend(name, VulkanOptions{options}, help);
 }
 
 }  // namespace mobirt

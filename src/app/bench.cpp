@@ -188,7 +188,7 @@ struct BenchOptions {
   bool baseline = true;
   bool cpu = true;
   std::vector<std::string> backends = {"vulkan", "gles"};
-  BackendOptions backend_options;
+  VulkanOptions backend_options;  // the pipeline cache is Vulkan's
   RenderSettings settings;  // kd, stack, max_steps
 };
 

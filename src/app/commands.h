@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "backend/backend.h"
+#include "backend/vulkan/vulkan_backend.h"
 
 namespace mobirt {
 
@@ -15,6 +16,9 @@ namespace mobirt {
 std::string default_pipeline_cache_dir();
 
 // --backend gles|vulkan: the API the passes run on; `help` names where the option is described.
+// GLES takes the common part of the options; without VulkanOptions, Vulkan gets its defaults.
+std::unique_ptr<Backend> create_backend(const std::string& name, const VulkanOptions& options,
+                                        const std::string& help = "mobirt --help");
 std::unique_ptr<Backend> create_backend(const std::string& name, const BackendOptions& options,
                                         const std::string& help = "mobirt --help");
 

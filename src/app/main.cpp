@@ -72,6 +72,8 @@ int cmd_info(const std::vector<std::string>& args) {
   std::cout << "api:     " << info.api << "\n"
             << "device:  " << info.device << (info.is_software ? " (software)" : "") << "\n"
             << "driver:  " << info.driver << "\n"
+            << "version: " << info.driver_version << ", ray queries: "
+            << (info.ray_query ? "yes (VK_KHR_ray_query, VK_KHR_acceleration_structure)" : "no") << "\n"
             << "limits:\n";
   for (const std::string& line : info.limits) std::cout << "  " << line << "\n";
   return 0;

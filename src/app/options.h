@@ -13,6 +13,7 @@
 
 #include "app/scene_setup.h"
 #include "backend/backend.h"
+#include "backend/vulkan/vulkan_backend.h"
 #include "render/renderer.h"
 
 namespace CLI {
@@ -60,7 +61,7 @@ enum Command : unsigned { kRender = 1, kAccuracy = 2, kBench = 4, kInfo = 8 };
 // What the shared settings set: the renderer's settings, the backend, and the scene's edits.
 struct CommonOptions {
   RenderSettings settings;
-  BackendOptions backend;
+  VulkanOptions backend;  // with Vulkan's own: the pipeline cache (render, bench)
   std::string backend_name = "vulkan";  // --backend
   SceneEdits edits;                     // --light, --camera, --background
   std::optional<double> time;           // --time

@@ -1,5 +1,8 @@
 #include "backend/backend.h"
 
+#include <regex>
+#include <set>
+
 #include "core/error.h"
 #include "layout.h"
 
@@ -14,24 +17,37 @@ size_t texel_bytes(TexelFormat format) {
   throw Error(ErrorKind::Internal, "texel_bytes: unknown texel format " + std::to_string(int(format)));
 }
 
-const char* shader_name(ShaderId id) {
-  switch (id) {
-    case ShaderId::Traverse: return "trace.frag";
-    case ShaderId::Shade: return "shade.frag";
-    case ShaderId::TestTwoOutputs: return "test/two_outputs.frag";
-    case ShaderId::TestStorageWrite: return "test/storage_write.frag";
-    case ShaderId::TestNineTextures: return "test/nine_textures.frag";
-    case ShaderId::TestCopyInput: return "test/copy_input.frag";
-    case ShaderId::TestSpin: return "test/spin.frag";
-    case ShaderId::TestAtlasLookup: return "test/atlas_lookup.frag";
-    case ShaderId::TestNumerics: return "test/numerics.frag";
+void check_pass_desc(const PassDesc& desc) {
+  const std::string name = desc.shader.name();
+  if (desc.texture_bindings.size() > MOBIRT_MAX_SAMPLED_TEXTURES) {
+    throw Error(ErrorKind::Constraint, "pass " + name + " binds " + std::to_string(desc.texture_bindings.size()) +
+                                           " textures; at most " + std::to_string(MOBIRT_MAX_SAMPLED_TEXTURES) +
+                                           " are allowed (GL_MAX_TEXTURE_IMAGE_UNITS)");
   }
-  return "unknown shader";
+  if (desc.uniform_vec4s > MOBIRT_MAX_PARAM_VEC4S) {
+    throw Error(ErrorKind::Internal, "pass " + name + " asks for " + std::to_string(desc.uniform_vec4s) +
+                                         " uniform vec4; at most " + std::to_string(MOBIRT_MAX_PARAM_VEC4S));
+  }
+  // Binding 0 is the uniforms' on both APIs (both preludes declare it), whether the pass fills it or not.
+  std::set<uint32_t> used;
+  for (const uint32_t binding : desc.texture_bindings) {
+    if (binding == MOBIRT_BIND_TRACE_PARAMS || !used.insert(binding).second) {
+      throw Error(ErrorKind::Internal, "pass " + name + ": binding " + std::to_string(binding) +
+                                           " is used twice (binding 0 is the uniform block)");
+    }
+  }
+  std::set<uint32_t> constant_ids;
+  for (const Specialization& s : desc.specialization) {
+    if (!constant_ids.insert(s.id).second) {
+      throw Error(ErrorKind::Internal, "pass " + name + ": specialization constant " + std::to_string(s.id) +
+                                           " is set twice");
+    }
+  }
 }
 
 void check_run_pass_arguments(const PassDesc& desc, size_t textures, size_t uniform_floats, uint32_t width,
                               uint32_t count, size_t out_texels) {
-  const std::string name = shader_name(desc.shader);
+  const std::string name = desc.shader.name();
   if (textures != desc.texture_bindings.size()) {
     throw Error(ErrorKind::Internal, "pass " + name + " takes " + std::to_string(desc.texture_bindings.size()) +
                                          " textures, got " + std::to_string(textures));
@@ -46,6 +62,34 @@ void check_run_pass_arguments(const PassDesc& desc, size_t textures, size_t unif
     throw Error(ErrorKind::Internal, "pass " + name + ": output holds " + std::to_string(out_texels) +
                                          " texels, the pass writes " + std::to_string(count));
   }
+}
+
+uint32_t checked_target_height(const PassDesc& desc, uint32_t width, uint32_t count, uint32_t limit,
+                               const char* limit_name) {
+  const uint32_t height = (count + width - 1) / width;
+  if (width > limit || height > limit) {
+    throw Error(ErrorKind::BadInput, "pass " + std::string(desc.shader.name()) + ": " + std::to_string(count) +
+                                         " rays in rows of " + std::to_string(width) + " need a " +
+                                         std::to_string(width) + "x" + std::to_string(height) + " target, beyond " +
+                                         limit_name + " (" + std::to_string(limit) + ")");
+  }
+  return height;
+}
+
+PassTiming empty_pass_timing(double& pending_upload_ms, std::chrono::steady_clock::time_point wall_start) {
+  PassTiming timing;
+  timing.upload_ms = pending_upload_ms;
+  pending_upload_ms = 0.0;
+  timing.wall_ms = elapsed_ms(wall_start);
+  return timing;
+}
+
+std::string mesa_version(const std::string& text) {
+  // "Mesa" then a dotted version: "Mesa 25.0.7", "Mesa 22.3.6 (LLVM 15.0.6)", "Mesa 25.0.7-2~bpo12+1".
+  static const std::regex pattern(R"(\bMesa ([0-9]+(\.[0-9]+)+))");
+  std::smatch match;
+  if (!std::regex_search(text, match, pattern)) return {};
+  return "Mesa " + match[1].str();
 }
 
 }  // namespace mobirt

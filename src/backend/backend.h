@@ -11,6 +11,8 @@
 #include <string>
 #include <vector>
 
+#include "shader_ids.h"  // enum class ShaderId { Traverse, Shade }: generated from the shader list
+
 namespace mobirt {
 
 template <typename Tag>
@@ -25,20 +27,31 @@ using PassHandle = Handle<struct PassTag>;
 enum class TexelFormat { RGBA32F, R32F, RGBA8 };
 size_t texel_bytes(TexelFormat format);
 
-// The fragment shaders a pass can run. Test-only shaders exist to prove that the OpenGL ES 2.0
-// constraints are enforced when a pass is created.
-enum class ShaderId {
-  Traverse,
-  Shade,
-  TestTwoOutputs,     // writes two colour attachments: must be refused
-  TestStorageWrite,   // writes a storage buffer: must be refused
-  TestNineTextures,   // samples nine textures: must be refused
-  TestCopyInput,      // copies texture 1 to the output: plumbing tests
-  TestSpin,           // loops until the cap: watchdog tests
-  TestAtlasLookup,    // atlas.glsl's lookup for (uv, texture) per ray: atlas tests
-  TestNumerics,       // fp16 rounding, the ulp offset, the output packing against the CPU
+// A fragment shader as built into the binary: SPIR-V for Vulkan and GLSL ES 1.00 for OpenGL ES 2.0,
+// both generated from glsl/ at build time. Every shader is one line of the shader list in
+// CMakeLists.txt, which generates the registries: the production one (ShaderId, shader_source) and
+// the tests' own (tests only link it), so that test shaders never reach the renderer's enum.
+struct ShaderSource {
+  const char* name;                  // "trace.frag": errors name it
+  std::span<const uint32_t> spirv;   // glsl/<name> compiled for Vulkan 1.1
+  const char* es;                    // glsl/es/<name> with its includes expanded; nullptr: Vulkan only
 };
-const char* shader_name(ShaderId id);
+
+// shader_ids.h declares the production registry's lookup, generated with it:
+//   const ShaderSource& shader_source(ShaderId id);
+
+// The shader a pass runs: a production shader by id, or any other registered source (tests').
+class ShaderRef {
+ public:
+  // Implicit, so that `desc.shader = ShaderId::Shade` and `desc.shader = some_source` both read.
+  ShaderRef(ShaderId id) : source_(&shader_source(id)) {}
+  ShaderRef(const ShaderSource& source) : source_(&source) {}
+  const ShaderSource& source() const { return *source_; }
+  const char* name() const { return source_->name; }
+
+ private:
+  const ShaderSource* source_;
+};
 
 // Specialisation of a shader to a scene: Vulkan specialization constants, #defines on GLES.
 // Ids are listed in glsl/prelude_vk.glsl.
@@ -48,7 +61,7 @@ struct Specialization {
 };
 
 struct PassDesc {
-  ShaderId shader = ShaderId::Traverse;
+  ShaderRef shader = ShaderId::Traverse;
   std::vector<Specialization> specialization;
   uint32_t uniform_vec4s = 0;              // size of the vec4 uniform array at binding 0
   std::vector<uint32_t> texture_bindings;  // binding slot of each sampled texture, in order
@@ -67,7 +80,11 @@ struct DeviceInfo {
   std::string api;            // "Vulkan 1.3.239"
   std::string device;         // "llvmpipe (LLVM 15.0.6, 256 bits)"
   std::string driver;         // "llvmpipe / Mesa 22.3.6"
+  std::string driver_version; // "Mesa 25.0.7" (Mesa drivers), else the driver's own version string
   bool is_software = false;
+  // The driver's own ray tracing for a ray-query engine: VK_KHR_ray_query with
+  // VK_KHR_acceleration_structure (lavapipe from Mesa 25; never on OpenGL ES 2.0).
+  bool ray_query = false;
   std::vector<std::string> limits;  // "name: value" lines that matter to mobirt
 };
 
@@ -98,26 +115,54 @@ class Backend {
   virtual std::vector<std::string> take_debug_messages() = 0;
 };
 
+// A pass description checked the same way by every backend before it builds anything: at most
+// MOBIRT_MAX_SAMPLED_TEXTURES textures (Error(Constraint)), at most MOBIRT_MAX_PARAM_VEC4S uniform
+// vec4, no binding used twice and none at binding 0 (the uniforms' slot, on both APIs), no
+// specialization constant set twice (Error(Internal)). Errors name the shader.
+void check_pass_desc(const PassDesc& desc);
+
 // The arguments of Backend::run_pass checked against the pass, the same way by every backend:
 // throws Error(Internal) naming the pass when the texture count, the uniform size (at most the
 // pass's uniform_vec4s and MOBIRT_MAX_PARAM_VEC4S), the width or the output size is wrong.
 void check_run_pass_arguments(const PassDesc& desc, size_t textures, size_t uniform_floats, uint32_t width,
                               uint32_t count, size_t out_texels);
 
+// The target's height for `count` (> 0) rays in rows of `width`; Error(BadInput) naming the pass
+// when a side exceeds the device's `limit` texels (`limit_name`: "maxImageDimension2D", ...).
+uint32_t checked_target_height(const PassDesc& desc, uint32_t width, uint32_t count, uint32_t limit,
+                               const char* limit_name);
+
+// The start of Backend::run_pass, the same on every backend: the arguments checked
+// (check_run_pass_arguments), each texture handle looked up into `bound` (an unknown one throws,
+// even for an empty pass), and the target's height (checked_target_height); 0 for an empty pass.
+template <typename Texture, typename Lookup>
+uint32_t start_run_pass(const PassDesc& desc, std::span<const TextureHandle> textures, size_t uniform_floats,
+                        uint32_t width, uint32_t count, size_t out_texels, uint32_t limit, const char* limit_name,
+                        Lookup&& lookup, std::vector<Texture*>& bound) {
+  check_run_pass_arguments(desc, textures.size(), uniform_floats, width, count, out_texels);
+  bound.clear();
+  for (const TextureHandle t : textures) bound.push_back(&lookup(t));
+  return count == 0 ? 0 : checked_target_height(desc, width, count, limit, limit_name);
+}
+
+// An empty pass's timing: the uploads since the last pass, now taken, and the call's wall time.
+PassTiming empty_pass_timing(double& pending_upload_ms, std::chrono::steady_clock::time_point wall_start);
+
+// What every backend takes. Vulkan-only settings are VulkanOptions (backend/vulkan/vulkan_backend.h).
 struct BackendOptions {
   std::string device;        // Vulkan: index or a substring of the device name; empty = lavapipe
-  bool validation = false;   // Khronos validation layer; messages make the backend throw
-  bool sync_validation = false;  // with validation: also the layer's synchronization validation
-  // Vulkan: a folder where the pipeline cache is kept between runs (one file per device and driver,
-  // named by the cache UUID), so that a known scene's first frame does not compile again. Empty:
-  // no cache on disk.
-  std::string pipeline_cache_dir;
+  bool validation = false;   // Vulkan: Khronos validation layer (messages make it throw); GLES: KHR_debug
 };
 
+// Vulkan with the default Vulkan-only settings (VulkanOptions for the others).
 std::unique_ptr<Backend> create_vulkan_backend(const BackendOptions& options);
 // OpenGL ES 2.0 through EGL without a window (Mesa's surfaceless platform or an EGL device);
 // options.validation turns KHR_debug output on. Throws Error(Unsupported) naming what is missing.
 std::unique_ptr<Backend> create_gles_backend(const BackendOptions& options);
+
+// "Mesa 25.0.7" from a driver string that names Mesa ("OpenGL ES 3.2 Mesa 25.0.7", "Mesa 22.3.6
+// (LLVM 15.0.6)"); empty when it names none.
+std::string mesa_version(const std::string& text);
 
 // Milliseconds since `start`, for stage timings on the CPU clock.
 inline double elapsed_ms(std::chrono::steady_clock::time_point start) {

@@ -26,16 +26,10 @@
 #include "core/error.h"
 #include "layout.h"
 
-// GLSL ES 1.00 sources, includes expanded at build time (build/gles_shaders/<name>.h).
+// The full-screen triangle's GLSL ES 1.00 source (build/gles_shaders/; a pass's own comes with its
+// PassDesc) and the binding and #define tables generated from glsl/layout.h and prelude_vk.glsl.
 #include "es_fullscreen_vert.h"
-#include "es_shade_frag.h"
-#include "es_test_atlas_lookup_frag.h"
-#include "es_test_copy_input_frag.h"
-#include "es_test_nine_textures_frag.h"
-#include "es_test_numerics_frag.h"
-#include "es_test_storage_write_frag.h"
-#include "es_test_two_outputs_frag.h"
-#include "es_trace_frag.h"
+#include "gles_layout_tables.h"
 
 namespace mobirt {
 
@@ -94,57 +88,23 @@ GLint gl_int(GLenum name) {
   return value;
 }
 
-const char* es_source(ShaderId id) {
-  switch (id) {
-    case ShaderId::Traverse: return es_trace_frag;
-    case ShaderId::Shade: return es_shade_frag;
-    case ShaderId::TestTwoOutputs: return es_test_two_outputs_frag;
-    case ShaderId::TestStorageWrite: return es_test_storage_write_frag;
-    case ShaderId::TestNineTextures: return es_test_nine_textures_frag;
-    case ShaderId::TestCopyInput: return es_test_copy_input_frag;
-    case ShaderId::TestAtlasLookup: return es_test_atlas_lookup_frag;
-    case ShaderId::TestNumerics: return es_test_numerics_frag;
-    case ShaderId::TestSpin: break;  // needs bit operations and test-only constants: Vulkan only
+// Specialization constant ids (glsl/layout.h) and the #define each becomes on GLES.
+const char* define_name(uint32_t id) {
+  for (const gles::SpecDefine& d : gles::kSpecDefines) {
+    if (d.id == id) return d.define;
   }
   return nullptr;
 }
 
-// Specialization constant ids (glsl/layout.h) and the #define each becomes on GLES.
-const char* define_name(uint32_t id) {
-  switch (id) {
-    case MOBIRT_SPEC_LIGHT_COUNT: return "LIGHT_COUNT";
-    case MOBIRT_SPEC_STACK_DEPTH: return "STACK_DEPTH";
-    case MOBIRT_SPEC_MAX_STEPS: return "MAX_STEPS";
-    case MOBIRT_SPEC_PACKING: return "PACKING";
-    case MOBIRT_SPEC_TEXTURE_COUNT: return "TEXTURE_COUNT";
-    case MOBIRT_SPEC_INTERSECT: return "INTERSECT";
-    case MOBIRT_SPEC_PRECISION: return "PRECISION";
-    case MOBIRT_SPEC_OFFSET: return "OFFSET_MODE";
-    case MOBIRT_SPEC_COLOUR: return "COLOUR";
-    default: return nullptr;
-  }
-}
-
 // The binding slot a SAMPLER(slot, name) line names: a number or a MOBIRT_BIND_* name.
 int binding_value(const std::string& slot) {
-  static const std::map<std::string, int> names = {
-      {"MOBIRT_BIND_NODES", MOBIRT_BIND_NODES},
-      {"MOBIRT_BIND_PRIM_LIST", MOBIRT_BIND_PRIM_LIST},
-      {"MOBIRT_BIND_TRIANGLES", MOBIRT_BIND_TRIANGLES},
-      {"MOBIRT_BIND_RAY_ORIGIN", MOBIRT_BIND_RAY_ORIGIN},
-      {"MOBIRT_BIND_RAY_DIRECTION", MOBIRT_BIND_RAY_DIRECTION},
-      {"MOBIRT_BIND_HIT_POSITION", MOBIRT_BIND_HIT_POSITION},
-      {"MOBIRT_BIND_HIT_NORMAL", MOBIRT_BIND_HIT_NORMAL},
-      {"MOBIRT_BIND_MATERIALS", MOBIRT_BIND_MATERIALS},
-      {"MOBIRT_BIND_SHADE_RAY_DIRECTION", MOBIRT_BIND_SHADE_RAY_DIRECTION},
-      {"MOBIRT_BIND_HIT_TEXCOORD", MOBIRT_BIND_HIT_TEXCOORD},
-      {"MOBIRT_BIND_ATLAS", MOBIRT_BIND_ATLAS},
-  };
   if (!slot.empty() && std::all_of(slot.begin(), slot.end(), [](char c) { return c >= '0' && c <= '9'; })) {
     return std::atoi(slot.c_str());
   }
-  const auto it = names.find(slot);
-  return it == names.end() ? -1 : it->second;
+  for (const gles::BindingName& b : gles::kBindingNames) {
+    if (slot == b.name) return b.slot;
+  }
+  return -1;
 }
 
 std::string strip_comments(const std::string& source) {
@@ -455,6 +415,9 @@ GlesBackend::GlesBackend(const BackendOptions& options) {
     info_.device = renderer;
     info_.driver = gl_string(GL_VENDOR) + " / EGL " + display_->version + " (" + display_->vendor + ", " +
                    display_->platform + ")";
+    const std::string mesa = mesa_version(info_.api);  // GL_VERSION "OpenGL ES 3.2 Mesa 25.0.7"
+    info_.driver_version = mesa.empty() ? info_.api : mesa;
+    info_.ray_query = false;  // no ray tracing in OpenGL ES
     info_.is_software = renderer.find("llvmpipe") != std::string::npos ||
                         renderer.find("softpipe") != std::string::npos || renderer.find("swrast") != std::string::npos;
     auto add = [&](const std::string& name, const std::string& value) { info_.limits.push_back(name + ": " + value); };
@@ -643,8 +606,8 @@ void GlesBackend::destroy(TextureHandle handle) {
 
 PassHandle GlesBackend::create_pass(const PassDesc& desc) {
   current();
-  const std::string name = shader_name(desc.shader);
-  const char* embedded = es_source(desc.shader);
+  const std::string name = desc.shader.name();
+  const char* embedded = desc.shader.source().es;
   if (!embedded) {
     throw Error(ErrorKind::Unsupported, "shader " + name + " has no GLSL ES 1.00 version (it needs bit operations): "
                                         "Vulkan only");
@@ -660,34 +623,15 @@ PassHandle GlesBackend::create_pass(const PassDesc& desc) {
     throw Error(ErrorKind::Constraint, "shader " + name + " uses storage resources (" + es.storage.front() +
                                            "); OpenGL ES 2.0 shaders cannot write storage buffers or images");
   }
-  if (desc.texture_bindings.size() > MOBIRT_MAX_SAMPLED_TEXTURES) {
-    throw Error(ErrorKind::Constraint, "pass " + name + " binds " + std::to_string(desc.texture_bindings.size()) +
-                                           " textures; at most " + std::to_string(MOBIRT_MAX_SAMPLED_TEXTURES) +
-                                           " are allowed (GL_MAX_TEXTURE_IMAGE_UNITS)");
-  }
-  if (desc.uniform_vec4s > MOBIRT_MAX_PARAM_VEC4S) {
-    throw Error(ErrorKind::Internal, "pass " + name + " asks for " + std::to_string(desc.uniform_vec4s) +
-                                         " uniform vec4; at most " + std::to_string(MOBIRT_MAX_PARAM_VEC4S));
-  }
-  std::set<uint32_t> used;
-  for (const uint32_t binding : desc.texture_bindings) {
-    if (binding == MOBIRT_BIND_TRACE_PARAMS || !used.insert(binding).second) {
-      throw Error(ErrorKind::Internal, "pass " + name + ": binding " + std::to_string(binding) +
-                                           " is used twice (binding 0 is the uniforms)");
-    }
-  }
+  check_pass_desc(desc);
 
   // Specialisation: #defines right after the #version line.
   std::string defines;
-  std::set<uint32_t> ids;
   for (const Specialization& s : desc.specialization) {
     const char* define = define_name(s.id);
     if (!define) {
       throw Error(ErrorKind::Internal, "pass " + name + ": specialization constant " + std::to_string(s.id) +
                                            " has no #define on GLES");
-    }
-    if (!ids.insert(s.id).second) {
-      throw Error(ErrorKind::Internal, "pass " + name + ": specialization constant " + std::to_string(s.id) + " is set twice");
     }
     defines += std::string("#define ") + define + " " + std::to_string(s.value) + "\n";
   }
@@ -815,24 +759,14 @@ PassTiming GlesBackend::run_pass(PassHandle handle, std::span<const TextureHandl
   const auto wall_start = Clock::now();
   current();
   Pass& pass = pass_ref(handle);
-  const std::string name = shader_name(pass.desc.shader);
+  std::vector<Texture*> bound;
+  const uint32_t height = start_run_pass(
+      pass.desc, textures, uniforms.size(), width, count, out.size(), uint32_t(max_texture_size_),
+      "GL_MAX_TEXTURE_SIZE", [&](TextureHandle t) -> Texture& { return texture_ref(t); }, bound);
+  if (height == 0) return empty_pass_timing(pending_upload_ms_, wall_start);
+  const std::string name = pass.desc.shader.name();
   PassTiming timing;
   timing.upload_ms = pending_upload_ms_;
-  check_run_pass_arguments(pass.desc, textures.size(), uniforms.size(), width, count, out.size());
-  std::vector<Texture*> bound;
-  for (const TextureHandle t : textures) bound.push_back(&texture_ref(t));
-  if (count == 0) {
-    pending_upload_ms_ = 0.0;
-    timing.wall_ms = elapsed_ms(wall_start);
-    return timing;
-  }
-  const uint32_t height = (count + width - 1) / width;
-  if (width > uint32_t(max_texture_size_) || height > uint32_t(max_texture_size_)) {
-    throw Error(ErrorKind::BadInput, "pass " + name + ": " + std::to_string(count) + " rays in rows of " +
-                                         std::to_string(width) + " need a " + std::to_string(width) + "x" +
-                                         std::to_string(height) + " target, beyond GL_MAX_TEXTURE_SIZE (" +
-                                         std::to_string(max_texture_size_) + ")");
-  }
   ensure_target(width, height);
 
   glUseProgram(pass.program);

@@ -39,10 +39,20 @@ std::string result_name(VkResult result) {
   }
 }
 
-void check(VkResult result, const char* call) {
-  if (result != VK_SUCCESS) {
-    throw Error(ErrorKind::Internal, std::string(call) + " failed: " + result_name(result));
+void check(VkResult result, const char* call, const char* file, int line) {
+  if (result == VK_SUCCESS) return;
+  std::string name(call);
+  name = name.substr(0, name.find('('));
+  while (!name.empty() && name.back() == ' ') name.pop_back();
+  // The place from the source tree's root ("src/backend/vulkan/vk_device.cpp:120"), else the file's name.
+  std::string place(file);
+  if (const size_t src = place.rfind("/src/"); src != std::string::npos) {
+    place.erase(0, src + 1);
+  } else if (const size_t slash = place.rfind('/'); slash != std::string::npos) {
+    place.erase(0, slash + 1);
   }
+  throw Error(ErrorKind::Internal,
+              name + " failed (" + place + ":" + std::to_string(line) + "): " + result_name(result));
 }
 
 std::atomic<long>& live_object_counter() {

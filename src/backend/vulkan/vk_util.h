@@ -14,8 +14,20 @@ namespace mobirt::vk {
 // "VK_ERROR_DEVICE_LOST", ... ("VkResult(-13)" for codes this header does not know).
 std::string result_name(VkResult result);
 
-// Throws Error(Internal, "<call> failed: VK_ERROR_...") unless result is VK_SUCCESS.
-void check(VkResult result, const char* call);
+// Throws Error(Internal, "vkCreateImage failed (src/backend/vulkan/vk_resources.cpp:42):
+// VK_ERROR_OUT_OF_DEVICE_MEMORY") unless result is VK_SUCCESS. `call` is the call's text: its name
+// is what comes before the first '('.
+void check(VkResult result, const char* call, const char* file, int line);
+
+}  // namespace mobirt::vk
+
+// VK_CHECK(vkCreateFence(device, &info, nullptr, &fence)): the call, checked, its name and
+// place in the error (../shared/STYLE.md). VK_CHECK_RESULT(result, "vkWaitForFences") for a result
+// in hand. The Vulkan headers define no VK_CHECK; every use is in src/backend/vulkan/.
+#define VK_CHECK(call) ::mobirt::vk::check((call), #call, __FILE__, __LINE__)
+#define VK_CHECK_RESULT(result, name) ::mobirt::vk::check((result), name, __FILE__, __LINE__)
+
+namespace mobirt::vk {
 
 // Live Vulkan objects owned through Unique, over every backend in the process (leak tests).
 std::atomic<long>& live_object_counter();

@@ -1,0 +1,300 @@
+#include "backend/vulkan/vk_pipeline.h"
+
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <unistd.h>
+
+#include "backend/vulkan/vk_resources.h"
+#include "core/error.h"
+#include "layout.h"
+
+// SPIR-V of the full-screen triangle, generated at build time from glsl/ (build/spirv/<name>.h).
+#include "fullscreen.vert.h"
+
+namespace mobirt::vk {
+
+namespace {
+
+// "<dir>/pipelines-<cache UUID in hex>.bin"; empty without a folder.
+std::string cache_file_name(const std::string& dir, const VkPhysicalDeviceProperties& properties) {
+  if (dir.empty()) return {};
+  std::string name = "pipelines-";
+  char hex[3];
+  for (uint8_t byte : properties.pipelineCacheUUID) {
+    std::snprintf(hex, sizeof(hex), "%02x", byte);
+    name.append(hex);
+  }
+  return (std::filesystem::path(dir) / name.append(".bin")).string();
+}
+
+}  // namespace
+
+Pipelines::Pipelines(const Device& device, const std::string& cache_dir)
+    : device_(device), cache_file_(cache_file_name(cache_dir, device.properties())) {
+  const VkDevice vk_device = device.handle();
+  // Shaders read texels with texelFetch: the sampler's filtering never applies, but a sampler is
+  // part of a combined image sampler, so one immutable NEAREST / CLAMP_TO_EDGE sampler serves all.
+  VkSamplerCreateInfo sampler_info{VK_STRUCTURE_TYPE_SAMPLER_CREATE_INFO};
+  sampler_info.magFilter = VK_FILTER_NEAREST;
+  sampler_info.minFilter = VK_FILTER_NEAREST;
+  sampler_info.mipmapMode = VK_SAMPLER_MIPMAP_MODE_NEAREST;
+  sampler_info.addressModeU = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
+  sampler_info.addressModeV = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
+  sampler_info.addressModeW = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
+  sampler_info.maxLod = 0.0f;
+  VkSampler sampler = VK_NULL_HANDLE;
+  VK_CHECK(vkCreateSampler(vk_device, &sampler_info, nullptr, &sampler));
+  sampler_ = Sampler(vk_device, sampler);
+
+  // One render pass for every pipeline: one RGBA8 colour attachment, contents not loaded (every
+  // texel of the render area is written), stored and left ready for the copy to the host.
+  VkAttachmentDescription attachment{};
+  attachment.format = kTargetFormat;
+  attachment.samples = VK_SAMPLE_COUNT_1_BIT;
+  attachment.loadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
+  attachment.storeOp = VK_ATTACHMENT_STORE_OP_STORE;
+  attachment.stencilLoadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
+  attachment.stencilStoreOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
+  attachment.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+  attachment.finalLayout = VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL;
+  VkAttachmentReference color{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
+  VkSubpassDescription subpass{};
+  subpass.pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
+  subpass.colorAttachmentCount = 1;
+  subpass.pColorAttachments = &color;
+  VkSubpassDependency dependencies[2]{};
+  // The previous pass's copy read the image before this pass overwrites it (write after read).
+  dependencies[0].srcSubpass = VK_SUBPASS_EXTERNAL;
+  dependencies[0].dstSubpass = 0;
+  dependencies[0].srcStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT;
+  dependencies[0].dstStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  dependencies[0].srcAccessMask = 0;
+  dependencies[0].dstAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  // The copy to the read-back buffer reads what the pass wrote.
+  dependencies[1].srcSubpass = 0;
+  dependencies[1].dstSubpass = VK_SUBPASS_EXTERNAL;
+  dependencies[1].srcStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  dependencies[1].dstStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT;
+  dependencies[1].srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  dependencies[1].dstAccessMask = VK_ACCESS_TRANSFER_READ_BIT;
+  VkRenderPassCreateInfo render_pass_info{VK_STRUCTURE_TYPE_RENDER_PASS_CREATE_INFO};
+  render_pass_info.attachmentCount = 1;
+  render_pass_info.pAttachments = &attachment;
+  render_pass_info.subpassCount = 1;
+  render_pass_info.pSubpasses = &subpass;
+  render_pass_info.dependencyCount = 2;
+  render_pass_info.pDependencies = dependencies;
+  VkRenderPass render_pass = VK_NULL_HANDLE;
+  VK_CHECK(vkCreateRenderPass(vk_device, &render_pass_info, nullptr, &render_pass));
+  render_pass_ = RenderPass(vk_device, render_pass);
+
+  VkShaderModuleCreateInfo module_info{VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO};
+  module_info.codeSize = sizeof(spirv_fullscreen_vert);
+  module_info.pCode = spirv_fullscreen_vert;
+  VkShaderModule module = VK_NULL_HANDLE;
+  VK_CHECK(vkCreateShaderModule(vk_device, &module_info, nullptr, &module));
+  vertex_shader_ = ShaderModule(vk_device, module);
+
+  VkPipelineCacheCreateInfo cache_info{VK_STRUCTURE_TYPE_PIPELINE_CACHE_CREATE_INFO};
+  const std::vector<char> cached = load_cache();
+  cache_info.initialDataSize = cached.size();
+  cache_info.pInitialData = cached.empty() ? nullptr : cached.data();
+  VkPipelineCache cache = VK_NULL_HANDLE;
+  VK_CHECK(vkCreatePipelineCache(vk_device, &cache_info, nullptr, &cache));
+  cache_ = PipelineCache(vk_device, cache);
+}
+
+std::vector<char> Pipelines::load_cache() const {
+  const VkPhysicalDeviceProperties& properties = device_.properties();
+  std::vector<char> data;
+  if (cache_file_.empty()) return data;
+  std::ifstream in(cache_file_, std::ios::binary);
+  if (!in) return data;
+  data.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  // The header (VkPipelineCacheHeaderVersionOne) must name this device and driver; anything else
+  // is ignored rather than handed to the driver.
+  VkPipelineCacheHeaderVersionOne header{};
+  if (data.size() < sizeof(header)) return {};
+  std::memcpy(&header, data.data(), sizeof(header));
+  if (header.headerVersion != VK_PIPELINE_CACHE_HEADER_VERSION_ONE || header.vendorID != properties.vendorID ||
+      header.deviceID != properties.deviceID ||
+      std::memcmp(header.pipelineCacheUUID, properties.pipelineCacheUUID, VK_UUID_SIZE) != 0) {
+    return {};
+  }
+  return data;
+}
+
+void Pipelines::save_cache() const {
+  if (cache_file_.empty() || !cache_.get()) return;
+  size_t size = 0;
+  if (vkGetPipelineCacheData(device_.handle(), cache_.get(), &size, nullptr) != VK_SUCCESS || size == 0) return;
+  std::vector<char> data(size);
+  if (vkGetPipelineCacheData(device_.handle(), cache_.get(), &size, data.data()) != VK_SUCCESS) return;
+  // Written whole or not at all: a temporary file renamed into place.
+  std::error_code ec;
+  const std::filesystem::path target(cache_file_);
+  std::filesystem::create_directories(target.parent_path(), ec);
+  std::string temp_name = cache_file_;
+  temp_name.append(".tmp").append(std::to_string(::getpid()));
+  {
+    std::ofstream out(temp_name, std::ios::binary);
+    out.write(data.data(), std::streamsize(size));
+    if (!out) {
+      std::filesystem::remove(temp_name, ec);
+      return;
+    }
+  }
+  std::filesystem::rename(temp_name, target, ec);
+  if (ec) std::filesystem::remove(temp_name, ec);
+}
+
+Pass Pipelines::create_pass(const PassDesc& desc) const {
+  const VkDevice vk_device = device_.handle();
+  const std::span<const uint32_t> code = desc.shader.source().spirv;
+  Pass pass;
+  pass.desc = desc;
+
+  // Descriptor set layout: the uniform block, then one combined image sampler per texture.
+  const VkSampler immutable_sampler = sampler_.get();
+  std::vector<VkDescriptorSetLayoutBinding> bindings;
+  if (desc.uniform_vec4s > 0) {
+    bindings.push_back({MOBIRT_BIND_TRACE_PARAMS, VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr});
+  }
+  for (const uint32_t binding : desc.texture_bindings) {
+    bindings.push_back({binding, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1, VK_SHADER_STAGE_FRAGMENT_BIT,
+                        &immutable_sampler});
+  }
+  VkDescriptorSetLayoutCreateInfo set_info{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO};
+  set_info.bindingCount = uint32_t(bindings.size());
+  set_info.pBindings = bindings.data();
+  VkDescriptorSetLayout set_layout = VK_NULL_HANDLE;
+  VK_CHECK(vkCreateDescriptorSetLayout(vk_device, &set_info, nullptr, &set_layout));
+  pass.set_layout = DescriptorSetLayout(vk_device, set_layout);
+
+  VkPipelineLayoutCreateInfo layout_info{VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO};
+  layout_info.setLayoutCount = 1;
+  layout_info.pSetLayouts = &set_layout;
+  VkPipelineLayout pipeline_layout = VK_NULL_HANDLE;
+  VK_CHECK(vkCreatePipelineLayout(vk_device, &layout_info, nullptr, &pipeline_layout));
+  pass.pipeline_layout = PipelineLayout(vk_device, pipeline_layout);
+
+  // The uniform block: always the full MOBIRT_MAX_PARAM_VEC4S array the shaders declare.
+  if (desc.uniform_vec4s > 0) {
+    HostBuffer ubo = create_host_buffer(device_, VkDeviceSize(MOBIRT_MAX_PARAM_VEC4S) * 16, VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT, false);
+    if (!ubo.coherent) throw Error(ErrorKind::Unsupported, "the Vulkan device has no host-coherent memory for uniforms");
+    pass.uniforms = static_cast<float*>(ubo.mapped);
+    std::memset(pass.uniforms, 0, size_t(MOBIRT_MAX_PARAM_VEC4S) * 16);
+    pass.uniform_memory = std::move(ubo.memory);
+    pass.uniform_buffer = std::move(ubo.buffer);
+  }
+
+  if (!bindings.empty()) {
+    std::vector<VkDescriptorPoolSize> sizes;
+    if (desc.uniform_vec4s > 0) sizes.push_back({VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1});
+    if (!desc.texture_bindings.empty()) {
+      sizes.push_back({VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, uint32_t(desc.texture_bindings.size())});
+    }
+    VkDescriptorPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
+    pool_info.maxSets = 1;
+    pool_info.poolSizeCount = uint32_t(sizes.size());
+    pool_info.pPoolSizes = sizes.data();
+    VkDescriptorPool pool = VK_NULL_HANDLE;
+    VK_CHECK(vkCreateDescriptorPool(vk_device, &pool_info, nullptr, &pool));
+    pass.descriptor_pool = DescriptorPool(vk_device, pool);
+    VkDescriptorSetAllocateInfo alloc{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO};
+    alloc.descriptorPool = pool;
+    alloc.descriptorSetCount = 1;
+    alloc.pSetLayouts = &set_layout;
+    VK_CHECK(vkAllocateDescriptorSets(vk_device, &alloc, &pass.descriptor_set));
+    if (desc.uniform_vec4s > 0) {
+      VkDescriptorBufferInfo buffer_info{pass.uniform_buffer.get(), 0, VK_WHOLE_SIZE};
+      VkWriteDescriptorSet write{VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
+      write.dstSet = pass.descriptor_set;
+      write.dstBinding = MOBIRT_BIND_TRACE_PARAMS;
+      write.descriptorCount = 1;
+      write.descriptorType = VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER;
+      write.pBufferInfo = &buffer_info;
+      vkUpdateDescriptorSets(vk_device, 1, &write, 0, nullptr);
+    }
+  }
+
+  // The pipeline: a full-screen triangle, the specialised fragment shader, dynamic viewport.
+  VkShaderModuleCreateInfo module_info{VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO};
+  module_info.codeSize = code.size_bytes();
+  module_info.pCode = code.data();
+  VkShaderModule module_handle = VK_NULL_HANDLE;
+  VK_CHECK(vkCreateShaderModule(vk_device, &module_info, nullptr, &module_handle));
+  const ShaderModule fragment_module(vk_device, module_handle);  // only needed until the pipeline exists
+
+  std::vector<VkSpecializationMapEntry> entries;
+  std::vector<int32_t> values;
+  for (const Specialization& s : desc.specialization) {
+    entries.push_back({s.id, uint32_t(values.size() * sizeof(int32_t)), sizeof(int32_t)});
+    values.push_back(s.value);
+  }
+  VkSpecializationInfo specialization{uint32_t(entries.size()), entries.data(), values.size() * sizeof(int32_t),
+                                      values.data()};
+
+  VkPipelineShaderStageCreateInfo stages[2]{};
+  stages[0].sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
+  stages[0].stage = VK_SHADER_STAGE_VERTEX_BIT;
+  stages[0].module = vertex_shader_.get();
+  stages[0].pName = "main";
+  stages[1].sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
+  stages[1].stage = VK_SHADER_STAGE_FRAGMENT_BIT;
+  stages[1].module = fragment_module.get();
+  stages[1].pName = "main";
+  stages[1].pSpecializationInfo = entries.empty() ? nullptr : &specialization;
+
+  VkPipelineVertexInputStateCreateInfo vertex_input{VK_STRUCTURE_TYPE_PIPELINE_VERTEX_INPUT_STATE_CREATE_INFO};
+  VkPipelineInputAssemblyStateCreateInfo assembly{VK_STRUCTURE_TYPE_PIPELINE_INPUT_ASSEMBLY_STATE_CREATE_INFO};
+  assembly.topology = VK_PRIMITIVE_TOPOLOGY_TRIANGLE_LIST;
+  VkPipelineViewportStateCreateInfo viewport{VK_STRUCTURE_TYPE_PIPELINE_VIEWPORT_STATE_CREATE_INFO};
+  viewport.viewportCount = 1;
+  viewport.scissorCount = 1;
+  VkPipelineRasterizationStateCreateInfo raster{VK_STRUCTURE_TYPE_PIPELINE_RASTERIZATION_STATE_CREATE_INFO};
+  raster.polygonMode = VK_POLYGON_MODE_FILL;
+  raster.cullMode = VK_CULL_MODE_NONE;
+  raster.frontFace = VK_FRONT_FACE_COUNTER_CLOCKWISE;
+  raster.lineWidth = 1.0f;
+  VkPipelineMultisampleStateCreateInfo multisample{VK_STRUCTURE_TYPE_PIPELINE_MULTISAMPLE_STATE_CREATE_INFO};
+  multisample.rasterizationSamples = VK_SAMPLE_COUNT_1_BIT;
+  VkPipelineColorBlendAttachmentState blend_attachment{};
+  blend_attachment.blendEnable = VK_FALSE;
+  blend_attachment.colorWriteMask =
+      VK_COLOR_COMPONENT_R_BIT | VK_COLOR_COMPONENT_G_BIT | VK_COLOR_COMPONENT_B_BIT | VK_COLOR_COMPONENT_A_BIT;
+  VkPipelineColorBlendStateCreateInfo blend{VK_STRUCTURE_TYPE_PIPELINE_COLOR_BLEND_STATE_CREATE_INFO};
+  blend.attachmentCount = 1;
+  blend.pAttachments = &blend_attachment;
+  const VkDynamicState dynamic_states[] = {VK_DYNAMIC_STATE_VIEWPORT, VK_DYNAMIC_STATE_SCISSOR};
+  VkPipelineDynamicStateCreateInfo dynamic{VK_STRUCTURE_TYPE_PIPELINE_DYNAMIC_STATE_CREATE_INFO};
+  dynamic.dynamicStateCount = 2;
+  dynamic.pDynamicStates = dynamic_states;
+
+  VkGraphicsPipelineCreateInfo pipeline_info{VK_STRUCTURE_TYPE_GRAPHICS_PIPELINE_CREATE_INFO};
+  pipeline_info.stageCount = 2;
+  pipeline_info.pStages = stages;
+  pipeline_info.pVertexInputState = &vertex_input;
+  pipeline_info.pInputAssemblyState = &assembly;
+  pipeline_info.pViewportState = &viewport;
+  pipeline_info.pRasterizationState = &raster;
+  pipeline_info.pMultisampleState = &multisample;
+  pipeline_info.pColorBlendState = &blend;
+  pipeline_info.pDynamicState = &dynamic;
+  pipeline_info.layout = pipeline_layout;
+  pipeline_info.renderPass = render_pass_.get();
+  pipeline_info.subpass = 0;
+  VkPipeline pipeline = VK_NULL_HANDLE;
+  VK_CHECK(vkCreateGraphicsPipelines(vk_device, cache_.get(), 1, &pipeline_info, nullptr, &pipeline));
+  pass.pipeline = Pipeline(vk_device, pipeline);
+  return pass;
+}
+
+}  // namespace mobirt::vk

@@ -1,0 +1,53 @@
+// Pipelines of the Vulkan backend: what every pass's pipeline shares (the render pass of one RGBA8
+// attachment, the full-screen triangle's vertex shader, the immutable sampler, the pipeline cache
+// and its file on disk), and one pass's descriptor set, uniform block and specialised graphics
+// pipeline. Private to src/backend/vulkan/.
+#pragma once
+
+#include <vulkan/vulkan.h>
+
+#include <string>
+#include <vector>
+
+#include "backend/backend.h"
+#include "backend/vulkan/vk_device.h"
+#include "backend/vulkan/vk_util.h"
+
+namespace mobirt::vk {
+
+struct Pass {
+  PassDesc desc;
+  DescriptorSetLayout set_layout;
+  PipelineLayout pipeline_layout;
+  Pipeline pipeline;
+  Memory uniform_memory;
+  Buffer uniform_buffer;
+  float* uniforms = nullptr;  // persistently mapped, MOBIRT_MAX_PARAM_VEC4S vec4
+  DescriptorPool descriptor_pool;
+  VkDescriptorSet descriptor_set = VK_NULL_HANDLE;  // freed with the pool
+};
+
+class Pipelines {
+ public:
+  // cache_dir: VulkanOptions::pipeline_cache_dir (empty: no cache on disk).
+  Pipelines(const Device& device, const std::string& cache_dir);
+
+  // The pass's objects for desc, already checked (check_es2_constraints, check_pass_desc).
+  Pass create_pass(const PassDesc& desc) const;
+  VkRenderPass render_pass() const { return render_pass_.get(); }
+  // Writes the pipeline cache to its file, whole or not at all; never throws (a cache is an
+  // optimisation, so a folder that cannot be written only costs the next run its compile time).
+  void save_cache() const;
+
+ private:
+  std::vector<char> load_cache() const;
+
+  const Device& device_;
+  std::string cache_file_;  // where the pipeline cache is saved, empty = nowhere
+  Sampler sampler_;
+  RenderPass render_pass_;
+  ShaderModule vertex_shader_;
+  PipelineCache cache_;
+};
+
+}  // namespace mobirt::vk
