@@ -3,6 +3,9 @@
 // toaster scene's primary rays at the paper's 400x240, with its lights: the texels are what the
 // GPU would return (closest hit and shadow mask, computed once on the CPU before timing), so the
 // batch has the scene's real mix of hits, misses and shadow bits.
+// OrderRays/fish/<coherent>: packing the fish's first secondary generation (mirror and refracted
+// rays of its glass, 400x240 primary rays) for the traversal pass: 1 = the coherent order
+// (raytree/ray_order.h: sort, then SIMD tiles), 0 = the SIMD tiles alone; the sort's cost.
 #include <benchmark/benchmark.h>
 
 #include <string>
@@ -14,7 +17,9 @@
 #include "core/camera.h"
 #include "raytree/hits.h"
 #include "raytree/packing.h"
+#include "raytree/ray_order.h"
 #include "raytree/rays.h"
+#include "raytree/secondary.h"
 
 namespace mobirt::bench {
 
@@ -62,6 +67,29 @@ void hit_decoding(benchmark::State& state) {
       benchmark::Counter(double(rays.count()), benchmark::Counter::kIsIterationInvariantRate);
 }
 
+void secondary_ray_order(benchmark::State& state) {
+  const bool coherent = state.range(0) != 0;
+  const Scene& scene = project_scene_loaded("fish");
+  const FlatKdTree tree = build_kdtree(scene.mesh.positions);
+  const RayBatch primary = primary_rays(scene_camera(scene, 400, 240), 400, 240);
+  std::vector<SurfaceHit> hits(primary.count());
+  for (uint32_t i = 0; i < primary.count(); ++i) {
+    const Hit h = traverse(tree, primary.ray(i));
+    if (h.valid()) hits[i] = surface_hit(scene, tree, primary.ray(i), h.prim);
+  }
+  const RayBatch secondary = next_generation(scene, tree.bounds, primary, hits, SecondarySettings{});
+  for (auto _ : state) {
+    RayBatch rays = secondary;
+    if (coherent) {
+      order_for_traversal(rays, tree.bounds);
+    } else {
+      order_in_simd_tiles(rays);
+    }
+    benchmark::DoNotOptimize(rays.origin.data());
+  }
+  state.counters["rays"] = double(secondary.count());
+}
+
 }  // namespace
 
 void register_raytree_benchmarks() {
@@ -69,6 +97,11 @@ void register_raytree_benchmarks() {
       ->Args({400, 240})
       ->Args({1920, 1080})
       ->ArgNames({"w", "h"})
+      ->Unit(benchmark::kMicrosecond);
+  benchmark::RegisterBenchmark("OrderRays/fish", secondary_ray_order)
+      ->Arg(0)
+      ->Arg(1)
+      ->ArgName("coherent")
       ->Unit(benchmark::kMicrosecond);
   benchmark::RegisterBenchmark("DecodeHits/toaster", hit_decoding)
       ->Args({400, 240})

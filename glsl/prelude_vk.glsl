@@ -36,14 +36,29 @@ layout(set = 0, binding = 0, std140) uniform Params {
 };
 #define PARAM(i) u_params[i]
 
-// Data textures: element i at texel (i mod W, i div W). Indices arrive as exact floats.
-#define DATA_TEXEL(tex, index) \
-  texelFetch(tex, ivec2(int(index) & (MOBIRT_DATA_WIDTH - 1), int(index) >> MOBIRT_DATA_WIDTH_LOG2), 0)
+// Exact integer floats 0 <= v < 2^23 as ints without a float-to-int conversion: v + 2^23 is the
+// float whose bits are 0x4B000000 + v. Mesa 25's llvmpipe converts with saturating semantics that
+// LLVM 15 turns into eight scalar conversions with clamps per vector (about 60 instructions for an
+// ivec2); this is one add and one subtract.
+ivec2 small_floats_to_ints(vec2 v) {
+  precise vec2 biased = v + 8388608.0;
+  return floatBitsToInt(biased) - 0x4B000000;
+}
+
+// Data textures: element i at texel (i mod W, i div W). Indices arrive as exact floats below 2^24;
+// W is a power of two, so the row (a division by W and a floor) and the column are exact.
+ivec2 data_coord(float index) {
+  precise float row = floor(index * (1.0 / float(MOBIRT_DATA_WIDTH)));
+  precise float column = index - row * float(MOBIRT_DATA_WIDTH);
+  return small_floats_to_ints(vec2(column, row));
+}
+#define DATA_TEXEL(tex, index) texelFetch(tex, data_coord(index), 0)
 // Per-ray textures share the pass's layout: this fragment's own ray.
-#define RAY_TEXEL(tex) texelFetch(tex, ivec2(gl_FragCoord.xy), 0)
+#define RAY_TEXEL(tex) texelFetch(tex, small_floats_to_ints(floor(gl_FragCoord.xy)), 0)
 // Texture atlas (RGBA8, NEAREST): the texel at integer coordinates xy (exact floats), no filtering.
 // The GLES prelude reads it with texture2D at the texel centre (xy + 0.5) / MOBIRT_ATLAS_SIZE.
-#define ATLAS_TEXEL(tex, xy) texelFetch(tex, ivec2(xy), 0)
+// The clamp keeps a NaN coordinate (which the bit trick turns into a huge index) inside the atlas.
+#define ATLAS_TEXEL(tex, xy) texelFetch(tex, clamp(small_floats_to_ints(xy), 0, MOBIRT_ATLAS_SIZE - 1), 0)
 
 #define SAMPLER(slot, name) layout(set = 0, binding = slot) uniform sampler2D name
 

@@ -39,22 +39,16 @@ RayBatch primary_rays(const Camera& camera, int width, int height) {
 }
 
 void order_in_simd_tiles(RayBatch& batch) {
-  const uint32_t w = batch.width;
-  if (w == 0 || w % 4 != 0) return;
-  const uint32_t tiled = batch.count() / (2 * w) * (2 * w);  // rays in full pairs of rows
+  const uint32_t tiled = simd_tiled_rays(batch);
   if (tiled == 0) return;
   RayBatch out;
-  out.width = w;
+  out.width = batch.width;
   out.origin = batch.origin;
   out.direction = batch.direction;
   out.pixel = batch.pixel;
   out.weight = batch.weight;
   for (uint32_t k = 0; k < tiled; ++k) {
-    // The k-th ray goes to lane k mod 8 of tile k / 8; tiles run along a pair of rows.
-    const uint32_t tile = k / 8, lane = k % 8;
-    const uint32_t x = (tile % (w / 4)) * 4 + lane % 4;
-    const uint32_t y = (tile / (w / 4)) * 2 + lane / 4;
-    const uint32_t i = y * w + x;
+    const uint32_t i = simd_tile_texel(k, batch.width);
     out.origin[i] = batch.origin[k];
     out.direction[i] = batch.direction[k];
     out.pixel[i] = batch.pixel[k];

@@ -39,4 +39,22 @@ RayBatch primary_rays(const Camera& camera, int width, int height);
 // batch is left as it is).
 void order_in_simd_tiles(RayBatch& batch);
 
+// Where order_in_simd_tiles puts the k-th ray of a batch of rows `width` (a multiple of 4), for k
+// inside the full pairs of rows: texel index y * width + x.
+inline uint32_t simd_tile_texel(uint32_t k, uint32_t width) {
+  // The k-th ray goes to lane k mod 8 of tile k / 8; tiles run along a pair of rows.
+  const uint32_t tile = k / 8, lane = k % 8;
+  const uint32_t x = (tile % (width / 4)) * 4 + lane % 4;
+  const uint32_t y = (tile / (width / 4)) * 2 + lane / 4;
+  return y * width + x;
+}
+
+// Rays of a batch in full pairs of rows, which order_in_simd_tiles lays out in tiles (0 when the
+// width is not a multiple of 4).
+inline uint32_t simd_tiled_rays(const RayBatch& batch) {
+  const uint32_t w = batch.width;
+  if (w == 0 || w % 4 != 0) return 0;
+  return batch.count() / (2 * w) * (2 * w);
+}
+
 }  // namespace mobirt

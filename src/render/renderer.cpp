@@ -11,6 +11,7 @@
 
 #include "core/error.h"
 #include "layout.h"
+#include "raytree/ray_order.h"
 #include "render/whitted.h"
 #include "scene/atlas.h"
 #include "texels.h"
@@ -156,7 +157,7 @@ class Renderer::Engine final : public WhittedEngine {
   }
 
   void order_rays(RayBatch& rays) const override {
-    order_in_simd_tiles(rays);  // 8 neighbouring rays per SIMD group of the traversal pass
+    order_for_traversal(rays, r_.data_->tree.bounds);  // coherent rays per SIMD group (raytree/ray_order.h)
   }
 
  private:

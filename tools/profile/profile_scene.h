@@ -15,6 +15,7 @@
 #include "accel/kdtree.h"
 #include "core/camera.h"
 #include "core/error.h"
+#include "raytree/ray_order.h"
 #include "scene/animation.h"
 #include "scene/loader.h"
 #include "scene/overrides.h"
@@ -28,6 +29,9 @@ struct ProfileScene {
   FlatKdTree tree;
   int width = 400, height = 240, stack = 4, depth = 0, repeat = 5;
   std::string csv;  // empty: no CSV
+  // --ray-order coherent (the renderer's: sorted when the octants are mixed), sorted (always) or
+  // tiles (the tiling alone): order_for_traversal's sort_above.
+  float sort_above = kSortAboveOctantChanges;
 };
 
 inline ProfileScene load_profile_scene(int argc, char** argv, const char* usage) {
@@ -58,6 +62,9 @@ inline ProfileScene load_profile_scene(int argc, char** argv, const char* usage)
     else if (a == "--depth") p.depth = std::stoi(v);
     else if (a == "--repeat") p.repeat = std::stoi(v);
     else if (a == "--csv") p.csv = v;
+    else if (a == "--ray-order" && v == "coherent") p.sort_above = kSortAboveOctantChanges;
+    else if (a == "--ray-order" && v == "sorted") p.sort_above = 0.0f;
+    else if (a == "--ray-order" && v == "tiles") p.sort_above = 2.0f;
     else throw Error(ErrorKind::BadInput, "unknown option " + a + "\n" + usage);
   }
   const AnimatedScene animation = load_animated_scene(p.path, load);

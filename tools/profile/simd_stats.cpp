@@ -14,11 +14,13 @@
 //                     lanes doing useful work in the node loop
 //   ... (8 in a row)  the same with each group made of 8 consecutive rays instead of a 4x2 tile
 //                     of the ray texture (for comparison; secondary rays are ordered by
-//                     order_in_simd_tiles, as the renderer does, so that a tile holds 8
-//                     consecutively made rays)
+//                     order_for_traversal, as the renderer does: sorted by direction octant and
+//                     origin when their octants are mixed, then laid out so that a tile holds 8
+//                     consecutive rays; --ray-order sorted always sorts, tiles never does)
 //
 // Usage: mobirt_simd_stats SCENE [--mtl F] [--camera SPEC] [--light SPEC]... [--size WxH]
-//        [--stack N] [--bins N] [--leaf-size N] [--isect-cost C] [--depth N] [--csv FILE]
+//        [--stack N] [--bins N] [--leaf-size N] [--isect-cost C] [--depth N]
+//        [--ray-order coherent|sorted|tiles] [--csv FILE]
 #include <algorithm>
 #include <cstdio>
 #include <optional>
@@ -29,6 +31,7 @@
 #include "core/camera.h"
 #include "core/error.h"
 #include "raytree/hits.h"
+#include "raytree/ray_order.h"
 #include "raytree/rays.h"
 #include "raytree/secondary.h"
 #include "profile_scene.h"
@@ -146,7 +149,7 @@ int run(int argc, char** argv) {
   const profile::ProfileScene p = profile::load_profile_scene(
       argc, argv,
       "usage: mobirt_simd_stats SCENE [--mtl F] [--camera SPEC] [--light SPEC]... [--size WxH] [--stack N] "
-      "[--bins N] [--leaf-size N] [--isect-cost C] [--depth N] [--csv FILE]");
+      "[--bins N] [--leaf-size N] [--isect-cost C] [--depth N] [--ray-order coherent|sorted|tiles] [--csv FILE]");
   const Scene& scene = p.scene;
   const FlatKdTree& tree = p.tree;
   const int width = p.width, height = p.height, stack = p.stack, depth = p.depth;
@@ -188,7 +191,10 @@ int run(int argc, char** argv) {
     }
     if (g < depth) {
       rays = next_generation(scene, tree.bounds, rays, hits, SecondarySettings{});
-      order_in_simd_tiles(rays);  // as the renderer does
+      // As the renderer does (--ray-order tiles: the tiling alone, to measure what the sort buys).
+      std::printf("    next generation: %.1f %% of consecutive rays change octant (sorted at %.0f %% or more)\n",
+                  100.0 * octant_change_rate(rays), 100.0 * kSortAboveOctantChanges);
+      order_for_traversal(rays, tree.bounds, p.sort_above);
     }
   }
   if (out) std::fclose(out);
