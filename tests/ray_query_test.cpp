@@ -11,10 +11,13 @@
 #include <vector>
 
 #include "backend/shader_constraints.h"
+#include "backend/vulkan/vulkan_backend.h"
 #include "baseline/ray_query_engine.h"
+#include "baseline/ray_query_whitted.h"
 #include "core/error.h"
 #include "core/parallel.h"
 #include "raytree/hits.h"
+#include "render/whitted.h"
 #include "scene/animation.h"
 #include "scene/loader.h"
 #include "test_support.h"
@@ -280,6 +283,65 @@ TEST(RayQuery, EmptySceneMissesEveryRay) {
   EXPECT_GE(trace_and_compare(*engine, fish, random_rays(fish, *fish.camera, 4000, 64, 5), "fish after empty").share(),
             0.999);
   const std::vector<std::string> messages = engine->take_debug_messages();
+  EXPECT_TRUE(messages.empty()) << join(messages);
+}
+
+// The peer's whole frame (RayQueryWhittedEngine): the same primary rays, hit decoding, ray tree and
+// shading pass as mobirt's Vulkan frame, only the traversal differs, so the frames agree within
+// 45 dB (the rays through shared edges and grazing shadow rays are all that differs).
+TEST(RayQuery, WhittedFramesEqualMobirtsVulkanFrames) {
+  MOBIRT_RAY_QUERY_ENGINE(rq, validated());
+  VulkanOptions options;
+  options.validation = true;
+  const std::unique_ptr<Backend> mobirt_backend = create_vulkan_backend(options);
+  const std::unique_ptr<Backend> shading_backend = create_vulkan_backend(options);
+  size_t bounced = 0;
+  for (const char* name : {"toaster", "fish"}) {
+    const AnimatedScene animation = load_animated_scene(std::string(MOBIRT_SOURCE_DIR) + "/scenes/" + name + ".gltf");
+    RenderSettings settings;
+    settings.width = 160;
+    settings.height = 96;
+    settings.depth = 2;
+    settings.always_rebuild = true;
+    Renderer mobirt(*mobirt_backend, settings);
+    Renderer shading(*shading_backend, settings);
+    RayQueryWhittedEngine peer(*rq, shading);
+    Scene scene;
+    for (const double t : {0.0, 0.7}) {
+      SCOPED_TRACE(std::string(name) + " at " + std::to_string(t) + " s");
+      animation.evaluate(t, scene);
+      ASSERT_TRUE(scene.camera);
+      FrameTimings want_t, got_t;
+      const Image want = mobirt.render(scene, *scene.camera, &want_t);
+      const Image got = render_whitted(scene, *scene.camera, settings, peer, &got_t);
+      const ImageDiff diff = compare_images(want, got);
+      EXPECT_GE(diff.psnr, 45.0) << "max error " << diff.max_error;
+      if (diff.psnr < 45.0) {
+        write_image(test::output_path(std::string("ray_query_frame_") + name + ".png").string(),
+                    difference_image(want, got));
+      }
+      // The same rays were traced, generation by generation, within the few that differ.
+      ASSERT_EQ(got_t.generations.size(), want_t.generations.size());
+      for (size_t k = 0; k < got_t.generations.size(); ++k) {
+        EXPECT_NEAR(double(got_t.generations[k].rays), double(want_t.generations[k].rays),
+                    0.002 * want_t.generations[k].rays + 2) << "generation " << k;
+      }
+      EXPECT_GT(got_t.sum.hits, got_t.primary_rays() / 4);
+      EXPECT_GT(got_t.sum.shadow_rays, 0u);
+      EXPECT_EQ(got_t.sum.capped, 0u);
+      EXPECT_TRUE(got_t.tree_rebuilt);
+      EXPECT_GT(got_t.sum.trace_ms, 0.0);
+      EXPECT_GT(got_t.sum.shade_ms, 0.0);
+      EXPECT_EQ(peer.last_build().triangles, scene.mesh.triangle_count());
+      bounced += got_t.generations.size() > 1;
+    }
+  }
+  EXPECT_GT(bounced, 0u) << "no scene had secondary rays: depth 2 was not tested";
+  for (Backend* b : {mobirt_backend.get(), shading_backend.get()}) {
+    const std::vector<std::string> messages = b->take_debug_messages();
+    EXPECT_TRUE(messages.empty()) << join(messages);
+  }
+  const std::vector<std::string> messages = rq->take_debug_messages();
   EXPECT_TRUE(messages.empty()) << join(messages);
 }
 

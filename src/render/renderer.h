@@ -70,6 +70,13 @@ class Renderer {
   std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, std::span<const SurfaceHit> hits,
                                GenerationTimings& timings);
 
+  // For an engine that traces elsewhere and shades with this renderer's pass (the ray-query peer,
+  // src/baseline/ray_query_whitted.h): what shade() reads besides the hits, which mobirt's own
+  // frame uploads in begin_frame and trace: the scene's materials (once per frame) and the rays
+  // (each generation, before shade()).
+  void upload_materials(const Scene& scene);
+  void upload_rays(const RayBatch& rays);
+
   const RenderSettings& settings() const { return settings_; }
 
  private:
@@ -81,8 +88,6 @@ class Renderer {
   PassHandle shade_pass(int lights, int textures, int colour);
   void prepare_atlas(const Scene& scene);
   void upload_tree(const FlatKdTree& tree);
-  void upload_rays(const RayBatch& rays);
-  void upload_materials(const Scene& scene);
   // The lights the traversal pass casts shadow rays to: the scene's, or none without shadows.
   std::span<const Light> shadow_lights(const Scene& scene) const;
   // The light count a pass is built for: the scene's, or the packing's maximum when general.

@@ -1,0 +1,53 @@
+#include "baseline/ray_query_whitted.h"
+
+#include <chrono>
+
+#include "core/error.h"
+#include "raytree/ray_order.h"
+
+namespace mobirt {
+
+void RayQueryWhittedEngine::begin_frame(const Scene& scene, const RenderSettings& settings, FrameTimings& frame) {
+  const RenderSettings& own = shading_.settings();
+  if (own.colour != settings.colour || own.specialize != settings.specialize) {
+    throw Error(ErrorKind::Internal, "RayQueryWhittedEngine: the shading renderer was made with other settings "
+                                     "(colour depth or specialisation) than the frame's");
+  }
+  // Refuse a scene over a packing limit before any work, as mobirt's passes do.
+  choose_packing(scene.mesh.triangle_count(), settings.shadows ? int(scene.lights.size()) : 0, scene.source);
+  shadows_ = settings.shadows;
+  shadow_rays_ = settings.shadow_rays;
+  build_ = {};
+  rq_.build(scene, &build_);
+  frame.build_ms = build_.wall_ms;
+  frame.tree_rebuilt = true;
+  shading_.upload_materials(scene);
+}
+
+TracedGeneration RayQueryWhittedEngine::trace(const Scene& scene, const RayBatch& rays, GenerationTimings& g) {
+  const std::span<const Light> lights = shadows_ ? std::span<const Light>(scene.lights) : std::span<const Light>();
+  TracedGeneration traced;
+  traced.form = TracedGeneration::Form::PackedTexels;
+  traced.texels.resize(rays.count());
+  RayQueryTimings t;
+  traced.packing = rq_.trace(rays, lights, shadow_rays_, traced.texels, &t);
+  g.upload_ms += t.upload_ms;
+  g.trace_ms += t.trace_ms;
+  g.trace_readback_ms += t.readback_ms;
+  g.bytes_read += t.bytes_read;
+  return traced;
+}
+
+std::vector<glm::vec3> RayQueryWhittedEngine::shade(const Scene& scene, const RayBatch& rays,
+                                                    std::span<const SurfaceHit> hits, GenerationTimings& g) {
+  // The shading pass reads the ray directions from its own backend's textures: the peer uploads
+  // them there as well (mobirt's traversal pass shares them with its shading pass).
+  const auto start = std::chrono::steady_clock::now();
+  shading_.upload_rays(rays);
+  g.upload_ms += elapsed_ms(start);
+  return shading_.shade(scene, rays, hits, g);
+}
+
+void RayQueryWhittedEngine::order_rays(RayBatch& rays) const { order_for_traversal(rays, rq_.triangles().bounds); }
+
+}  // namespace mobirt
