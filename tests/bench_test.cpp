@@ -4,6 +4,8 @@
 
 #include <filesystem>
 #include <fstream>
+#include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -32,10 +34,26 @@ TEST(Bench, OneSmallCellWithEveryColumn) {
   std::ifstream in(json);
   const nlohmann::json j = nlohmann::json::parse(in);
   ASSERT_EQ(j["cells"].size(), 2u);
+  // The ray-query peer runs where the driver has ray queries; elsewhere one line says why.
+  const std::string skipped = "bench: ray-query peer skipped: ";
+  const size_t skip_line = r.output.find(skipped);
+  const bool ray_query = skip_line == std::string::npos;
+  if (ray_query) {
+    EXPECT_NE(r.output.find(" fps, ray query "), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("fps/rq"), std::string::npos) << r.output;
+    EXPECT_TRUE(j["machine"]["ray_query"].is_array()) << j["machine"];
+  } else {
+    EXPECT_EQ(r.output.find(skipped, skip_line + 1), std::string::npos) << "more than one skip line:\n" << r.output;
+    EXPECT_GT(r.output.find('\n', skip_line), skip_line + skipped.size()) << "no reason given";
+    EXPECT_FALSE(j["cells"][0].contains("ray_query"));
+    EXPECT_FALSE(j["cells"][0]["ratios"]["mobirt"].contains("fps_over_ray_query"));
+  }
   for (const nlohmann::json& c : j["cells"]) {
     SCOPED_TRACE(c["level"].get<std::string>());
     EXPECT_EQ(c["triangles"].get<int>(), 1392);
-    for (const char* column : {"mobirt", "mobirt_gles", "embree", "cpu_kd"}) {
+    std::vector<std::string> columns = {"mobirt", "mobirt_gles", "embree", "cpu_kd"};
+    if (ray_query) columns.push_back("ray_query");
+    for (const std::string& column : columns) {
       SCOPED_TRACE(column);
       const nlohmann::json& fps = c[column]["fps"];
       EXPECT_GT(fps["median"].get<double>(), 0.0);
@@ -55,6 +73,18 @@ TEST(Bench, OneSmallCellWithEveryColumn) {
       EXPECT_EQ(gpu["pass0_rays"].get<double>(), 64.0 * 40.0);
       EXPECT_GT(c["ratios"][column]["traversal_over_embree"].get<double>(), 0.0);
       EXPECT_GT(c["ratios"][column]["build_over_embree"].get<double>(), 0.0);
+      if (ray_query) {
+        EXPECT_GT(c["ratios"][column]["fps_over_ray_query"].get<double>(), 0.0);
+        EXPECT_GT(c["ratios"][column]["traversal_over_ray_query"].get<double>(), 0.0);
+      }
+    }
+    if (ray_query) {
+      // The peer traces the same rays as mobirt's passes and reads back as much.
+      const nlohmann::json& rq = c["ray_query"]["stages_ms"];
+      EXPECT_EQ(rq["bytes_read"].get<double>(), 8.0 * rq["traced_rays"].get<double>());
+      EXPECT_EQ(rq["pass0_rays"].get<double>(), 64.0 * 40.0);
+      EXPECT_NEAR(rq["traced_rays"].get<double>(), c["mobirt"]["stages_ms"]["traced_rays"].get<double>(),
+                  0.01 * c["mobirt"]["stages_ms"]["traced_rays"].get<double>());
     }
     // The same primary rays in every column; the bounces give the fish's glass more rays.
     EXPECT_EQ(c["embree"]["stages_ms"]["traced_rays"].get<double>() >= 64.0 * 40.0, true);
@@ -68,6 +98,22 @@ TEST(Bench, OneSmallCellWithEveryColumn) {
               bounce["mobirt"]["stages_ms"]["traced_rays"].get<double>(),
               0.01 * bounce["mobirt"]["stages_ms"]["traced_rays"].get<double>());
   EXPECT_TRUE(bounce["paper_fps"].is_null());  // a scene given on the command line: no paper figure
+}
+
+// --no-baseline leaves out every peer, the ray query included, and says nothing about it.
+TEST(Bench, NoBaselineSkipsEveryPeer) {
+  const fs::path json = test::temp_dir() / "bench.json";
+  const test::CommandResult r =
+      test::run_mobirt("bench " MOBIRT_SOURCE_DIR "/scenes/fish.gltf --size 32x20 --frames 1 --warmup 0 "
+                       "--levels cast --backend vulkan --no-baseline --json '" + json.string() + "'");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(r.output.find("ray-query peer skipped"), std::string::npos) << r.output;
+  std::ifstream in(json);
+  const nlohmann::json j = nlohmann::json::parse(in);
+  ASSERT_EQ(j["cells"].size(), 1u);
+  const nlohmann::json& c = j["cells"][0];
+  EXPECT_GT(c["mobirt"]["fps"]["median"].get<double>(), 0.0);
+  for (const char* peer : {"embree", "cpu_kd", "ray_query", "ratios"}) EXPECT_FALSE(c.contains(peer)) << peer;
 }
 
 TEST(Bench, BadOptionsAreRefusedBeforeTheRun) {

@@ -1,6 +1,7 @@
-// mobirt bench: the MobiRT paper's Table 1 measured on this machine, with the baseline a user
-// would pick instead (Embree 3 on the CPU) and mobirt's own CPU traversal of the same kd-tree in
-// the same run, frame by frame interleaved, on the same scenes, frames, cores and settings.
+// mobirt bench: the MobiRT paper's Table 1 measured on this machine, with the peers a user would
+// pick instead (Embree 3 on the CPU, the driver's own ray queries on the same Vulkan driver) and
+// mobirt's own CPU traversal of the same kd-tree in the same run, frame by frame interleaved, on
+// the same scenes, frames, cores and settings.
 
 #include <algorithm>
 #include <chrono>
@@ -20,10 +21,14 @@
 #include "app/commands.h"
 #include "app/options.h"
 #include "app/scene_setup.h"
+#include "backend/vulkan/vulkan_backend.h"
 #include "baseline/embree_engine.h"
+#include "baseline/ray_query_engine.h"
+#include "baseline/ray_query_whitted.h"
 #include "core/error.h"
 #include "render/cpu_render.h"
 #include "render/renderer.h"
+#include "render/whitted.h"
 #include "scene/animation.h"
 #include "scene/overrides.h"
 
@@ -34,9 +39,12 @@ constexpr const char* kBenchAbout = R"(The paper's Table 1 on this machine: for 
 + 2 bounces, animation playing and the kd-tree rebuilt every frame, warm-up frames and then timed
 frames (median and min-max FPS), with every stage of the frame and, in the same run and frame by
 frame interleaved, the same frames rendered on the CPU by Embree 3 (rtcIntersect1 / rtcOccluded1
-over a dynamic, LOW-quality BVH rebuilt every frame) and by mobirt's own kd-tree on the CPU.
-Prints the table, the stages, and the ratios mobirt / Embree per cell, for the traversal alone
-(Mrays/s over the same rays) and for the build alone (kd-tree vs Embree BVH).
+over a dynamic, LOW-quality BVH rebuilt every frame), by mobirt's own kd-tree on the CPU, and by
+the driver's own ray queries (lavapipe's BVH built every frame, rayQueryEXT in a fragment pass, the
+same ray tree, hit decoding and shading pass as mobirt's; skipped with the reason where the driver
+lacks VK_KHR_ray_query). Prints the table, the stages, and the ratios mobirt / Embree and mobirt /
+ray query per cell, for the traversal alone (Mrays/s over the same rays) and for the build alone
+(kd-tree vs Embree BVH).
 
 Without SCENE: the paper's scenes (scenes/toaster.gltf 400x240, marbles 240x400, fish 400x240)
 and, when ../shared/scenes has them, the real Utah toasters and the wood doll.
@@ -137,13 +145,15 @@ nlohmann::json fps_json(const std::vector<double>& frame_ms) {
           {"max", *lo > 0 ? 1000.0 / *lo : 0.0}};
 }
 
-void add_gpu_frame(Samples& s, double animate_ms, const FrameTimings& t) {
+// One frame of any column, GPU passes or CPU engine: each stage the engine does not have stays 0.
+void add_frame(Samples& s, double animate_ms, const FrameTimings& t) {
   const GenerationTimings& g = t.sum;
   s.add("animate", animate_ms);
   s.add("build", t.build_ms);
   s.add("rays", t.rays_ms);
   s.add("upload", g.upload_ms);
   s.add("trace", g.trace_ms);
+  s.add("shadow", g.shadow_ms);
   s.add("readback", g.trace_readback_ms + g.shade_readback_ms);
   s.add("decode", g.decode_ms);
   s.add("shade", g.shade_ms);
@@ -153,31 +163,17 @@ void add_gpu_frame(Samples& s, double animate_ms, const FrameTimings& t) {
   s.add("traced_rays", double(g.rays));
   s.add("shadow_rays", double(g.shadow_rays));
   s.add("bytes_read", double(g.bytes_read));
-  s.add("trace_mrays", mrays(double(g.rays + g.shadow_rays), g.trace_ms));
+  // The CPU engines cast their shadow rays after the closest hits; the passes, in the same pass.
+  s.add("trace_mrays", mrays(double(g.rays + g.shadow_rays), g.trace_ms + g.shadow_ms));
   for (size_t k = 0; k < t.generations.size(); ++k) {
     const GenerationTimings& x = t.generations[k];
     const std::string p = "pass" + std::to_string(k) + "_";
     s.add(p + "rays", double(x.rays));
     s.add(p + "shadow_rays", double(x.shadow_rays));
-    s.add(p + "trace_ms", x.trace_ms);
-    s.add(p + "mrays", mrays(double(x.rays + x.shadow_rays), x.trace_ms));
+    s.add(p + "trace_ms", x.trace_ms + x.shadow_ms);
+    s.add(p + "mrays", mrays(double(x.rays + x.shadow_rays), x.trace_ms + x.shadow_ms));
     s.add(p + "bytes_read", double(x.bytes_read));
   }
-}
-
-void add_cpu_frame(Samples& s, double animate_ms, const FrameTimings& t) {
-  const GenerationTimings& g = t.sum;
-  s.add("animate", animate_ms);
-  s.add("build", t.build_ms);
-  s.add("rays", t.rays_ms);
-  s.add("trace", g.trace_ms);
-  s.add("shadow", g.shadow_ms);
-  s.add("shade", g.shade_ms + g.accumulate_ms);
-  s.add("secondary", g.secondary_ms);
-  s.add("frame", animate_ms + t.total_ms);
-  s.add("traced_rays", double(g.rays));
-  s.add("shadow_rays", double(g.shadow_rays));
-  s.add("trace_mrays", mrays(double(g.rays + g.shadow_rays), g.trace_ms + g.shadow_ms));
 }
 
 struct BenchOptions {
@@ -191,6 +187,19 @@ struct BenchOptions {
   VulkanOptions backend_options;  // the pipeline cache is Vulkan's
   RenderSettings settings;  // kd, stack, max_steps
 };
+
+// The ray-query column: the driver's BVH and rayQueryEXT pass, and a Vulkan backend of its own for
+// mobirt's shading pass (so that the mobirt columns' textures and passes stay theirs). Made once per
+// run, absent where the driver lacks ray queries or with --no-baseline.
+struct RayQueryPeer {
+  std::unique_ptr<RayQueryEngine> rq;
+  std::unique_ptr<Backend> shading;
+};
+
+// Throws when a Vulkan context of the run reported validation messages.
+void check_messages(std::vector<std::string> messages) {
+  for (const std::string& m : messages) throw Error(ErrorKind::Internal, "validation: " + m);
+}
 
 struct CellResult {
   nlohmann::json json;
@@ -209,8 +218,8 @@ struct GpuColumn {
   std::unique_ptr<Backend> backend;
 };
 
-nlohmann::json run_cell(std::vector<GpuColumn>& columns, const BenchScene& bs, const AnimatedScene& animation, const Level& level,
-                        const BenchOptions& o) {
+nlohmann::json run_cell(std::vector<GpuColumn>& columns, RayQueryPeer* peer, const BenchScene& bs,
+                        const AnimatedScene& animation, const Level& level, const BenchOptions& o) {
   RenderSettings settings = o.settings;
   settings.width = bs.width;
   settings.height = bs.height;
@@ -223,11 +232,14 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, const BenchScene& bs, c
   std::optional<KdTreeEngine> kd;
   if (o.baseline) embree.emplace(EmbreeOptions{o.threads, true});
   if (o.baseline && o.cpu) kd.emplace(settings.kd, settings.shadow_rays.ray_test);
+  std::optional<Renderer> peer_shading;
+  std::optional<RayQueryWhittedEngine> ray_query;
+  if (peer) ray_query.emplace(*peer->rq, peer_shading.emplace(*peer->shading, settings));
 
   PosedScene posed(animation, bs.edits, bs.width, bs.height);
   const Scene& scene = posed.scene;
   std::vector<Samples> gpu(columns.size());
-  Samples emb, cpu;
+  Samples emb, cpu, rqs;
   const double fps = animation.fps() > 0 ? animation.fps() : 24.0;
   KdBuildStats kd_stats;
   for (int f = 0; f < o.warmup + o.frames; ++f) {
@@ -240,20 +252,25 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, const BenchScene& bs, c
     for (size_t c = 0; c < columns.size(); ++c) {
       FrameTimings ft;
       renderers[c]->render(scene, view, &ft);
-      for (const std::string& m : columns[c].backend->take_debug_messages()) {
-        throw Error(ErrorKind::Internal, "validation: " + m);
-      }
-      if (timed) add_gpu_frame(gpu[c], animate_ms, ft);
+      check_messages(columns[c].backend->take_debug_messages());
+      if (timed) add_frame(gpu[c], animate_ms, ft);
+    }
+    if (ray_query) {
+      FrameTimings ft;
+      render_whitted(scene, view, settings, *ray_query, &ft);
+      check_messages(peer->rq->take_debug_messages());
+      check_messages(peer->shading->take_debug_messages());
+      if (timed) add_frame(rqs, animate_ms, ft);
     }
     if (embree) {
       FrameTimings ct;
       render_whitted_cpu(scene, view, settings, *embree, o.threads, &ct);
-      if (timed) add_cpu_frame(emb, animate_ms, ct);
+      if (timed) add_frame(emb, animate_ms, ct);
     }
     if (kd) {
       FrameTimings ct;
       render_whitted_cpu(scene, view, settings, *kd, o.threads, &ct);
-      if (timed) add_cpu_frame(cpu, animate_ms, ct);
+      if (timed) add_frame(cpu, animate_ms, ct);
       kd_stats = kd->tree().stats;
     }
   }
@@ -278,15 +295,26 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, const BenchScene& bs, c
     cell[key] = {{"fps", fps_json(gpu[c].all("frame"))}, {"stages_ms", gpu[c].medians()}};
     const double gpu_fps = cell[key]["fps"]["median"];
     best_fps = std::max(best_fps, gpu_fps);
+    // fps over a peer's fps; traversal: Mrays/s over the peer's on the same rays.
+    auto fps_over = [&](const Samples& peer_samples) {
+      return gpu_fps / (1000.0 / std::max(median(peer_samples.all("frame")), 1e-9));
+    };
+    auto traversal_over = [&](const Samples& peer_samples) {
+      return gpu[c].med("trace_mrays") / std::max(peer_samples.med("trace_mrays"), 1e-9);
+    };
     if (embree) {
-      cell["ratios"][key] = {
-          {"fps_over_embree", gpu_fps / (1000.0 / std::max(median(emb.all("frame")), 1e-9))},
-          {"traversal_over_embree", gpu[c].med("trace_mrays") / std::max(emb.med("trace_mrays"), 1e-9)},
-          {"build_over_embree", gpu[c].med("build") / std::max(emb.med("build"), 1e-9)}};
+      cell["ratios"][key] = {{"fps_over_embree", fps_over(emb)},
+                             {"traversal_over_embree", traversal_over(emb)},
+                             {"build_over_embree", gpu[c].med("build") / std::max(emb.med("build"), 1e-9)}};
+    }
+    if (ray_query) {
+      cell["ratios"][key]["fps_over_ray_query"] = fps_over(rqs);
+      cell["ratios"][key]["traversal_over_ray_query"] = traversal_over(rqs);
     }
   }
   cell["meets_target"] = std::isnan(paper) ? nlohmann::json(nullptr) : nlohmann::json(best_fps >= 2 * paper);
   if (embree) cell["embree"] = {{"fps", fps_json(emb.all("frame"))}, {"stages_ms", emb.medians()}};
+  if (ray_query) cell["ray_query"] = {{"fps", fps_json(rqs.all("frame"))}, {"stages_ms", rqs.medians()}};
   if (kd) {
     cell["cpu_kd"] = {{"fps", fps_json(cpu.all("frame"))}, {"stages_ms", cpu.medians()}};
     cell["kd_tree"] = {{"sah_cost", kd_stats.sah_cost},
@@ -306,7 +334,9 @@ std::string opt(const nlohmann::json& j, const char* key, const char* fmt) {
   return buf;
 }
 
-const char* column_title(const std::string& key) { return key == "mobirt" ? "Vulkan" : "GLES 2.0"; }
+const char* column_title(const std::string& key) {
+  return key == "mobirt" ? "Vulkan" : key == "mobirt_gles" ? "GLES 2.0" : "ray query";
+}
 
 void print_tables(const nlohmann::json& result) {
   const nlohmann::json& cells = result["cells"];
@@ -317,6 +347,7 @@ void print_tables(const nlohmann::json& result) {
   }
   const bool baseline = cells[0].contains("embree");
   const bool cpu = cells[0].contains("cpu_kd");
+  const bool ray_query = cells[0].contains("ray_query");
   auto label = [](const nlohmann::json& c) {
     return c["scene"].get<std::string>() + ", " + c["level_name"].get<std::string>();
   };
@@ -324,6 +355,7 @@ void print_tables(const nlohmann::json& result) {
   std::printf("\nTable 1: frames per second, median [min-max]; paper = the MobiRT paper, target = 2x paper\n");
   std::printf("%-28s %-8s %5s %6s", "scene, level", "size", "paper", "target");
   for (const std::string& g : gpus) std::printf("  %-18s", (std::string("mobirt ") + column_title(g)).c_str());
+  if (ray_query) std::printf("  %-18s", "ray query (Vulkan)");
   if (baseline) std::printf("  %-18s", "Embree 3");
   if (cpu) std::printf("  %-18s", "CPU kd-tree");
   std::printf("\n");
@@ -331,16 +363,22 @@ void print_tables(const nlohmann::json& result) {
     std::printf("%-28s %-8s %5s %6s", label(c).c_str(), c["size"].get<std::string>().c_str(),
                 opt(c, "paper_fps", "%.0f").c_str(), opt(c, "target_fps", "%.0f").c_str());
     for (const std::string& g : gpus) std::printf("  %-18s", cell_fps(c[g]["fps"]).c_str());
+    if (ray_query) std::printf("  %-18s", cell_fps(c["ray_query"]["fps"]).c_str());
     if (baseline) std::printf("  %-18s", cell_fps(c["embree"]["fps"]).c_str());
     if (cpu) std::printf("  %-18s", cell_fps(c["cpu_kd"]["fps"]).c_str());
     std::printf("\n");
   }
 
-  for (const std::string& g : gpus) {
-    std::printf("\nmobirt on %s, per stage, ms (median): animate, kd-tree build, primary rays, upload, traversal\n"
+  // The ray-query peer has the same stages as mobirt's passes: its BVH build, its traversal pass,
+  // and mobirt's decoding, shading pass and ray tree.
+  std::vector<std::string> staged = gpus;
+  if (ray_query) staged.push_back("ray_query");
+  for (const std::string& g : staged) {
+    std::printf("\n%s, per stage, ms (median): animate, %s build, primary rays, upload, traversal\n"
                 "passes, read-back, hit decoding, shading passes, accumulate, secondary rays, frame; Mrays/s of\n"
                 "the traversal passes (closest-hit + shadow rays); KB that left the GPU (4 bytes per ray and pass)\n",
-                column_title(g));
+                g == "ray_query" ? "The driver's ray query" : ("mobirt on " + std::string(column_title(g))).c_str(),
+                g == "ray_query" ? "BLAS + TLAS" : "kd-tree");
     std::printf("%-28s %6s %6s %5s %6s %7s %6s %6s %6s %5s %6s %7s %7s %6s\n", "scene, level", "anim", "build",
                 "rays", "upload", "trace", "rdback", "decode", "shade", "accum", "second", "frame", "Mrays/s", "KB");
     for (const nlohmann::json& c : cells) {
@@ -379,17 +417,21 @@ void print_tables(const nlohmann::json& result) {
       std::printf("%-28s %-7s %6.2f %5.2f %7.2f %7.2f %6.2f %6.2f %7.2f %7.2f\n", label(c).c_str(),
                   std::string(key) == "embree" ? "Embree" : "CPU kd", s["build"].get<double>(),
                   s["rays"].get<double>(), s["trace"].get<double>(), s["shadow"].get<double>(),
-                  s["shade"].get<double>(), s["secondary"].get<double>(), s["frame"].get<double>(),
+                  s["shade"].get<double>() + s["accumulate"].get<double>(), s["secondary"].get<double>(),
+                  s["frame"].get<double>(),
                   s["trace_mrays"].get<double>());
     }
   }
 
   std::printf("\nRatios mobirt / Embree, the same frames: fps; traversal alone (Mrays/s on the same rays: GPU\n"
               "traversal passes vs rtcIntersect1 + rtcOccluded1); build alone (kd-tree build ms / Embree BVH\n"
-              "build ms, >1 = slower); SAH cost of the kd-tree built\n");
+              "build ms, >1 = slower); %sSAH cost of the kd-tree built\n",
+              ray_query ? "mobirt / ray query (fps/rq, trc/rq): fps, traversal alone\n(Mrays/s on the same rays); "
+                        : "");
   std::printf("%-28s", "scene, level");
   for (const std::string& g : gpus) {
     std::printf(" | %-8s %7s %7s %7s", column_title(g), "fps", "trace", "build");
+    if (ray_query) std::printf(" %7s %7s", "fps/rq", "trc/rq");
   }
   std::printf(" | %8s\n", "SAH");
   for (const nlohmann::json& c : cells) {
@@ -398,6 +440,10 @@ void print_tables(const nlohmann::json& result) {
       const nlohmann::json& r = c["ratios"][g];
       std::printf(" | %-8s %6.2fx %6.2fx %6.1fx", "", r["fps_over_embree"].get<double>(),
                   r["traversal_over_embree"].get<double>(), r["build_over_embree"].get<double>());
+      if (ray_query) {
+        std::printf(" %6.2fx %6.2fx", r["fps_over_ray_query"].get<double>(),
+                    r["traversal_over_ray_query"].get<double>());
+      }
     }
     std::printf(" | %8s\n", cpu ? opt(c["kd_tree"], "sah_cost", "%.1f").c_str() : "-");
   }
@@ -409,7 +455,8 @@ void print_progress(const nlohmann::json& cell, size_t done, size_t total, doubl
   std::string line = "bench: [" + std::to_string(done) + "/" + std::to_string(total) + "] " +
                      cell["scene"].get<std::string>() + ", " + cell["level_name"].get<std::string>() + ":";
   for (const auto& [key, title] : {std::pair<const char*, const char*>{"mobirt", "Vulkan"},
-                                   {"mobirt_gles", "GLES 2.0"}, {"embree", "Embree 3"}, {"cpu_kd", "CPU kd-tree"}}) {
+                                   {"mobirt_gles", "GLES 2.0"}, {"ray_query", "ray query"},
+                                   {"embree", "Embree 3"}, {"cpu_kd", "CPU kd-tree"}}) {
     if (!cell.contains(key)) continue;
     char buf[64];
     std::snprintf(buf, sizeof buf, " %s %.1f fps,", title, cell[key]["fps"]["median"].get<double>());
@@ -462,7 +509,8 @@ int cmd_bench(const std::vector<std::string>& args) {
             "CPU threads of the Embree and CPU kd-tree columns and of the kd-tree build\n"
             "(default: all cores); lavapipe's threads are set by LP_NUM_THREADS",
             [&](const cli::Value& v) { o.threads = unsigned(v.integer(1, 1024)); });
-  cl.flag("--no-baseline", "leave out the Embree and CPU kd-tree columns", [&] { o.baseline = false; });
+  cl.flag("--no-baseline", "leave out the peers: the ray-query, Embree and CPU kd-tree columns",
+          [&] { o.baseline = false; });
   cl.flag("--no-cpu", "leave out the CPU kd-tree column only", [&] { o.cpu = false; });
   cl.option("--json", "FILE", "every number as JSON (- = standard output)",
             [&](const cli::Value& v) { json_path = v.text; });
@@ -520,6 +568,23 @@ int cmd_bench(const std::vector<std::string>& args) {
   for (const std::string& b : o.backends) {
     columns.push_back({b == "vulkan" ? "mobirt" : "mobirt_gles", create_backend(b, o.backend_options, kHelp)});
   }
+  // The ray-query peer where the driver has it; else one line says why and the run goes on.
+  std::optional<RayQueryPeer> peer;
+  std::string peer_skipped;
+  if (o.baseline) {
+    RayQueryOptions ro;
+    ro.device = o.backend_options.device;
+    ro.validation = o.backend_options.validation;
+    ro.sync_validation = o.backend_options.sync_validation;
+    peer_skipped = o.settings.shadow_rays.ray_test.precision == Precision::Medium
+                       ? "it traces in fp32 only, and --precision mediump was asked for"
+                       : RayQueryEngine::unavailable_reason(ro);
+    if (peer_skipped.empty()) {
+      peer.emplace(RayQueryPeer{std::make_unique<RayQueryEngine>(ro), create_vulkan_backend(o.backend_options)});
+    } else {
+      std::fputs(("bench: ray-query peer skipped: " + peer_skipped + "\n").c_str(), stderr);
+    }
+  }
   const DeviceInfo info = columns[0].backend->device_info();
   const char* lp = std::getenv("LP_NUM_THREADS");
   nlohmann::json result;
@@ -530,6 +595,8 @@ int cmd_bench(const std::vector<std::string>& args) {
                        {"backends", o.backends},
                        {"lp_num_threads", lp ? std::string(lp) : std::string("default (all cores)")},
                        {"embree", EmbreeEngine::version()},
+                       {"ray_query", peer ? nlohmann::json(peer->rq->info())
+                                          : nlohmann::json::object({{"skipped", o.baseline ? peer_skipped : "--no-baseline"}})},
                        {"threads", o.threads}};
   result["settings"] = {{"frames", o.frames},
                         {"warmup", o.warmup},
@@ -553,7 +620,7 @@ int cmd_bench(const std::vector<std::string>& args) {
     load.mtl = bs.mtl;
     const AnimatedScene animation = load_animated_scene(bs.path, load);
     for (int k : o.levels) {
-      cells.push_back(run_cell(columns, bs, animation, kLevels[k], o));
+      cells.push_back(run_cell(columns, peer ? &*peer : nullptr, bs, animation, kLevels[k], o));
       print_progress(cells.back(), cells.size(), total, elapsed_ms(start) / 1000.0);
     }
   }
