@@ -52,7 +52,21 @@ ivec2 data_coord(float index) {
   precise float column = index - row * float(MOBIRT_DATA_WIDTH);
   return small_floats_to_ints(vec2(column, row));
 }
+#ifdef MOBIRT_DATA_TEXEL_BUFFERS
+// Data textures as uniform texel buffers (trace_texel_buffers.frag): element i is texel i, with
+// no mip-level work or 2D bounds checks in llvmpipe's fetch. Indices are exact floats below 2^23
+// (the backend refuses larger buffers), so the same bit trick makes them ints.
+int data_index(float index) {
+  precise float biased = index + 8388608.0;
+  return floatBitsToInt(biased) - 0x4B000000;
+}
+#define DATA_TEXEL(tex, index) texelFetch(tex, data_index(index))
+// A textureBuffer, not a samplerBuffer: SPIR-V forbids a sampled image of a buffer (Mesa warns),
+// so the includer enables GL_EXT_samplerless_texture_functions for texelFetch on it.
+#define DATA_SAMPLER(slot, name) layout(set = 0, binding = slot) uniform textureBuffer name
+#else
 #define DATA_TEXEL(tex, index) texelFetch(tex, data_coord(index), 0)
+#endif
 // Per-ray textures share the pass's layout: this fragment's own ray.
 #define RAY_TEXEL(tex) texelFetch(tex, small_floats_to_ints(floor(gl_FragCoord.xy)), 0)
 // Texture atlas (RGBA8, NEAREST): the texel at integer coordinates xy (exact floats), no filtering.

@@ -9,9 +9,13 @@
 // PRECISION, OFFSET_MODE, PRECISE, add_float_bits and precision.glsl (mp, mp_cross, mp_dot).
 #include "offset.glsl"
 
-SAMPLER(MOBIRT_BIND_NODES, u_nodes);
-SAMPLER(MOBIRT_BIND_PRIM_LIST, u_prim_list);
-SAMPLER(MOBIRT_BIND_TRIANGLES, u_triangles);
+// Scene data: 2D textures, or texel buffers where the prelude says so (DATA_SAMPLER).
+#ifndef DATA_SAMPLER
+#define DATA_SAMPLER(slot, name) SAMPLER(slot, name)
+#endif
+DATA_SAMPLER(MOBIRT_BIND_NODES, u_nodes);
+DATA_SAMPLER(MOBIRT_BIND_PRIM_LIST, u_prim_list);
+DATA_SAMPLER(MOBIRT_BIND_TRIANGLES, u_triangles);
 
 // traverse()'s short stack is 16 vec4 of two entries each (s0 .. s15): the C++ refuses deeper
 // stacks against MOBIRT_MAX_STACK_DEPTH, so the two must change together.

@@ -81,6 +81,17 @@ TEST_F(GlesBackendTest, NineTexturesAreRefused) {
   expect_refused(test_shader(TestShader::NineTextures), "GL_MAX_TEXTURE_IMAGE_UNITS", 9);
 }
 
+// OpenGL ES 2.0 has no buffer textures: the renderer reads 2D images there whatever --data says.
+TEST_F(GlesBackendTest, HasNoTexelBuffers) {
+  EXPECT_FALSE(backend->device_info().texel_buffers);
+  try {
+    backend->create_texel_buffer(16, TexelFormat::RGBA32F);
+    ADD_FAILURE() << "expected Error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::Unsupported) << e.what();
+  }
+}
+
 TEST_F(GlesBackendTest, SpinShaderIsVulkanOnly) {
   PassDesc desc;
   desc.shader = test_shader(TestShader::Spin);

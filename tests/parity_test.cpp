@@ -306,5 +306,71 @@ std::vector<ParityCase> parity_cases() {
 INSTANTIATE_TEST_SUITE_P(Scenes, CrossBackend, ::testing::ValuesIn(parity_cases()),
                          [](const ::testing::TestParamInfo<ParityCase>& p) { return case_name(p.param); });
 
+// ---- Vulkan: texel buffers against 2D images ---------------------------------------------------
+
+// --data texel-buffers and --data images run the same arithmetic on the same texels, so the
+// traversal pass must give the same packed texel ray by ray, and the frame the same image.
+class DataReadParity : public ::testing::TestWithParam<ParityCase> {
+ protected:
+  void SetUp() override { vulkan = make_backend(Api::Vulkan); }
+  void TearDown() override {
+    if (vulkan) expect_no_messages(*vulkan, "vulkan");
+  }
+  std::unique_ptr<Backend> vulkan;
+};
+
+RenderSettings with_data(RenderSettings s, DataReads reads) {
+  s.data = reads;
+  return s;
+}
+
+TEST_P(DataReadParity, SameHitsAndShadowMasks) {
+  const ParityCase& c = GetParam();
+  const Scene scene = load_scene(std::string(MOBIRT_SOURCE_DIR "/scenes/") + c.scene);
+  const RenderSettings settings = case_settings(c);
+  const FlatKdTree tree = build_kdtree(scene.mesh.positions, settings.kd);
+  const RayBatch rays = primary_rays(scene_camera(scene, c.width, c.height), c.width, c.height);
+  Renderer buffers(*vulkan, with_data(settings, DataReads::TexelBuffers));
+  Renderer images(*vulkan, with_data(settings, DataReads::Images));
+  ASSERT_TRUE(buffers.texel_buffers());
+  ASSERT_FALSE(images.texel_buffers());
+  const TraceResult a = buffers.trace(scene, tree, rays);
+  const TraceResult b = images.trace(scene, tree, rays);
+  ASSERT_EQ(a.packing, b.packing);
+  ASSERT_EQ(a.texels.size(), b.texels.size());
+  size_t hits = 0, masked = 0;
+  for (size_t i = 0; i < a.texels.size(); ++i) {
+    ASSERT_EQ(a.texels[i], b.texels[i]) << "ray " << i << ": texel buffers " << std::hex << a.texels[i]
+                                        << ", images " << b.texels[i];
+    const TraceTexel t = unpack_trace(a.packing, a.texels[i]);
+    if (t.hit()) ++hits;
+    if (t.hit() && t.mask != 0) ++masked;
+  }
+  // The comparison means something only where rays hit and shadow rays ran.
+  EXPECT_GT(hits, a.texels.size() / 10);
+  if (settings.shadows) {
+    EXPECT_GT(masked, 0u);
+  }
+}
+
+TEST_P(DataReadParity, SameImage) {
+  const ParityCase& c = GetParam();
+  const Scene scene = load_scene(std::string(MOBIRT_SOURCE_DIR "/scenes/") + c.scene);
+  const RenderSettings settings = case_settings(c);
+  const Camera camera = scene_camera(scene, c.width, c.height);
+  Renderer buffers(*vulkan, with_data(settings, DataReads::TexelBuffers));
+  Renderer images(*vulkan, with_data(settings, DataReads::Images));
+  const Image a = buffers.render(scene, camera);
+  const Image b = images.render(scene, camera);
+  const ImageDiff d = compare_images(a, b, 0.0f);
+  EXPECT_EQ(d.max_error, 0.0) << "PSNR " << d.psnr << " dB, " << 100.0 * d.share_over << "% of pixels differ";
+}
+
+INSTANTIATE_TEST_SUITE_P(Scenes, DataReadParity,
+                         ::testing::Values(ParityCase{"toaster.gltf", 96, 64, "shadows"},
+                                           ParityCase{"fish.gltf", 96, 64, "bounces"},
+                                           ParityCase{"marbles.gltf", 64, 96, "bounces"}),
+                         [](const ::testing::TestParamInfo<ParityCase>& p) { return case_name(p.param); });
+
 }  // namespace
 }  // namespace mobirt

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "backend/backend.h"
+#include "backend/shader_constraints.h"
 #include "backend/vulkan/vk_util.h"
 #include "backend/vulkan/vulkan_backend.h"
 #include "copy_pass.h"
@@ -251,7 +252,45 @@ TEST_F(VulkanBackendTest, ConstraintShadersAreRefused) {
   expect_refused(*backend, test_shader(TestShader::TwoOutputs), "writes 2 colour attachments");
   expect_refused(*backend, test_shader(TestShader::StorageWrite), "storage buffers");
   expect_refused(*backend, test_shader(TestShader::NineTextures), "samples 9 textures; at most 8");
+  // Texel buffers are sampled textures of the ES 2.0 model: they count against the 8, and a
+  // storage texel buffer is a storage image.
+  expect_refused(*backend, test_shader(TestShader::TexelBuffers), "samples 9 textures; at most 8");
+  expect_refused(*backend, test_shader(TestShader::TexelBufferStore), "storage buffers, storage images");
   EXPECT_EQ(vulkan_live_objects(), objects) << "a refused pass left Vulkan objects behind";
+}
+
+TEST_F(VulkanBackendTest, TexelBufferTraversalKeepsTheConstraints) {
+  const ShaderInterface s = reflect_spirv(shader_source(ShaderId::TraverseTexelBuffers).spirv);
+  ASSERT_TRUE(s.valid);
+  EXPECT_EQ(s.sampled_textures, 5);  // nodes, primitive list, triangles (texel buffers), two ray images
+  EXPECT_EQ(s.storage_resources, 0);
+  EXPECT_EQ(s.storage_writes, 0);
+  EXPECT_TRUE(es2_constraints_broken(shader_source(ShaderId::TraverseTexelBuffers).spirv).empty());
+}
+
+TEST_F(VulkanBackendTest, TexelBuffersRefuseBadUse) {
+  EXPECT_TRUE(backend->device_info().texel_buffers);
+  try {
+    backend->create_texel_buffer((uint32_t(1) << 23) + 1, TexelFormat::RGBA32F);
+    ADD_FAILURE() << "expected Error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::BadInput);
+    EXPECT_NE(std::string(e.what()).find("--data images"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(backend->create_texel_buffer(0, TexelFormat::R32F), Error);
+  const TextureHandle buffer = backend->create_texel_buffer(16, TexelFormat::RGBA32F);
+  const std::vector<float> too_many(17 * 4, 1.0f);
+  EXPECT_THROW(backend->upload(buffer, too_many.data(), too_many.size() * sizeof(float)), Error);
+  // A pass that reads a 2D image at binding 1 refuses a texel buffer there.
+  std::vector<uint32_t> out(4);
+  try {
+    test::run_copy_pass(*backend, buffer, 4, 4, out);
+    ADD_FAILURE() << "expected Error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::Internal);
+    EXPECT_NE(std::string(e.what()).find("texel buffer"), std::string::npos) << e.what();
+  }
+  backend->destroy(buffer);
 }
 
 // Mesa 22.3's llvmpipe (lavapipe) ends a shader invocation's loops after 65535 iterations in all,

@@ -144,6 +144,15 @@ const Setting kSettings[] = {
                                                                         {"16", ColourDepth::Bits16}};
        o.settings.colour = v.choice(depths);
      }},
+    {"--data", "READS", kFrames,
+     "how the Vulkan traversal pass reads nodes, primitive lists and\n"
+     "triangles: texel-buffers (uniform texel buffers) or images (2D\n"
+     "textures, as OpenGL ES 2.0 always does) (default texel-buffers)",
+     [](CommonOptions& o, const Value& v) {
+       static constexpr std::pair<const char*, DataReads> reads[] = {{"texel-buffers", DataReads::TexelBuffers},
+                                                                     {"images", DataReads::Images}};
+       o.settings.data = v.choice(reads);
+     }},
     {"--light", "SPEC", kViews,
      "replaces the scene's lights (repeat for several):\n"
      "  \"point pos=X,Y,Z [color=R,G,B] [intensity=I] [range=R]\"\n"

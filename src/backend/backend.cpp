@@ -28,6 +28,10 @@ void check_pass_desc(const PassDesc& desc) {
     throw Error(ErrorKind::Internal, "pass " + name + " asks for " + std::to_string(desc.uniform_vec4s) +
                                          " uniform vec4; at most " + std::to_string(MOBIRT_MAX_PARAM_VEC4S));
   }
+  if (!desc.texture_kinds.empty() && desc.texture_kinds.size() != desc.texture_bindings.size()) {
+    throw Error(ErrorKind::Internal, "pass " + name + ": " + std::to_string(desc.texture_kinds.size()) +
+                                         " texture kinds for " + std::to_string(desc.texture_bindings.size()) + " bindings");
+  }
   // Binding 0 is the uniforms' on both APIs (both preludes declare it), whether the pass fills it or not.
   std::set<uint32_t> used;
   for (const uint32_t binding : desc.texture_bindings) {
@@ -43,6 +47,10 @@ void check_pass_desc(const PassDesc& desc) {
                                            " is set twice");
     }
   }
+}
+
+TextureHandle Backend::create_texel_buffer(uint32_t, TexelFormat) {
+  throw Error(ErrorKind::Unsupported, "this backend has no texel buffers (OpenGL ES 2.0): use --data images");
 }
 
 void check_run_pass_arguments(const PassDesc& desc, size_t textures, size_t uniform_floats, uint32_t width,

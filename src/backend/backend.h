@@ -27,6 +27,11 @@ using PassHandle = Handle<struct PassTag>;
 enum class TexelFormat { RGBA32F, R32F, RGBA8 };
 size_t texel_bytes(TexelFormat format);
 
+// How a pass reads a data texture: a 2D image (texelFetch / texture2D, both APIs) or a uniform
+// texel buffer (Vulkan only: samplerBuffer, no mip-level path in llvmpipe's fetch). Either one is
+// still one of the 8 sampled-texture slots of the ES 2.0 model.
+enum class TextureKind { Image2D, TexelBuffer };
+
 // A fragment shader as built into the binary: SPIR-V for Vulkan and GLSL ES 1.00 for OpenGL ES 2.0,
 // both generated from glsl/ at build time. Every shader is one line of the shader list in
 // CMakeLists.txt, which generates the registries: the production one (ShaderId, shader_source) and
@@ -65,6 +70,9 @@ struct PassDesc {
   std::vector<Specialization> specialization;
   uint32_t uniform_vec4s = 0;              // size of the vec4 uniform array at binding 0
   std::vector<uint32_t> texture_bindings;  // binding slot of each sampled texture, in order
+  // The kind of each of texture_bindings, in the same order; empty = every one a 2D image.
+  std::vector<TextureKind> texture_kinds;
+  TextureKind kind(size_t i) const { return i < texture_kinds.size() ? texture_kinds[i] : TextureKind::Image2D; }
 };
 
 // One pass's cost, as measured by the backend.
@@ -85,6 +93,8 @@ struct DeviceInfo {
   // The driver's own ray tracing for a ray-query engine: VK_KHR_ray_query with
   // VK_KHR_acceleration_structure (lavapipe from Mesa 25; never on OpenGL ES 2.0).
   bool ray_query = false;
+  // Uniform texel buffers (Backend::create_texel_buffer): Vulkan, never OpenGL ES 2.0.
+  bool texel_buffers = false;
   std::vector<std::string> limits;  // "name: value" lines that matter to mobirt
 };
 
@@ -96,6 +106,10 @@ class Backend {
 
   // Data textures. upload() replaces the first `bytes` of the texture's texels (row-major).
   virtual TextureHandle create_texture(uint32_t width, uint32_t height, TexelFormat format) = 0;
+  // A uniform texel buffer of `texels` texels, read by a pass whose binding is TextureKind::TexelBuffer
+  // (DeviceInfo::texel_buffers); upload() and destroy() take it like a texture. Error(Unsupported) by
+  // default, Error(BadInput) above the device's maxTexelBufferElements.
+  virtual TextureHandle create_texel_buffer(uint32_t texels, TexelFormat format);
   virtual void upload(TextureHandle texture, const void* data, size_t bytes) = 0;
   virtual void destroy(TextureHandle texture) = 0;
 

@@ -167,6 +167,9 @@ class Renderer::Engine final : public WhittedEngine {
 Renderer::Renderer(Backend& backend, const RenderSettings& settings)
     : backend_(backend), settings_(settings), data_(std::make_unique<Data>()),
       engine_(std::make_unique<Engine>(*this)) {
+  if (settings_.data == DataReads::TexelBuffers && backend_.device_info().texel_buffers) {
+    data_kind_ = TextureKind::TexelBuffer;
+  }
   if (settings_.stack_depth < 0 || settings_.stack_depth > MOBIRT_MAX_STACK_DEPTH) {
     throw Error(ErrorKind::BadInput, "--stack " + std::to_string(settings_.stack_depth) +
                                          ": the short stack holds 0 to " +
@@ -192,12 +195,14 @@ Renderer::~Renderer() {
 }
 
 TextureHandle Renderer::ensure_texture(TextureHandle& handle, uint32_t& capacity_rows, uint32_t width,
-                                       uint32_t rows, TexelFormat format) {
+                                       uint32_t rows, TexelFormat format, TextureKind kind) {
   if (handle && capacity_rows >= rows) return handle;
   if (handle) backend_.destroy(handle);
   // Grow with headroom so that an animation whose tree changes size does not reallocate often.
   const uint32_t grown = std::max(rows, capacity_rows + capacity_rows / 2);
-  handle = backend_.create_texture(width, grown, format);
+  // A texel buffer holds the same rows end to end: DATA_TEXEL's index is the texel's.
+  handle = kind == TextureKind::TexelBuffer ? backend_.create_texel_buffer(width * grown, format)
+                                            : backend_.create_texture(width, grown, format);
   capacity_rows = grown;
   return handle;
 }
@@ -207,7 +212,7 @@ PassHandle Renderer::trace_pass(int lights, Packing packing) {
   auto it = data_->trace_passes.find(key);
   if (it != data_->trace_passes.end()) return it->second;
   PassDesc desc;
-  desc.shader = ShaderId::Traverse;
+  desc.shader = texel_buffers() ? ShaderId::TraverseTexelBuffers : ShaderId::Traverse;
   desc.specialization = {{MOBIRT_SPEC_LIGHT_COUNT, lights},
                          {MOBIRT_SPEC_STACK_DEPTH, settings_.stack_depth},
                          {MOBIRT_SPEC_MAX_STEPS, settings_.max_steps},
@@ -218,6 +223,7 @@ PassHandle Renderer::trace_pass(int lights, Packing packing) {
   desc.uniform_vec4s = MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * uint32_t(lights);
   desc.texture_bindings = {MOBIRT_BIND_NODES, MOBIRT_BIND_PRIM_LIST, MOBIRT_BIND_TRIANGLES,
                            MOBIRT_BIND_RAY_ORIGIN, MOBIRT_BIND_RAY_DIRECTION};
+  desc.texture_kinds = {data_kind_, data_kind_, data_kind_, TextureKind::Image2D, TextureKind::Image2D};
   PassHandle pass = backend_.create_pass(desc);
   data_->trace_passes.emplace(key, pass);
   return pass;
@@ -270,7 +276,7 @@ void Renderer::upload_tree(const FlatKdTree& tree) {
   auto upload_padded = [&](Data::Texture& t, const void* src, size_t elements, size_t element_bytes,
                            TexelFormat format) {
     const uint32_t rows = data_rows(elements);
-    ensure_texture(t.handle, t.rows, kDataWidth, rows, format);
+    ensure_texture(t.handle, t.rows, kDataWidth, rows, format, data_kind_);
     const size_t bytes = elements * element_bytes;
     if (elements == 0) {
       const std::vector<float> zero(4, 0.0f);

@@ -23,6 +23,10 @@
 
 namespace mobirt {
 
+// How the traversal pass reads the scene data (nodes, primitive lists, triangles): uniform texel
+// buffers where the backend has them (Vulkan), else 2D images; images always on OpenGL ES 2.0.
+enum class DataReads { TexelBuffers, Images };
+
 struct RenderSettings {
   int width = 400;
   int height = 240;
@@ -38,6 +42,7 @@ struct RenderSettings {
   bool always_rebuild = false;
   // The shading pass's colour: 8 bits per channel, or 16 from two passes (high and low bytes).
   ColourDepth colour = ColourDepth::Bits8;
+  DataReads data = DataReads::TexelBuffers;  // faster on lavapipe (README: "Data reads")
   KdBuildOptions kd;
   ShadowSettings shadow_rays;  // also the ray/triangle test and precision of every traced ray
   SecondarySettings secondary;
@@ -78,12 +83,14 @@ class Renderer {
   void upload_rays(const RayBatch& rays);
 
   const RenderSettings& settings() const { return settings_; }
+  // Whether the traversal pass reads the scene data from texel buffers (settings.data and the backend).
+  bool texel_buffers() const { return data_kind_ == TextureKind::TexelBuffer; }
 
  private:
   struct Data;  // textures and passes, kept across frames and resized when they are too small
   class Engine;  // the passes as the frame loop drives them
   TextureHandle ensure_texture(TextureHandle& handle, uint32_t& capacity_rows, uint32_t width,
-                               uint32_t rows, TexelFormat format);
+                               uint32_t rows, TexelFormat format, TextureKind kind = TextureKind::Image2D);
   PassHandle trace_pass(int lights, Packing packing);
   PassHandle shade_pass(int lights, int textures, int colour);
   void prepare_atlas(const Scene& scene);
@@ -96,6 +103,7 @@ class Renderer {
 
   Backend& backend_;
   RenderSettings settings_;
+  TextureKind data_kind_ = TextureKind::Image2D;  // of the nodes, primitive list and triangles
   std::unique_ptr<Data> data_;
   std::unique_ptr<Engine> engine_;
 };

@@ -152,12 +152,13 @@ EsInterface reflect_es_source(const std::string& code) {
   return result;
 }
 
-// SAMPLER(slot, name) lines of a source: name -> binding slot.
+// SAMPLER(slot, name) and DATA_SAMPLER(slot, name) lines of a source (DATA_SAMPLER is SAMPLER on
+// GLES: traverse.glsl's scene data, texel buffers on Vulkan): name -> binding slot.
 std::map<std::string, int> sampler_slots(const std::string& code) {
   std::map<std::string, int> slots;
-  static const std::regex line(R"(\bSAMPLER\s*\(\s*(\w+)\s*,\s*(\w+)\s*\))");
+  static const std::regex line(R"(\b(?:DATA_)?SAMPLER\s*\(\s*(\w+)\s*,\s*(\w+)\s*\))");
   for (auto it = std::sregex_iterator(code.begin(), code.end(), line); it != std::sregex_iterator(); ++it) {
-    if ((*it)[1].str() == "slot") continue;  // the prelude's own #define
+    if ((*it)[1].str() == "slot") continue;  // a #define of the macro itself
     slots[(*it)[2].str()] = binding_value((*it)[1].str());
   }
   return slots;

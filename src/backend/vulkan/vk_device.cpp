@@ -311,10 +311,12 @@ DeviceInfo Device::info() const {
   info.driver = driver_;
   info.driver_version = driver_version_;
   info.ray_query = ray_query_;
+  info.texel_buffers = true;  // uniform texel buffers of RGBA32F and R32F are core Vulkan 1.0
   info.is_software = properties_.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
   const VkPhysicalDeviceLimits& l = properties_.limits;
   auto add = [&](const char* name, const std::string& value) { info.limits.push_back(std::string(name) + ": " + value); };
   add("maxImageDimension2D", std::to_string(l.maxImageDimension2D));
+  add("maxTexelBufferElements", std::to_string(l.maxTexelBufferElements));
   add("maxPerStageDescriptorSampledImages", std::to_string(l.maxPerStageDescriptorSampledImages));
   add("maxPerStageDescriptorSamplers", std::to_string(l.maxPerStageDescriptorSamplers));
   add("maxFragmentOutputAttachments", std::to_string(l.maxFragmentOutputAttachments));

@@ -161,15 +161,24 @@ Pass Pipelines::create_pass(const PassDesc& desc) const {
   Pass pass;
   pass.desc = desc;
 
-  // Descriptor set layout: the uniform block, then one combined image sampler per texture.
+  // Descriptor set layout: the uniform block, then per texture a combined image sampler or a
+  // uniform texel buffer.
   const VkSampler immutable_sampler = sampler_.get();
   std::vector<VkDescriptorSetLayoutBinding> bindings;
   if (desc.uniform_vec4s > 0) {
     bindings.push_back({MOBIRT_BIND_TRACE_PARAMS, VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr});
   }
-  for (const uint32_t binding : desc.texture_bindings) {
-    bindings.push_back({binding, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1, VK_SHADER_STAGE_FRAGMENT_BIT,
-                        &immutable_sampler});
+  uint32_t images = 0, texel_buffers = 0;
+  for (size_t i = 0; i < desc.texture_bindings.size(); ++i) {
+    if (desc.kind(i) == TextureKind::TexelBuffer) {
+      bindings.push_back({desc.texture_bindings[i], VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, 1,
+                          VK_SHADER_STAGE_FRAGMENT_BIT, nullptr});
+      ++texel_buffers;
+    } else {
+      bindings.push_back({desc.texture_bindings[i], VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1,
+                          VK_SHADER_STAGE_FRAGMENT_BIT, &immutable_sampler});
+      ++images;
+    }
   }
   VkDescriptorSetLayoutCreateInfo set_info{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO};
   set_info.bindingCount = uint32_t(bindings.size());
@@ -198,9 +207,8 @@ Pass Pipelines::create_pass(const PassDesc& desc) const {
   if (!bindings.empty()) {
     std::vector<VkDescriptorPoolSize> sizes;
     if (desc.uniform_vec4s > 0) sizes.push_back({VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1});
-    if (!desc.texture_bindings.empty()) {
-      sizes.push_back({VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, uint32_t(desc.texture_bindings.size())});
-    }
+    if (images > 0) sizes.push_back({VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, images});
+    if (texel_buffers > 0) sizes.push_back({VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, texel_buffers});
     VkDescriptorPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
     pool_info.maxSets = 1;
     pool_info.poolSizeCount = uint32_t(sizes.size());

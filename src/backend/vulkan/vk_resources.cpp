@@ -37,6 +37,12 @@ void DeviceImage::reset() {
   memory.reset();
 }
 
+void TexelBuffer::reset() {
+  view.reset();
+  buffer.reset();
+  memory.reset();
+}
+
 void RenderTarget::reset() {
   framebuffer.reset();
   image.reset();
@@ -68,25 +74,36 @@ Memory allocate(const Device& device, const VkMemoryRequirements& requirements, 
   return Memory(device.handle(), memory);
 }
 
-HostBuffer create_host_buffer(const Device& device, VkDeviceSize size, VkBufferUsageFlags usage, bool prefer_cached) {
+namespace {
+
+// A buffer of `size` bytes for `usage`, bound to memory of its own (allocate()'s rules).
+void create_bound_buffer(const Device& device, VkDeviceSize size, VkBufferUsageFlags usage,
+                         VkMemoryPropertyFlags required, VkMemoryPropertyFlags preferred, Buffer& buffer_out,
+                         Memory& memory_out, bool* coherent) {
   const VkDevice vk_device = device.handle();
-  HostBuffer result;
-  result.size = size;
   VkBufferCreateInfo info{VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO};
   info.size = size;
   info.usage = usage;
   info.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
   VkBuffer buffer = VK_NULL_HANDLE;
   VK_CHECK(vkCreateBuffer(vk_device, &info, nullptr, &buffer));
-  result.buffer = Buffer(vk_device, buffer);
+  buffer_out = Buffer(vk_device, buffer);
   VkMemoryRequirements requirements{};
   vkGetBufferMemoryRequirements(vk_device, buffer, &requirements);
-  result.memory = allocate(device, requirements, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT,
-                           prefer_cached ? VK_MEMORY_PROPERTY_HOST_CACHED_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT
-                                         : VK_MEMORY_PROPERTY_HOST_COHERENT_BIT,
-                           &result.coherent);
-  VK_CHECK(vkBindBufferMemory(vk_device, buffer, result.memory.get(), 0));
-  VK_CHECK(vkMapMemory(vk_device, result.memory.get(), 0, VK_WHOLE_SIZE, 0, &result.mapped));
+  memory_out = allocate(device, requirements, required, preferred, coherent);
+  VK_CHECK(vkBindBufferMemory(vk_device, buffer, memory_out.get(), 0));
+}
+
+}  // namespace
+
+HostBuffer create_host_buffer(const Device& device, VkDeviceSize size, VkBufferUsageFlags usage, bool prefer_cached) {
+  HostBuffer result;
+  result.size = size;
+  create_bound_buffer(device, size, usage, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT,
+                      prefer_cached ? VK_MEMORY_PROPERTY_HOST_CACHED_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT
+                                    : VK_MEMORY_PROPERTY_HOST_COHERENT_BIT,
+                      result.buffer, result.memory, &result.coherent);
+  VK_CHECK(vkMapMemory(device.handle(), result.memory.get(), 0, VK_WHOLE_SIZE, 0, &result.mapped));
   return result;
 }
 
@@ -121,6 +138,23 @@ DeviceImage create_image(const Device& device, uint32_t width, uint32_t height, 
   VkImageView view = VK_NULL_HANDLE;
   VK_CHECK(vkCreateImageView(vk_device, &view_info, nullptr, &view));
   result.view = ImageView(vk_device, view);
+  return result;
+}
+
+TexelBuffer create_texel_buffer(const Device& device, uint32_t texels, VkFormat format, size_t texel_bytes) {
+  const VkDevice vk_device = device.handle();
+  TexelBuffer result;
+  create_bound_buffer(device, VkDeviceSize(texels) * texel_bytes,
+                      VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT, 0,
+                      VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT, result.buffer, result.memory, nullptr);
+  VkBufferViewCreateInfo view_info{VK_STRUCTURE_TYPE_BUFFER_VIEW_CREATE_INFO};
+  view_info.buffer = result.buffer.get();
+  view_info.format = format;
+  view_info.offset = 0;
+  view_info.range = VK_WHOLE_SIZE;
+  VkBufferView view = VK_NULL_HANDLE;
+  VK_CHECK(vkCreateBufferView(vk_device, &view_info, nullptr, &view));
+  result.view = BufferView(vk_device, view);
   return result;
 }
 

@@ -38,11 +38,23 @@ struct DeviceImage {
   void reset();
 };
 
+// A device-local buffer with a texel view of it: a uniform texel buffer (samplerBuffer).
+struct TexelBuffer {
+  Memory memory;
+  Buffer buffer;
+  BufferView view;
+
+  void reset();
+};
+
+// A data texture: a 2D image (width x height) or a texel buffer (width texels, height 1).
 struct Texture {
   uint32_t width = 0, height = 0;
   TexelFormat format = TexelFormat::RGBA32F;
-  VkImageLayout layout = VK_IMAGE_LAYOUT_UNDEFINED;
+  TextureKind kind = TextureKind::Image2D;
+  VkImageLayout layout = VK_IMAGE_LAYOUT_UNDEFINED;  // images only
   DeviceImage image;
+  TexelBuffer buffer;
 };
 
 struct RenderTarget {
@@ -67,5 +79,9 @@ HostBuffer create_host_buffer(const Device& device, VkDeviceSize size, VkBufferU
 // there is some, with its view.
 DeviceImage create_image(const Device& device, uint32_t width, uint32_t height, VkFormat format,
                          VkImageUsageFlags usage);
+
+// A device-local uniform texel buffer of `texels` texels of `format` (also a transfer destination),
+// with its view.
+TexelBuffer create_texel_buffer(const Device& device, uint32_t texels, VkFormat format, size_t texel_bytes);
 
 }  // namespace mobirt::vk

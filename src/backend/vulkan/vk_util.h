@@ -73,6 +73,7 @@ class Unique {
 };
 
 using Buffer = Unique<VkBuffer, vkDestroyBuffer>;
+using BufferView = Unique<VkBufferView, vkDestroyBufferView>;
 using Image = Unique<VkImage, vkDestroyImage>;
 using ImageView = Unique<VkImageView, vkDestroyImageView>;
 using Memory = Unique<VkDeviceMemory, vkFreeMemory>;

@@ -53,6 +53,7 @@ class Impl {
 
   DeviceInfo device_info() const { return device_.info(); }
   TextureHandle create_texture(uint32_t width, uint32_t height, TexelFormat format);
+  TextureHandle create_texel_buffer(uint32_t texels, TexelFormat format);
   void upload(TextureHandle texture, const void* data, size_t bytes);
   void destroy(TextureHandle texture);
   PassHandle create_pass(const PassDesc& desc);
@@ -71,11 +72,14 @@ class Impl {
   void usable() const;
   VkResult device_result(VkResult result, const char* call);  // notes VK_ERROR_DEVICE_LOST
   void ensure_staging(VkDeviceSize size);
+  void stage(const void* data, size_t bytes);  // into the staging buffer, flushed
   void ensure_readback(VkDeviceSize size);
   void ensure_target(uint32_t width, uint32_t height);
   void begin_commands();
   void submit_and_wait(const char* what);
   vk::Texture& texture_ref(TextureHandle handle);
+  TextureHandle keep(vk::Texture texture);
+  void upload_buffer(vk::Texture& texture, const void* data, size_t bytes);
   vk::Pass& pass_ref(PassHandle handle);
 
   // Members go in reverse order: resources, pipelines and commands, the device and instance.
@@ -159,6 +163,16 @@ void Impl::ensure_staging(VkDeviceSize size) {
   if (staging_.size >= size) return;
   staging_.reset();
   staging_ = vk::create_host_buffer(device_, std::max(size, VkDeviceSize(1) << 20), VK_BUFFER_USAGE_TRANSFER_SRC_BIT, false);
+}
+
+void Impl::stage(const void* data, size_t bytes) {
+  std::memcpy(staging_.mapped, data, bytes);
+  if (!staging_.coherent) {
+    VkMappedMemoryRange range{VK_STRUCTURE_TYPE_MAPPED_MEMORY_RANGE};
+    range.memory = staging_.memory.get();
+    range.size = VK_WHOLE_SIZE;
+    VK_CHECK(vkFlushMappedMemoryRanges(device_.handle(), 1, &range));
+  }
 }
 
 void Impl::ensure_readback(VkDeviceSize size) {
@@ -252,10 +266,63 @@ TextureHandle Impl::create_texture(uint32_t width, uint32_t height, TexelFormat 
   texture.image = vk::create_image(device_, width, height, vk::vk_format(format),
                                    VK_IMAGE_USAGE_SAMPLED_BIT | VK_IMAGE_USAGE_TRANSFER_DST_BIT);
 
+  return keep(std::move(texture));
+}
+
+TextureHandle Impl::keep(vk::Texture texture) {
   device_.throw_validation_errors();
   const uint32_t id = next_texture_++;
   textures_.emplace(id, std::move(texture));
   return TextureHandle{id};
+}
+
+TextureHandle Impl::create_texel_buffer(uint32_t texels, TexelFormat format) {
+  usable();
+  if (texels == 0) throw Error(ErrorKind::Internal, "create_texel_buffer: empty texel buffer");
+  // The shaders turn indices into ints with a bit trick that holds below 2^23 (prelude_vk.glsl's
+  // data_index), so that is a limit too.
+  const uint32_t limit = std::min(device_.properties().limits.maxTexelBufferElements, uint32_t(1) << 23);
+  if (texels > limit) {
+    throw Error(ErrorKind::BadInput, "a texel buffer of " + std::to_string(texels) + " " + vk::format_name(format) +
+                                         " texels exceeds the limit of " + std::to_string(limit) +
+                                         " (maxTexelBufferElements, at most 2^23)"
+                                         "): render with --data images");
+  }
+  vk::Texture texture;
+  texture.width = texels;
+  texture.height = 1;
+  texture.format = format;
+  texture.kind = TextureKind::TexelBuffer;
+  texture.buffer = vk::create_texel_buffer(device_, texels, vk::vk_format(format), texel_bytes(format));
+  return keep(std::move(texture));
+}
+
+// A texel buffer's upload: staged copies of at most kStagingChunkBytes, each one submission.
+void Impl::upload_buffer(vk::Texture& texture, const void* data, size_t bytes) {
+  const auto start = Clock::now();
+  ensure_staging(std::min(bytes, kStagingChunkBytes));
+  for (size_t offset = 0; offset < bytes; offset += kStagingChunkBytes) {
+    const size_t chunk = std::min(kStagingChunkBytes, bytes - offset);
+    stage(static_cast<const char*>(data) + offset, chunk);
+    begin_commands();
+    // Earlier reads finished (every submission is waited for), so only the write needs ordering
+    // before the next pass's reads.
+    const VkBufferCopy region{0, offset, chunk};
+    vkCmdCopyBuffer(commands_, staging_.buffer.get(), texture.buffer.buffer.get(), 1, &region);
+    VkBufferMemoryBarrier barrier{VK_STRUCTURE_TYPE_BUFFER_MEMORY_BARRIER};
+    barrier.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+    barrier.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
+    barrier.srcQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+    barrier.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+    barrier.buffer = texture.buffer.buffer.get();
+    barrier.offset = offset;
+    barrier.size = chunk;
+    vkCmdPipelineBarrier(commands_, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, 0, 0, nullptr,
+                         1, &barrier, 0, nullptr);
+    submit_and_wait("texel buffer upload");
+  }
+  pending_upload_ms_ += elapsed_ms(start);
+  device_.throw_validation_errors();
 }
 
 void Impl::upload(TextureHandle handle, const void* data, size_t bytes) {
@@ -275,6 +342,7 @@ void Impl::upload(TextureHandle handle, const void* data, size_t bytes) {
   }
   if (bytes == 0) return;
   if (!data) throw Error(ErrorKind::Internal, "upload: no data");
+  if (texture.kind == TextureKind::TexelBuffer) return upload_buffer(texture, data, bytes);
   const auto start = Clock::now();
 
   // Whole rows, then the partial last row, in chunks that fit the reusable staging buffer.
@@ -287,13 +355,7 @@ void Impl::upload(TextureHandle handle, const void* data, size_t bytes) {
     const size_t full_rows = std::min(rows_per_chunk, remaining / texture.width);
     const size_t tail = full_rows < rows_per_chunk ? remaining - full_rows * texture.width : 0;
     const size_t chunk_bytes = (full_rows * texture.width + tail) * texel;
-    std::memcpy(staging_.mapped, static_cast<const char*>(data) + row * row_bytes, chunk_bytes);
-    if (!staging_.coherent) {
-      VkMappedMemoryRange range{VK_STRUCTURE_TYPE_MAPPED_MEMORY_RANGE};
-      range.memory = staging_.memory.get();
-      range.size = VK_WHOLE_SIZE;
-      VK_CHECK(vkFlushMappedMemoryRanges(device_.handle(), 1, &range));
-    }
+    stage(static_cast<const char*>(data) + row * row_bytes, chunk_bytes);
 
     begin_commands();
     VkImageMemoryBarrier barrier{VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER};
@@ -386,15 +448,28 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
   }
   if (!bound.empty()) {
     std::vector<VkDescriptorImageInfo> image_infos(bound.size());
+    std::vector<VkBufferView> buffer_views(bound.size());
     std::vector<VkWriteDescriptorSet> writes(bound.size());
     for (size_t i = 0; i < bound.size(); ++i) {
-      image_infos[i] = {VK_NULL_HANDLE, bound[i]->image.view.get(), VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
+      const TextureKind kind = pass.desc.kind(i);
+      if (bound[i]->kind != kind) {
+        throw Error(ErrorKind::Internal, "pass " + name + ": texture " + std::to_string(i) + " is a " +
+                                             (bound[i]->kind == TextureKind::TexelBuffer ? "texel buffer" : "2D image") +
+                                             " where the pass reads the other kind");
+      }
       writes[i] = {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
       writes[i].dstSet = pass.descriptor_set;
       writes[i].dstBinding = pass.desc.texture_bindings[i];
       writes[i].descriptorCount = 1;
-      writes[i].descriptorType = VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
-      writes[i].pImageInfo = &image_infos[i];
+      if (kind == TextureKind::TexelBuffer) {
+        buffer_views[i] = bound[i]->buffer.view.get();
+        writes[i].descriptorType = VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER;
+        writes[i].pTexelBufferView = &buffer_views[i];
+      } else {
+        image_infos[i] = {VK_NULL_HANDLE, bound[i]->image.view.get(), VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
+        writes[i].descriptorType = VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
+        writes[i].pImageInfo = &image_infos[i];
+      }
     }
     vkUpdateDescriptorSets(device_.handle(), uint32_t(writes.size()), writes.data(), 0, nullptr);
   }
@@ -405,7 +480,7 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
   // A texture never uploaded still needs its layout (its contents are undefined).
   std::vector<VkImageMemoryBarrier> first_use;
   for (vk::Texture* t : bound) {
-    if (t->layout != VK_IMAGE_LAYOUT_UNDEFINED) continue;
+    if (t->kind != TextureKind::Image2D || t->layout != VK_IMAGE_LAYOUT_UNDEFINED) continue;
     VkImageMemoryBarrier barrier{VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER};
     barrier.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
     barrier.oldLayout = VK_IMAGE_LAYOUT_UNDEFINED;
@@ -508,6 +583,9 @@ class VulkanBackend final : public Backend {
   DeviceInfo device_info() const override { return impl_->device_info(); }
   TextureHandle create_texture(uint32_t width, uint32_t height, TexelFormat format) override {
     return impl_->create_texture(width, height, format);
+  }
+  TextureHandle create_texel_buffer(uint32_t texels, TexelFormat format) override {
+    return impl_->create_texel_buffer(texels, format);
   }
   void upload(TextureHandle texture, const void* data, size_t bytes) override { impl_->upload(texture, data, bytes); }
   void destroy(TextureHandle texture) override { impl_->destroy(texture); }
