@@ -179,6 +179,11 @@ TEST(PlyLoader, BadFilesNameTheFileAndTheElement) {
        "element face 1\nproperty int a\nend_header\n0 0 0\n1\n", {"element 'face'", "vertex_indices"}},
       {"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
        "0 0 0\n1 0 0\n0 1 0\n", {"bad.ply", "no triangles"}},
+      // A second vertex list after the faces would leave their indices pointing past it.
+      {"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+       "element face 1\nproperty list uchar int vertex_indices\nelement vertex 1\nproperty float x\n"
+       "property float y\nproperty float z\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n5 5 5\n",
+       {"bad.ply", "element 'vertex' appears twice"}},
   };
   std::string big_face = header + "0 0 0\n1 0 0\n0 1 0\n16385";
   for (int i = 0; i < 16385; ++i) big_face += " 0";

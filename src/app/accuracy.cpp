@@ -208,9 +208,7 @@ int cmd_accuracy(const std::vector<std::string>& args) {
     if (json_path == "-") {
       std::cout << j.dump(2) << "\n";
     } else {
-      std::ofstream out(json_path);
-      out << j.dump(2) << "\n";
-      if (!out) throw input_error(json_path, "cannot write the JSON report");
+      if (!write_text_file(json_path, j.dump(2) + "\n")) throw input_error(json_path, "cannot write the JSON report");
     }
   }
   if (!csv_path.empty()) {

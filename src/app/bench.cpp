@@ -632,13 +632,7 @@ int cmd_bench(const std::vector<std::string>& args) {
     if (json_path == "-") {
       std::cout << text;
     } else {
-      const std::string tmp = json_path + ".tmp";
-      {
-        std::ofstream out(tmp);
-        out << text;
-        if (!out) throw Error(ErrorKind::BadInput, "--json " + json_path + ": cannot write");
-      }
-      std::filesystem::rename(tmp, json_path);
+      if (!write_text_file(json_path, text)) throw Error(ErrorKind::BadInput, "--json " + json_path + ": cannot write");
     }
   }
   return 0;

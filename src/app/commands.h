@@ -25,6 +25,10 @@ std::unique_ptr<Backend> create_backend(const std::string& name, const BackendOp
 // mobirt render SCENE -o OUT [options]: one frame or a sequence of frames to image files.
 int cmd_render(const std::vector<std::string>& args);
 
+// Writes `text` to `path` whole or not at all (a temporary file beside it, renamed over it); false
+// when it could not be written, and then nothing is left behind.
+bool write_text_file(const std::string& path, const std::string& text);
+
 // SIGINT and SIGTERM end the process at once, except during an image write (render.cpp), which
 // completes first: no half-written or temporary file is ever left behind.
 void install_interrupt_handlers();

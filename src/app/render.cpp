@@ -6,9 +6,11 @@
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <optional>
 #include <string>
+#include <system_error>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -54,6 +56,26 @@ void install_interrupt_handlers() {
   sigemptyset(&action.sa_mask);
   sigaction(SIGINT, &action, nullptr);
   sigaction(SIGTERM, &action, nullptr);
+}
+
+bool write_text_file(const std::string& path, const std::string& text) {
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary);
+    out << text;
+    out.flush();
+    if (!out) {
+      std::error_code ignored;
+      std::filesystem::remove(tmp, ignored);
+      return false;
+    }
+  }
+  std::error_code error;
+  std::filesystem::rename(tmp, path, error);
+  if (!error) return true;
+  std::error_code ignored;
+  std::filesystem::remove(tmp, ignored);
+  return false;
 }
 
 namespace {
@@ -324,9 +346,9 @@ int cmd_render(const std::vector<std::string>& args) {
                        {"backend", common.backend_name},
                        {"frames", measured.size()},
                        {"median", timings_json(median)}};
-      std::ofstream file(timings_json_path);
-      file << j.dump(2) << "\n";
-      if (!file) throw Error(ErrorKind::BadInput, "--timings-json " + timings_json_path + ": cannot write the file");
+      if (!write_text_file(timings_json_path, j.dump(2) + "\n")) {
+        throw Error(ErrorKind::BadInput, "--timings-json " + timings_json_path + ": cannot write the file");
+      }
     }
   }
   return 0;

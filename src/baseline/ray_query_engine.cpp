@@ -198,6 +198,11 @@ VkImageMemoryBarrier image_barrier(VkImage image, VkImageLayout from, VkImageLay
 
 struct RayQueryEngine::Impl {
   explicit Impl(const RayQueryOptions& options);
+  // The members below the device are destroyed before DeviceOwner waits for it: wait here first,
+  // so that nothing the device may still use (a pass cut short by an error) is freed under it.
+  ~Impl() {
+    if (device != VK_NULL_HANDLE) vkDeviceWaitIdle(device);
+  }
 
   // Instance, device choice and the reason the device cannot run the peer ("" = it can).
   void create_instance(bool validation, bool sync_validation);
@@ -663,14 +668,16 @@ Buffer RayQueryEngine::Impl::make_buffer(VkDeviceSize size, VkBufferUsageFlags u
 
 void RayQueryEngine::Impl::ensure_host(Buffer& b, VkDeviceSize size, VkBufferUsageFlags usage) {
   if (b.size >= size) return;
+  const VkDeviceSize grown = std::max(size, b.size + b.size / 2);  // headroom for growing scenes
   b.reset();
-  b = make_buffer(std::max(size, b.size + b.size / 2), usage, true);  // headroom for growing scenes
+  b = make_buffer(grown, usage, true);
 }
 
 void RayQueryEngine::Impl::ensure_device(Buffer& b, VkDeviceSize size, VkBufferUsageFlags usage) {
   if (b.size >= size) return;
+  const VkDeviceSize grown = std::max(size, b.size + b.size / 2);
   b.reset();
-  b = make_buffer(std::max(size, b.size + b.size / 2), usage, false);
+  b = make_buffer(grown, usage, false);
 }
 
 void RayQueryEngine::Impl::ensure_image(Image2D& image, uint32_t width, uint32_t height, VkFormat format,

@@ -110,8 +110,12 @@ class PlyReader {
   Scene read() {
     scene_.source = path_;
     header();
+    bool have_vertices = false;
     for (const Element& e : elements_) {
       if (e.name == "vertex") {
+        // A second vertex element would replace the vertices the faces were checked against.
+        if (have_vertices) fail("element 'vertex' appears twice: a PLY file has one vertex list");
+        have_vertices = true;
         vertices(e);
       } else if (e.name == "face") {
         faces(e);
