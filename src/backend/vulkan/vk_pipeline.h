@@ -15,6 +15,13 @@
 
 namespace mobirt::vk {
 
+// The graphics pipeline of a full-screen fragment pass: one triangle from `vertex`, `fragment` with
+// its specialisation (may be null), no culling, no blending, dynamic viewport and scissor, one
+// RGBA8 attachment of `render_pass`. Every fragment pass uses it, the peers' included.
+VkPipeline create_fullscreen_pipeline(VkDevice device, VkRenderPass render_pass, VkPipelineLayout layout,
+                                      VkShaderModule vertex, VkShaderModule fragment,
+                                      const VkSpecializationInfo* specialization, VkPipelineCache cache);
+
 struct Pass {
   PassDesc desc;
   DescriptorSetLayout set_layout;
