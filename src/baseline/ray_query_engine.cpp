@@ -37,7 +37,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-constexpr VkFormat kTargetFormat = VK_FORMAT_R8G8B8A8_UNORM;
 constexpr VkFormat kRayFormat = VK_FORMAT_R32G32B32A32_SFLOAT;
 constexpr uint32_t kTimestamps = 4;
 constexpr const char* kExtensions[] = {VK_KHR_ACCELERATION_STRUCTURE_EXTENSION_NAME, VK_KHR_RAY_QUERY_EXTENSION_NAME,
@@ -525,47 +524,9 @@ void RayQueryEngine::Impl::create_objects() {
     queries = vk::QueryPool(device, q);
   }
 
-  VkSamplerCreateInfo sampler_info{VK_STRUCTURE_TYPE_SAMPLER_CREATE_INFO};  // texelFetch only
-  sampler_info.magFilter = sampler_info.minFilter = VK_FILTER_NEAREST;
-  sampler_info.addressModeU = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
-  sampler_info.addressModeV = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
-  sampler_info.addressModeW = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
-  VkSampler s = VK_NULL_HANDLE;
-  VK_CHECK_RESULT(vkCreateSampler(device, &sampler_info, nullptr, &s), "vkCreateSampler");
-  sampler = vk::Sampler(device, s);
+  sampler = vk::create_fetch_sampler(device);
 
-  // One RGBA8 attachment, not loaded (every texel of the area is written), left for the copy out.
-  VkAttachmentDescription attachment{};
-  attachment.format = kTargetFormat;
-  attachment.samples = VK_SAMPLE_COUNT_1_BIT;
-  attachment.loadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
-  attachment.storeOp = VK_ATTACHMENT_STORE_OP_STORE;
-  attachment.stencilLoadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
-  attachment.stencilStoreOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
-  attachment.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
-  attachment.finalLayout = VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL;
-  VkAttachmentReference color{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
-  VkSubpassDescription subpass{};
-  subpass.pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
-  subpass.colorAttachmentCount = 1;
-  subpass.pColorAttachments = &color;
-  VkSubpassDependency out{};  // the texels written before the copy to the host reads them
-  out.srcSubpass = 0;
-  out.dstSubpass = VK_SUBPASS_EXTERNAL;
-  out.srcStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
-  out.dstStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT;
-  out.srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
-  out.dstAccessMask = VK_ACCESS_TRANSFER_READ_BIT;
-  VkRenderPassCreateInfo rp{VK_STRUCTURE_TYPE_RENDER_PASS_CREATE_INFO};
-  rp.attachmentCount = 1;
-  rp.pAttachments = &attachment;
-  rp.subpassCount = 1;
-  rp.pSubpasses = &subpass;
-  rp.dependencyCount = 1;
-  rp.pDependencies = &out;
-  VkRenderPass render = VK_NULL_HANDLE;
-  VK_CHECK_RESULT(vkCreateRenderPass(device, &rp, nullptr, &render), "vkCreateRenderPass");
-  render_pass = vk::RenderPass(device, render);
+  render_pass = vk::create_target_render_pass(device);  // the same as mobirt's passes
 
   auto module = [&](std::span<const uint32_t> code) {
     VkShaderModuleCreateInfo info{VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO};
@@ -725,7 +686,7 @@ void RayQueryEngine::Impl::ensure_image(Image2D& image, uint32_t width, uint32_t
 void RayQueryEngine::Impl::ensure_target(uint32_t width, uint32_t height) {
   if (target.width == width && target.height >= height && framebuffer) return;
   framebuffer.reset();
-  ensure_image(target, width, height, kTargetFormat,
+  ensure_image(target, width, height, vk::kTargetFormat,
                VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT);
   VkImageView view = target.view.get();
   VkFramebufferCreateInfo info{VK_STRUCTURE_TYPE_FRAMEBUFFER_CREATE_INFO};

@@ -36,9 +36,7 @@ std::string cache_file_name(const std::string& dir, const VkPhysicalDeviceProper
 
 }  // namespace
 
-Pipelines::Pipelines(const Device& device, const std::string& cache_dir)
-    : device_(device), cache_file_(cache_file_name(cache_dir, device.properties())) {
-  const VkDevice vk_device = device.handle();
+Sampler create_fetch_sampler(VkDevice vk_device) {
   // Shaders read texels with texelFetch: the sampler's filtering never applies, but a sampler is
   // part of a combined image sampler, so one immutable NEAREST / CLAMP_TO_EDGE sampler serves all.
   VkSamplerCreateInfo sampler_info{VK_STRUCTURE_TYPE_SAMPLER_CREATE_INFO};
@@ -51,8 +49,10 @@ Pipelines::Pipelines(const Device& device, const std::string& cache_dir)
   sampler_info.maxLod = 0.0f;
   VkSampler sampler = VK_NULL_HANDLE;
   VK_CHECK(vkCreateSampler(vk_device, &sampler_info, nullptr, &sampler));
-  sampler_ = Sampler(vk_device, sampler);
+  return Sampler(vk_device, sampler);
+}
 
+RenderPass create_target_render_pass(VkDevice vk_device) {
   // One render pass for every pipeline: one RGBA8 colour attachment, contents not loaded (every
   // texel of the render area is written), stored and left ready for the copy to the host.
   VkAttachmentDescription attachment{};
@@ -93,7 +93,15 @@ Pipelines::Pipelines(const Device& device, const std::string& cache_dir)
   render_pass_info.pDependencies = dependencies;
   VkRenderPass render_pass = VK_NULL_HANDLE;
   VK_CHECK(vkCreateRenderPass(vk_device, &render_pass_info, nullptr, &render_pass));
-  render_pass_ = RenderPass(vk_device, render_pass);
+  return RenderPass(vk_device, render_pass);
+}
+
+Pipelines::Pipelines(const Device& device, const std::string& cache_dir)
+    : device_(device), cache_file_(cache_file_name(cache_dir, device.properties())) {
+  const VkDevice vk_device = device.handle();
+  sampler_ = create_fetch_sampler(vk_device);
+
+  render_pass_ = create_target_render_pass(vk_device);
 
   VkShaderModuleCreateInfo module_info{VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO};
   module_info.codeSize = sizeof(spirv_fullscreen_vert);

@@ -15,6 +15,12 @@
 
 namespace mobirt::vk {
 
+// The immutable sampler of every texelFetch (NEAREST, CLAMP_TO_EDGE: its filtering never applies).
+Sampler create_fetch_sampler(VkDevice device);
+// The render pass of every fragment pass: one kTargetFormat attachment, not loaded, stored and left
+// for the copy to the host, ordered after the previous pass's copy and before this one's.
+RenderPass create_target_render_pass(VkDevice device);
+
 // The graphics pipeline of a full-screen fragment pass: one triangle from `vertex`, `fragment` with
 // its specialisation (may be null), no culling, no blending, dynamic viewport and scissor, one
 // RGBA8 attachment of `render_pass`. Every fragment pass uses it, the peers' included.
