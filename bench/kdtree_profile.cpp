@@ -20,18 +20,9 @@
 #include "accel/kdtree.h"
 #include "core/geometry.h"
 #include "bench_meshes.h"
+#include "core/cpu_time.h"
 #include "core/memory.h"
 #include "scene/animation.h"
-
-namespace {
-
-double process_cpu_ms() {
-  timespec t{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return double(t.tv_sec) * 1e3 + double(t.tv_nsec) * 1e-6;
-}
-
-}  // namespace
 
 int main(int argc, char** argv) {
   using namespace mobirt;

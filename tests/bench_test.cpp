@@ -116,6 +116,38 @@ TEST(Bench, NoBaselineSkipsEveryPeer) {
   for (const char* peer : {"embree", "cpu_kd", "ray_query", "ratios"}) EXPECT_FALSE(c.contains(peer)) << peer;
 }
 
+// mobirt's frames are pipelined unless --serial, and the table and the JSON say which; pipelined,
+// the next frame was prepared on the worker during each frame but the last.
+TEST(Bench, SaysWhetherItsFramesArePipelined) {
+  for (const bool serial : {false, true}) {
+    SCOPED_TRACE(serial ? "--serial" : "pipelined");
+    const fs::path json = test::temp_dir() / "bench.json";
+    const test::CommandResult r = test::run_mobirt(
+        "bench " MOBIRT_SOURCE_DIR "/scenes/fish.gltf --size 32x20 --frames 3 --warmup 0 --levels cast "
+        "--backend vulkan --no-baseline --build-threads 1 --json '" + json.string() + "'" + (serial ? " --serial" : ""));
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_NE(r.output.find(serial ? "mobirt's frames serial (--serial)" : "mobirt's frames pipelined"), std::string::npos)
+        << r.output;
+    EXPECT_NE(r.output.find(serial ? "mobirt's frame loop, serial" : "mobirt's frame loop, pipelined"), std::string::npos)
+        << r.output;
+    std::ifstream in(json);
+    const nlohmann::json j = nlohmann::json::parse(in);
+    EXPECT_EQ(j["settings"]["pipelined"].get<bool>(), !serial);
+    EXPECT_EQ(j["settings"]["build_threads"].get<int>(), 1);
+    const nlohmann::json& mobirt = j["cells"][0]["mobirt"];
+    EXPECT_EQ(mobirt["pipelined"].get<bool>(), !serial);
+    const nlohmann::json& s = mobirt["stages_ms"];
+    EXPECT_GT(s["build"].get<double>(), 0.0);
+    EXPECT_GE(s["render"].get<double>(), s["render_cpu"].get<double>() * 0.999);  // one thread's CPU time
+    if (serial) {
+      EXPECT_EQ(s["ahead"].get<double>(), 0.0);
+      EXPECT_EQ(s["build_wait"].get<double>(), 0.0);
+    } else {
+      EXPECT_GT(s["ahead"].get<double>(), 0.0);
+    }
+  }
+}
+
 TEST(Bench, BadOptionsAreRefusedBeforeTheRun) {
   const fs::path dir = test::temp_dir();
   for (const std::string& args :

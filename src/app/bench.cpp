@@ -27,6 +27,7 @@
 #include "baseline/ray_query_whitted.h"
 #include "core/error.h"
 #include "render/cpu_render.h"
+#include "render/frame_pipeline.h"
 #include "render/renderer.h"
 #include "render/whitted.h"
 #include "scene/animation.h"
@@ -146,9 +147,18 @@ nlohmann::json fps_json(const std::vector<double>& frame_ms) {
 }
 
 // One frame of any column, GPU passes or CPU engine: each stage the engine does not have stays 0.
-void add_frame(Samples& s, double animate_ms, const FrameTimings& t) {
+// `step`: the frame came from a frame pipeline (render/frame_pipeline.h), whose step's wall clock
+// is the frame's time; pipelined, its animate and build stages ran on the worker during the
+// previous frame, so they are not parts of it.
+void add_frame(Samples& s, double animate_ms, const FrameTimings& t, const PipelineStep* step = nullptr) {
   const GenerationTimings& g = t.sum;
   s.add("animate", animate_ms);
+  if (step) {
+    s.add("render", step->render_ms);
+    s.add("render_cpu", step->render_cpu_ms);
+    s.add("ahead", step->ahead_ms);
+    s.add("build_wait", step->wait_ms);
+  }
   s.add("build", t.build_ms);
   s.add("rays", t.rays_ms);
   s.add("upload", g.upload_ms);
@@ -159,7 +169,7 @@ void add_frame(Samples& s, double animate_ms, const FrameTimings& t) {
   s.add("shade", g.shade_ms);
   s.add("accumulate", g.accumulate_ms);
   s.add("secondary", g.secondary_ms);
-  s.add("frame", animate_ms + t.total_ms);
+  s.add("frame", step ? step->period_ms : animate_ms + t.total_ms);
   s.add("traced_rays", double(g.rays));
   s.add("shadow_rays", double(g.shadow_rays));
   s.add("bytes_read", double(g.bytes_read));
@@ -184,6 +194,10 @@ struct BenchOptions {
   bool baseline = true;
   bool cpu = true;
   std::vector<std::string> backends = {"vulkan", "gles"};
+  // mobirt's columns through the frame pipeline: frame N+1 posed and its kd-tree built on a worker
+  // (in an arena of build_threads) while frame N renders; --serial: one after the other.
+  bool pipelined = true;
+  unsigned build_threads = 0;  // 0: --threads
   VulkanOptions backend_options;  // the pipeline cache is Vulkan's
   RenderSettings settings;  // kd, stack, max_steps
 };
@@ -241,6 +255,21 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, RayQueryPeer* peer, con
   std::vector<Samples> gpu(columns.size());
   Samples emb, cpu, rqs;
   const double fps = animation.fps() > 0 ? animation.fps() : 24.0;
+  // Each GPU column's frames go through a frame pipeline of its own (serial with --serial), posing
+  // into two scenes of its own, one per slot; the peers render the shared posed scene.
+  std::vector<std::unique_ptr<PosedScene>> slots;
+  std::vector<std::unique_ptr<FramePipeline>> pipelines;
+  for (size_t c = 0; c < columns.size(); ++c) {
+    PosedScene* mine[2];
+    for (PosedScene*& p : mine) p = slots.emplace_back(std::make_unique<PosedScene>(animation, bs.edits, bs.width, bs.height)).get();
+    pipelines.push_back(std::make_unique<FramePipeline>(
+        size_t(o.warmup + o.frames),
+        [mine, fps](int slot, size_t index) {
+          const Camera view = mine[slot]->at(double(index) / fps);
+          return std::make_pair(static_cast<const Scene*>(&mine[slot]->scene), view);
+        },
+        settings.kd, settings.always_rebuild, o.pipelined));
+  }
   KdBuildStats kd_stats;
   for (int f = 0; f < o.warmup + o.frames; ++f) {
     const bool timed = f >= o.warmup;
@@ -251,9 +280,13 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, RayQueryPeer* peer, con
 
     for (size_t c = 0; c < columns.size(); ++c) {
       FrameTimings ft;
-      renderers[c]->render(scene, view, &ft);
+      double pose_ms = 0;
+      const PipelineStep step = pipelines[c]->step(size_t(f), [&](PreparedFrame& prepared) {
+        render_prepared(*renderers[c], prepared, &ft);
+        pose_ms = prepared.pose_ms;
+      });
       check_messages(columns[c].backend->take_debug_messages());
-      if (timed) add_frame(gpu[c], animate_ms, ft);
+      if (timed) add_frame(gpu[c], pose_ms, ft, &step);
     }
     if (ray_query) {
       FrameTimings ft;
@@ -292,7 +325,7 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, RayQueryPeer* peer, con
   double best_fps = 0;
   for (size_t c = 0; c < columns.size(); ++c) {
     const std::string& key = columns[c].key;
-    cell[key] = {{"fps", fps_json(gpu[c].all("frame"))}, {"stages_ms", gpu[c].medians()}};
+    cell[key] = {{"fps", fps_json(gpu[c].all("frame"))}, {"stages_ms", gpu[c].medians()}, {"pipelined", o.pipelined}};
     const double gpu_fps = cell[key]["fps"]["median"];
     best_fps = std::max(best_fps, gpu_fps);
     // fps over a peer's fps; traversal: Mrays/s over the peer's on the same rays.
@@ -338,6 +371,27 @@ const char* column_title(const std::string& key) {
   return key == "mobirt" ? "Vulkan" : key == "mobirt_gles" ? "GLES 2.0" : "ray query";
 }
 
+// mobirt's frame loop: what the rendering thread did and, pipelined, what the worker did beside it.
+void print_frame_loop(const nlohmann::json& cells, const std::vector<std::string>& gpus, bool pipelined) {
+  std::printf("\nmobirt's frame loop, %s, ms (median): render = upload, passes, decoding and ray tree on the\n"
+              "rendering thread, cpu = its own CPU time in them (the rest it waits on fences while the driver's\n"
+              "threads run the passes, or for its decoding threads); ahead = posing + kd-tree build of the next frame on the worker meanwhile;\n"
+              "wait = the rendering thread waiting for the worker afterwards (the build not hidden); frame = the\n"
+              "loop's period.%s\n",
+              pipelined ? "pipelined" : "serial",
+              pipelined ? " In the stage tables above, anim and build are the worker's, not parts of the frame." : "");
+  std::printf("%-28s %-8s %7s %7s %7s %7s %7s\n", "scene, level", "backend", "render", "cpu", "ahead", "wait", "frame");
+  for (const nlohmann::json& c : cells) {
+    for (const std::string& g : gpus) {
+      const nlohmann::json& s = c[g]["stages_ms"];
+      std::printf("%-28s %-8s %7.2f %7.2f %7.2f %7.2f %7.2f\n",
+                  (c["scene"].get<std::string>() + ", " + c["level_name"].get<std::string>()).c_str(),
+                  column_title(g), s["render"].get<double>(), s["render_cpu"].get<double>(), s["ahead"].get<double>(),
+                  s["build_wait"].get<double>(), s["frame"].get<double>());
+    }
+  }
+}
+
 void print_tables(const nlohmann::json& result) {
   const nlohmann::json& cells = result["cells"];
   if (cells.empty()) return;
@@ -352,7 +406,9 @@ void print_tables(const nlohmann::json& result) {
     return c["scene"].get<std::string>() + ", " + c["level_name"].get<std::string>();
   };
 
-  std::printf("\nTable 1: frames per second, median [min-max]; paper = the MobiRT paper, target = 2x paper\n");
+  std::printf("\nTable 1: frames per second, median [min-max]; paper = the MobiRT paper, target = 2x paper; mobirt's\n"
+              "frames %s\n", result["settings"]["pipelined"].get<bool>() ? "pipelined (next frame posed and built meanwhile)"
+                                                                         : "serial (--serial)");
   std::printf("%-28s %-8s %5s %6s", "scene, level", "size", "paper", "target");
   for (const std::string& g : gpus) std::printf("  %-18s", (std::string("mobirt ") + column_title(g)).c_str());
   if (ray_query) std::printf("  %-18s", "ray query (Vulkan)");
@@ -403,6 +459,7 @@ void print_tables(const nlohmann::json& result) {
       std::printf("\n");
     }
   }
+  print_frame_loop(cells, gpus, result["settings"]["pipelined"].get<bool>());
   if (!baseline) return;
 
   std::printf("\nEmbree 3 and the CPU kd-tree on %u threads, per stage, ms (median): build, primary rays, closest\n"
@@ -509,6 +566,14 @@ int cmd_bench(const std::vector<std::string>& args) {
             "CPU threads of the Embree and CPU kd-tree columns and of the kd-tree build\n"
             "(default: all cores); lavapipe's threads are set by LP_NUM_THREADS",
             [&](const cli::Value& v) { o.threads = unsigned(v.integer(1, 1024)); });
+  cl.option("--build-threads", "N",
+            "threads of mobirt's kd-tree build (its TBB arena; default --threads): its\n"
+            "share of the CPU beside lavapipe's LP_NUM_THREADS when pipelined",
+            [&](const cli::Value& v) { o.build_threads = unsigned(v.integer(1, 1024)); });
+  cl.flag("--serial",
+          "mobirt's frames one stage after the other (pose, build, passes) instead of\n"
+          "pipelined (frame N+1 posed and built on a worker while frame N renders)",
+          [&] { o.pipelined = false; });
   cl.flag("--no-baseline", "leave out the peers: the ray-query, Embree and CPU kd-tree columns",
           [&] { o.baseline = false; });
   cl.flag("--no-cpu", "leave out the CPU kd-tree column only", [&] { o.cpu = false; });
@@ -563,7 +628,8 @@ int cmd_bench(const std::vector<std::string>& args) {
   }
 
   o.backend_options.pipeline_cache_dir = default_pipeline_cache_dir();
-  o.settings.kd.threads = int(o.threads);  // the kd-tree build gets the cores the CPU columns get
+  // The kd-tree build gets the cores the CPU columns get, unless --build-threads says otherwise.
+  o.settings.kd.threads = int(o.build_threads ? o.build_threads : o.threads);
   std::vector<GpuColumn> columns;
   for (const std::string& b : o.backends) {
     columns.push_back({b == "vulkan" ? "mobirt" : "mobirt_gles", create_backend(b, o.backend_options, kHelp)});
@@ -604,9 +670,16 @@ int cmd_bench(const std::vector<std::string>& args) {
                         {"build", kd_build_mode_name(o.settings.kd.build)},
                         {"stack", o.settings.stack_depth},
                         {"max_steps", o.settings.max_steps},
-                        {"kd_rebuilt_every_frame", true}};
+                        {"kd_rebuilt_every_frame", true},
+                        {"pipelined", o.pipelined},
+                        {"build_threads", o.settings.kd.threads}};
   std::printf("mobirt bench: %d frames per cell after %d warm-up frames, animation playing, kd-tree rebuilt every frame\n",
               o.frames, o.warmup);
+  std::printf("%s; kd-tree build on %d threads\n",
+              o.pipelined ? "mobirt's frames pipelined: frame N+1 posed and its kd-tree built on a worker while frame N "
+                            "renders (--serial: one after the other)"
+                          : "mobirt's frames serial (--serial): pose, build, passes, one after the other",
+              o.settings.kd.threads);
   std::printf("machine: %u cores; %s, %s, %s, LP_NUM_THREADS=%s; %s on %u threads\n",
               std::thread::hardware_concurrency(), info.api.c_str(), info.device.c_str(), info.driver.c_str(),
               lp ? lp : "(all cores)", EmbreeEngine::version().c_str(), o.threads);

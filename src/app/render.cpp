@@ -21,6 +21,7 @@
 #include "backend/backend.h"
 #include "core/error.h"
 #include "core/image.h"
+#include "render/frame_pipeline.h"
 #include "render/renderer.h"
 #include "scene/loader.h"
 #include "scene/view_defaults.h"
@@ -153,11 +154,13 @@ FrameTimings median_timings(const std::vector<FrameTimings>& frames) {
   return m;
 }
 
-void print_timings(const FrameTimings& t) {
+// built_ahead: the frames came pipelined, their trees built on a worker during the previous frame.
+void print_timings(const FrameTimings& t, bool built_ahead) {
   const GenerationTimings& s = t.sum;
   auto mrays = [](double rays, double ms) { return ms > 0 ? rays / (ms * 1e3) : 0.0; };
   std::printf("stage                   ms\n");
-  std::printf("kd-tree build      %9.2f\n", t.build_ms);
+  std::printf("kd-tree build      %9.2f%s\n", t.build_ms,
+              built_ahead ? "   (on a worker while the previous frame rendered: not part of the frame)" : "");
   std::printf("primary rays       %9.2f\n", t.rays_ms);
   std::printf("upload             %9.2f   (tree, rays, shading inputs)\n", s.upload_ms);
   std::printf("traversal passes   %9.2f   %.2f Mrays/s (%u rays + %llu shadow rays)\n", s.trace_ms,
@@ -216,6 +219,7 @@ int cmd_render(const std::vector<std::string>& args) {
   cli::CommonOptions common;
   std::string output;
   bool timings = false;
+  bool serial = false;
   std::string timings_json_path;
   int repeat = 5;
   std::optional<double> fps;
@@ -234,6 +238,10 @@ int cmd_render(const std::vector<std::string>& args) {
               }
               frames = std::make_pair(first, last);
             });
+  cl.flag("--serial",
+          "with --frames: pose each frame and build its kd-tree after the previous\n"
+          "frame rendered, instead of on a worker while it renders (same images)",
+          [&] { serial = true; });
   cl.option("--fps", "F", "frames per second of --frames (default: the scene's, else 24)",
             [&](const cli::Value& v) { fps = v.real(0.001f, 10000.0f); });
   cl.flag("--timings",
@@ -302,11 +310,21 @@ int cmd_render(const std::vector<std::string>& args) {
   } else {
     const bool tty = isatty(2);
     const auto start = std::chrono::steady_clock::now();
+    // Frame i + 1 is posed into the other scene and its tree built while frame i renders.
+    PosedScene ahead(animation, common.edits, settings.width, settings.height);
+    PosedScene* slots[2] = {&posed, &ahead};
+    FramePipeline pipeline(
+        frame_list.size(),
+        [&](int slot, size_t index) {
+          const Camera view = slots[slot]->at(double(frame_list[index]) / frame_rate);
+          return std::make_pair(static_cast<const Scene*>(&slots[slot]->scene), view);
+        },
+        settings.kd, settings.always_rebuild, !serial);
     for (size_t i = 0; i < frame_list.size(); ++i) {
       const int frame = frame_list[i];
-      const Camera view = posed.at(double(frame) / frame_rate);
       FrameTimings t;
-      const Image image = renderer.render(scene, view, &t);
+      Image image;
+      pipeline.step(i, [&](PreparedFrame& f) { image = render_prepared(renderer, f, &t); });
       if (i > 0 || frame_list.size() == 1) measured.push_back(t);
       check_messages();
       if (const int code = write_output(output_for(frame), image)) return code;
@@ -320,7 +338,7 @@ int cmd_render(const std::vector<std::string>& args) {
     }
     if (tty) std::fprintf(stderr, "\n");
   }
-  if (posed.headlit()) note_headlight(scene);
+  if (posed.headlit()) note_headlight(scene);  // the pipeline's other slot poses the same scene
   if (timings && !measured.empty()) {
     std::printf("%s: %zu triangles, %zu lights, %dx%d, depth %d on %s\n", scene_path.c_str(),
                 scene.mesh.triangle_count(), scene.lights.size(), settings.width, settings.height,
@@ -331,7 +349,7 @@ int cmd_render(const std::vector<std::string>& args) {
       std::printf("median of %d frames after one warm-up frame\n", repeat);
     }
     const FrameTimings median = median_timings(measured);
-    print_timings(median);
+    print_timings(median, frames && !serial);
     if (!timings_json_path.empty()) {
       nlohmann::json j{{"scene", scene_path},
                        {"triangles", scene.mesh.triangle_count()},

@@ -103,6 +103,8 @@ struct Renderer::Data {
   FlatKdTree tree;                         // the last tree built, and the triangles it was built on
   std::vector<glm::vec3> tree_positions;
   bool tree_valid = false;
+  bool tree_prebuilt = false;   // the next begin_frame uploads `tree`, built elsewhere in prebuilt_ms
+  double prebuilt_ms = 0.0;
   uint32_t ray_width = 0;  // the ray textures' row width; a change recreates them
   std::map<std::pair<int, int>, PassHandle> trace_passes;  // (lights, packing)
   std::map<std::tuple<int, int, int>, PassHandle> shade_passes;  // (lights, textures, colour)
@@ -116,6 +118,8 @@ class Renderer::Engine final : public WhittedEngine {
   const char* name() const override { return "mobirt fragment passes"; }
 
   void begin_frame(const Scene& scene, const RenderSettings&, FrameTimings& t) override {
+    // A tree built elsewhere is this frame's only (taken first, so that a refused frame leaves none).
+    const bool prebuilt = std::exchange(r_.data_->tree_prebuilt, false);
     // Refuse a scene over a limit before any work.
     choose_packing(scene.mesh.triangle_count(), r_.pass_lights(int(r_.shadow_lights(scene).size())),
                    scene.source);
@@ -123,12 +127,16 @@ class Renderer::Engine final : public WhittedEngine {
     // as in the paper); a static scene, or a frame whose triangles did not move, keeps it.
     const auto stage = Clock::now();
     Data& cache = *r_.data_;
-    const bool reuse = !r_.settings_.always_rebuild && cache.tree_valid &&
+    const bool reuse = !prebuilt && !r_.settings_.always_rebuild && cache.tree_valid &&
                        cache.tree_positions == scene.mesh.positions;
-    if (!reuse) {
+    if (prebuilt) {
+      t.build_ms = cache.prebuilt_ms;  // on the frame pipeline's worker, during the previous frame
+    } else if (!reuse) {
       cache.tree = build_kdtree(scene.mesh.positions, r_.settings_.kd);
       cache.tree_positions = scene.mesh.positions;
       t.build_ms = elapsed_ms(stage);
+    }
+    if (!reuse) {
       r_.upload_tree(cache.tree);
       cache.tree_valid = true;
     }
@@ -420,6 +428,18 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
 }
 
 Image Renderer::render(const Scene& scene, const Camera& camera, FrameTimings* timings) {
+  return render_whitted(scene, camera, settings_, *engine_, timings);
+}
+
+Image Renderer::render(const Scene& scene, const Camera& camera, FlatKdTree&& tree, double build_ms,
+                       FrameTimings* timings) {
+  Data& d = *data_;
+  d.tree = std::move(tree);
+  // Kept as the cache of the triangles the tree was built on, as a tree built here would be.
+  d.tree_positions = scene.mesh.positions;
+  d.tree_valid = true;
+  d.tree_prebuilt = true;
+  d.prebuilt_ms = build_ms;
   return render_whitted(scene, camera, settings_, *engine_, timings);
 }
 

@@ -64,6 +64,11 @@ class Renderer {
 
   // One frame: ray casting, shadows and up to settings.depth bounces; width x height.
   Image render(const Scene& scene, const Camera& camera, FrameTimings* timings = nullptr);
+  // The same frame with a kd-tree built elsewhere over scene.mesh.positions as they are now (the
+  // frame pipeline's worker, render/frame_pipeline.h), moved in and uploaded instead of built;
+  // timings->build_ms is `build_ms`, the build's own wall clock.
+  Image render(const Scene& scene, const Camera& camera, FlatKdTree&& tree, double build_ms,
+               FrameTimings* timings = nullptr);
 
   // The traversal pass alone over the given rays (for tests and benchmarks). The tree must have
   // been built from scene.mesh.

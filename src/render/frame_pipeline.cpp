@@ -1,0 +1,73 @@
+#include "render/frame_pipeline.h"
+
+#include <chrono>
+#include <string>
+
+#include "core/cpu_time.h"
+#include "core/error.h"
+
+namespace mobirt {
+
+FramePipeline::FramePipeline(size_t frames, Pose pose, const KdBuildOptions& kd, bool always_rebuild, bool pipelined)
+    : frames_(frames), pose_(std::move(pose)), kd_(kd), always_rebuild_(always_rebuild), pipelined_(pipelined) {}
+
+FramePipeline::~FramePipeline() {
+  if (ahead_.valid()) ahead_.wait();  // its error, if any, dies with the pipeline
+}
+
+double FramePipeline::prepare(size_t index) {
+  const auto start = std::chrono::steady_clock::now();
+  PreparedFrame& f = slots_[index % 2];
+  auto [scene, camera] = pose_(int(index % 2), index);
+  f.index = index;
+  f.scene = scene;
+  f.camera = camera;
+  f.pose_ms = elapsed_ms(start);
+  const auto build_start = std::chrono::steady_clock::now();
+  f.tree_built = always_rebuild_ || !built_any_ || built_positions_ != scene->mesh.positions;
+  f.tree = f.tree_built ? build_kdtree(scene->mesh.positions, kd_) : FlatKdTree{};
+  f.build_ms = f.tree_built ? elapsed_ms(build_start) : 0.0;
+  if (f.tree_built && !always_rebuild_) built_positions_ = scene->mesh.positions;
+  built_any_ = true;
+  return elapsed_ms(start);
+}
+
+PipelineStep FramePipeline::step(size_t index, const std::function<void(PreparedFrame&)>& render) {
+  if (index != next_ || index >= frames_) {
+    throw Error(ErrorKind::Internal, "frame pipeline: step " + std::to_string(index) + " asked where " +
+                                         std::to_string(next_) + " of " + std::to_string(frames_) + " is next");
+  }
+  const auto start = std::chrono::steady_clock::now();
+  PipelineStep s;
+  // The first frame, and every frame of the serial loop, is prepared here; the others were
+  // prepared on the worker during the previous step.
+  if (!pipelined_ || index == 0) prepare(index);
+  ++next_;
+  if (pipelined_ && next_ < frames_) {
+    ahead_ = std::async(std::launch::async, [this, ahead = next_] { return prepare(ahead); });
+  }
+  const auto render_start = std::chrono::steady_clock::now();
+  const double render_cpu_start = thread_cpu_ms();
+  try {
+    render(slots_[index % 2]);
+  } catch (...) {
+    if (ahead_.valid()) ahead_.wait();  // the worker writes the other slot: let it finish first
+    throw;
+  }
+  s.render_ms = elapsed_ms(render_start);
+  s.render_cpu_ms = thread_cpu_ms() - render_cpu_start;
+  if (ahead_.valid()) {
+    const auto wait_start = std::chrono::steady_clock::now();
+    s.ahead_ms = ahead_.get();  // rethrows the worker's error
+    s.wait_ms = elapsed_ms(wait_start);
+  }
+  s.period_ms = elapsed_ms(start);
+  return s;
+}
+
+Image render_prepared(Renderer& renderer, PreparedFrame& f, FrameTimings* timings) {
+  if (!f.tree_built) return renderer.render(*f.scene, f.camera, timings);
+  return renderer.render(*f.scene, f.camera, std::move(f.tree), f.build_ms, timings);
+}
+
+}  // namespace mobirt

@@ -1,0 +1,97 @@
+// Frames made ready ahead of their passes, as the paper's CPU-GPU split intends: while frame N is
+// rendered, a worker thread poses frame N+1 and builds its kd-tree. The rendering thread spends
+// much of a frame waiting on a fence while the driver's own threads run the passes (lavapipe's
+// rasterizer threads, LP_NUM_THREADS); the build runs in that time instead of after it.
+//
+// Two slots, so that frame N's scene and tree are never written while frame N uses them. The GPU
+// side needs no second copy: the next frame's tree is uploaded by the rendering thread in its
+// begin_frame, after frame N's last pass finished (every pass is waited for). The backends' contexts
+// are only ever used by the rendering thread (an OpenGL ES context is bound to one).
+//
+// Every frame's image is the serial loop's, bit for bit: posing is a pure function of the frame's
+// time, the build gives the same tree for any thread count (accel/kdtree.h), and the passes see the
+// same tree and scene (tests/frame_pipeline_test.cpp).
+#pragma once
+
+#include <cstddef>
+#include <functional>
+#include <future>
+#include <utility>
+#include <vector>
+
+#include "accel/kdtree.h"
+#include "core/camera.h"
+#include "core/image.h"
+#include "render/engine.h"
+#include "render/renderer.h"
+#include "scene/scene.h"
+
+namespace mobirt {
+
+// One frame ready for the passes.
+struct PreparedFrame {
+  size_t index = 0;             // in the pipeline's frame list
+  const Scene* scene = nullptr; // posed; owned by the caller's slot
+  Camera camera;
+  FlatKdTree tree;              // over scene->mesh.positions, when tree_built
+  bool tree_built = false;      // false: the triangles did not move since the last tree built
+  double pose_ms = 0.0;         // posing the scene
+  double build_ms = 0.0;        // the kd-tree build's wall clock; pipelined, on the worker while
+                                // the previous frame rendered, so not part of this frame's time
+};
+
+// What one step cost, on the rendering thread's clock (milliseconds).
+struct PipelineStep {
+  // The step's wall clock: this frame rendered and the next one ready. Pipelined, the steady-state
+  // period of the frame loop (its fps); serial, posing + build + frame.
+  double period_ms = 0.0;
+  double render_ms = 0.0;      // the render callback
+  double render_cpu_ms = 0.0;  // the rendering thread's own CPU time in it; the rest of render_ms
+                               // it waited: on fences while the driver's threads ran the passes,
+                               // or for the helper threads of its parallel loops
+  double wait_ms = 0.0;    // waiting for the worker after the render: the preparation not hidden
+  double ahead_ms = 0.0;   // posing and building the next frame on the worker (0 when serial)
+};
+
+class FramePipeline {
+ public:
+  // Poses frame `index` of the list into the caller's scene of `slot` (0 or 1) and returns that
+  // scene and the view. Called for each index once, in order, one call at a time (on the worker
+  // when pipelined); a slot is posed again only after the frame that used it was rendered.
+  using Pose = std::function<std::pair<const Scene*, Camera>(int slot, size_t index)>;
+
+  // `kd.threads` is the build's share of the CPU (its TBB arena); `always_rebuild` as
+  // RenderSettings' (else a frame whose triangles did not move keeps the last tree).
+  // `pipelined` false: each step prepares its frame and then renders it, on the calling thread.
+  FramePipeline(size_t frames, Pose pose, const KdBuildOptions& kd, bool always_rebuild, bool pipelined);
+  ~FramePipeline();  // waits for the worker
+  FramePipeline(const FramePipeline&) = delete;
+  FramePipeline& operator=(const FramePipeline&) = delete;
+
+  // Renders frame `index` with `render` while frame index + 1 is prepared on the worker. Steps go
+  // in order 0, 1, 2, ...; the PreparedFrame is valid during the callback only. An error of the
+  // worker is rethrown here, after the render.
+  PipelineStep step(size_t index, const std::function<void(PreparedFrame&)>& render);
+
+  bool pipelined() const { return pipelined_; }
+
+ private:
+  double prepare(size_t index);  // into slots_[index % 2]; returns its milliseconds
+
+  size_t frames_;
+  Pose pose_;
+  KdBuildOptions kd_;
+  bool always_rebuild_;
+  bool pipelined_;
+  PreparedFrame slots_[2];
+  std::vector<glm::vec3> built_positions_;  // of the last tree built (when not always_rebuild)
+  bool built_any_ = false;
+  size_t next_ = 0;                // the index the next step must have
+  std::future<double> ahead_;      // the worker preparing frame next_
+};
+
+// Frame `f` through `renderer`: with the tree built ahead (moved into the renderer), or, when the
+// triangles did not move, with the renderer's own tree.
+Image render_prepared(Renderer& renderer, PreparedFrame& f, FrameTimings* timings = nullptr);
+
+}  // namespace mobirt

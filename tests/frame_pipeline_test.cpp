@@ -1,0 +1,251 @@
+// The frame pipeline (render/frame_pipeline.h): frames posed and built ahead on a worker give the
+// serial loop's images bit for bit on both backends, the worker really runs during the previous
+// frame, a static scene keeps its tree, and a worker's error reaches the caller.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <condition_variable>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <memory>
+#include <mutex>
+#include <stdexcept>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "backend/backend.h"
+#include "core/error.h"
+#include "render/frame_pipeline.h"
+#include "render/renderer.h"
+#include "scene/animation.h"
+#include "test_scenes.h"
+#include "test_support.h"
+#include "vulkan_fixture.h"
+
+namespace mobirt {
+namespace {
+
+enum class Api { Vulkan, Gles };
+
+std::unique_ptr<Backend> make_backend(Api api) {
+  const BackendOptions options = test::validated_options();
+  return api == Api::Vulkan ? create_vulkan_backend(options) : create_gles_backend(options);
+}
+
+class PipelinePerBackend : public ::testing::TestWithParam<Api> {};
+
+// The fish: refraction, reflection, textures and a swimming goldfish; frames 1/8 s apart move it.
+TEST_P(PipelinePerBackend, PipelinedFramesEqualSerialFrames) {
+  const AnimatedScene animation = load_animated_scene(std::string(MOBIRT_SOURCE_DIR) + "/scenes/fish.gltf");
+  ASSERT_TRUE(animation.animated());
+  RenderSettings settings;
+  settings.width = 64;
+  settings.height = 40;
+  settings.depth = 2;
+  settings.always_rebuild = true;  // as the bench renders
+  settings.kd.threads = 2;
+  constexpr size_t kFrames = 4;
+  auto seconds = [](size_t index) { return double(index) / 8.0; };
+
+  std::unique_ptr<Backend> serial_backend = make_backend(GetParam());
+  std::vector<Image> serial;
+  {
+    Renderer renderer(*serial_backend, settings);
+    Scene scene;
+    for (size_t i = 0; i < kFrames; ++i) {
+      animation.evaluate(seconds(i), scene);
+      serial.push_back(renderer.render(scene, *scene.camera));
+    }
+  }
+
+  std::unique_ptr<Backend> backend = make_backend(GetParam());
+  Renderer renderer(*backend, settings);
+  Scene slots[2];
+  FramePipeline pipeline(
+      kFrames,
+      [&](int slot, size_t index) {
+        animation.evaluate(seconds(index), slots[slot]);
+        return std::make_pair(static_cast<const Scene*>(&slots[slot]), *slots[slot].camera);
+      },
+      settings.kd, settings.always_rebuild, true);
+  for (size_t i = 0; i < kFrames; ++i) {
+    Image image;
+    FrameTimings t;
+    pipeline.step(i, [&](PreparedFrame& f) {
+      EXPECT_EQ(f.index, i);
+      EXPECT_TRUE(f.tree_built);
+      image = render_prepared(renderer, f, &t);
+    });
+    EXPECT_TRUE(t.tree_rebuilt);
+    ASSERT_EQ(image.pixels.size(), serial[i].pixels.size());
+    size_t differing = 0;
+    for (size_t p = 0; p < image.pixels.size(); ++p) differing += image.pixels[p] != serial[i].pixels[p];
+    EXPECT_EQ(differing, 0u) << "frame " << i << ": pixels that differ from the serial loop's";
+  }
+  // The frames really differ, so that equal images say the right tree reached each frame.
+  size_t moved = 0;
+  for (size_t p = 0; p < serial[0].pixels.size(); ++p) moved += serial[0].pixels[p] != serial[kFrames - 1].pixels[p];
+  EXPECT_GT(moved, 0u);
+  for (Backend* b : {serial_backend.get(), backend.get()}) {
+    const std::vector<std::string> messages = b->take_debug_messages();
+    EXPECT_TRUE(messages.empty()) << test::join(messages);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Backends, PipelinePerBackend, ::testing::Values(Api::Vulkan, Api::Gles),
+                         [](const ::testing::TestParamInfo<Api>& p) {
+                           return std::string(p.param == Api::Vulkan ? "vulkan" : "gles");
+                         });
+
+// `render --frames` pipelines its frames; --serial gives the same files byte for byte.
+TEST(FramePipelineCli, RenderFramesPipelinedEqualSerial) {
+  namespace fs = std::filesystem;
+  const fs::path dir = test::temp_dir();
+  for (const char* mode : {"pipelined", "serial"}) {
+    fs::create_directory(dir / mode);
+    const test::CommandResult r = test::run_mobirt(
+        std::string("render " MOBIRT_SOURCE_DIR "/scenes/fish.gltf --size 64x40 --fps 8 --frames 0:2 -o '") +
+        (dir / mode / "f_%d.png").string() + "'" + (std::string(mode) == "serial" ? " --serial" : ""));
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  auto bytes = [](const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  for (int f = 0; f <= 2; ++f) {
+    const std::string name = "f_" + std::to_string(f) + ".png";
+    const std::string pipelined = bytes(dir / "pipelined" / name);
+    EXPECT_FALSE(pipelined.empty()) << name;
+    EXPECT_EQ(pipelined, bytes(dir / "serial" / name)) << name;
+  }
+  EXPECT_NE(bytes(dir / "serial" / "f_0.png"), bytes(dir / "serial" / "f_2.png"));  // the fish moved
+}
+
+// ---- The pipeline without a GPU ----------------------------------------------------------------
+
+// A scene whose triangles move with the frame index.
+struct MovingScene {
+  Scene slots[2];
+  void pose(int slot, size_t index) {
+    Scene& s = slots[slot];
+    s = test::box_grid_scene();
+    for (glm::vec3& p : s.mesh.positions) p.y += 0.01f * float(index);
+  }
+};
+
+// Pipelined, frame i + 1 is posed while frame i renders: the render waits until it has been.
+TEST(FramePipeline, PosesTheNextFrameWhileTheFrameRenders) {
+  MovingScene moving;
+  std::mutex mutex;
+  std::condition_variable posed_cv;
+  size_t posed = 0;  // frames posed so far
+  std::vector<std::thread::id> pose_threads;
+  constexpr size_t kFrames = 4;
+  FramePipeline pipeline(
+      kFrames,
+      [&](int slot, size_t index) {
+        moving.pose(slot, index);
+        const std::lock_guard<std::mutex> lock(mutex);
+        EXPECT_EQ(index, posed);
+        ++posed;
+        pose_threads.push_back(std::this_thread::get_id());
+        posed_cv.notify_all();
+        return std::make_pair(static_cast<const Scene*>(&moving.slots[slot]), *moving.slots[slot].camera);
+      },
+      KdBuildOptions{}, true, true);
+  for (size_t i = 0; i < kFrames; ++i) {
+    pipeline.step(i, [&](PreparedFrame& f) {
+      EXPECT_EQ(f.scene, &moving.slots[i % 2]);
+      EXPECT_FALSE(f.tree.nodes.empty());
+      if (i + 1 == kFrames) return;
+      std::unique_lock<std::mutex> lock(mutex);
+      const bool ahead = posed_cv.wait_for(lock, std::chrono::seconds(20), [&] { return posed > i + 1; });
+      EXPECT_TRUE(ahead) << "frame " << i + 1 << " was not posed while frame " << i << " rendered";
+    });
+  }
+  EXPECT_EQ(posed, kFrames);  // no frame past the list
+  ASSERT_EQ(pose_threads.size(), kFrames);
+  EXPECT_EQ(pose_threads[0], std::this_thread::get_id());  // the first frame has nothing to hide behind
+  for (size_t i = 1; i < kFrames; ++i) EXPECT_NE(pose_threads[i], std::this_thread::get_id()) << i;
+}
+
+// Serial, each frame is posed on the calling thread just before it renders.
+TEST(FramePipeline, SerialPreparesEachFrameBeforeItRenders) {
+  MovingScene moving;
+  size_t posed = 0;
+  const std::thread::id caller = std::this_thread::get_id();
+  FramePipeline pipeline(
+      3,
+      [&](int slot, size_t index) {
+        EXPECT_EQ(std::this_thread::get_id(), caller);
+        moving.pose(slot, index);
+        ++posed;
+        return std::make_pair(static_cast<const Scene*>(&moving.slots[slot]), *moving.slots[slot].camera);
+      },
+      KdBuildOptions{}, true, false);
+  EXPECT_FALSE(pipeline.pipelined());
+  for (size_t i = 0; i < 3; ++i) {
+    const PipelineStep s = pipeline.step(i, [&](PreparedFrame& f) {
+      EXPECT_EQ(posed, i + 1);  // this frame, and not the next
+      EXPECT_EQ(f.index, i);
+    });
+    EXPECT_EQ(s.ahead_ms, 0.0);
+    EXPECT_EQ(s.wait_ms, 0.0);
+  }
+}
+
+// Without always_rebuild, a frame whose triangles did not move keeps the last tree, as the
+// renderer's own cache does; moved triangles build a new one.
+TEST(FramePipeline, KeepsTheTreeWhileTheTrianglesStay) {
+  MovingScene moving;
+  const std::vector<size_t> position_of = {0, 0, 0, 1, 1};  // the frame's pose
+  FramePipeline pipeline(
+      position_of.size(),
+      [&](int slot, size_t index) {
+        moving.pose(slot, position_of[index]);
+        return std::make_pair(static_cast<const Scene*>(&moving.slots[slot]), *moving.slots[slot].camera);
+      },
+      KdBuildOptions{}, false, true);
+  const std::vector<bool> built = {true, false, false, true, false};
+  for (size_t i = 0; i < built.size(); ++i) {
+    pipeline.step(i, [&](PreparedFrame& f) {
+      EXPECT_EQ(f.tree_built, built[i]) << "frame " << i;
+      EXPECT_EQ(f.tree.nodes.empty(), !built[i]) << "frame " << i;
+    });
+  }
+}
+
+TEST(FramePipeline, RethrowsTheWorkersErrorAndChecksTheOrder) {
+  MovingScene moving;
+  FramePipeline pipeline(
+      3,
+      [&](int slot, size_t index) {
+        if (index == 2) throw Error(ErrorKind::BadInput, "frame 2 is broken");
+        moving.pose(slot, index);
+        return std::make_pair(static_cast<const Scene*>(&moving.slots[slot]), *moving.slots[slot].camera);
+      },
+      KdBuildOptions{}, true, true);
+  int rendered = 0;
+  pipeline.step(0, [&](PreparedFrame&) { ++rendered; });
+  test::expect_bad_input([&] { pipeline.step(1, [&](PreparedFrame&) { ++rendered; }); }, {"frame 2 is broken"});
+  EXPECT_EQ(rendered, 2);  // frame 1 rendered; the error came from preparing frame 2
+
+  FramePipeline ordered(
+      3,
+      [&](int slot, size_t index) {
+        moving.pose(slot, index);
+        return std::make_pair(static_cast<const Scene*>(&moving.slots[slot]), *moving.slots[slot].camera);
+      },
+      KdBuildOptions{}, true, true);
+  try {
+    ordered.step(1, [](PreparedFrame&) {});
+    ADD_FAILURE() << "a step out of order was taken";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::Internal);
+  }
+}
+
+}  // namespace
+}  // namespace mobirt
