@@ -231,6 +231,9 @@ TEST(FramePipeline, RethrowsTheWorkersErrorAndChecksTheOrder) {
   pipeline.step(0, [&](PreparedFrame&) { ++rendered; });
   test::expect_bad_input([&] { pipeline.step(1, [&](PreparedFrame&) { ++rendered; }); }, {"frame 2 is broken"});
   EXPECT_EQ(rendered, 2);  // frame 1 rendered; the error came from preparing frame 2
+  // Frame 2 is never rendered from a slot the worker left half-written: preparing it again fails again.
+  test::expect_bad_input([&] { pipeline.step(2, [&](PreparedFrame&) { ++rendered; }); }, {"frame 2 is broken"});
+  EXPECT_EQ(rendered, 2);
 
   FramePipeline ordered(
       3,

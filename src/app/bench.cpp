@@ -373,13 +373,13 @@ const char* column_title(const std::string& key) {
 
 // mobirt's frame loop: what the rendering thread did and, pipelined, what the worker did beside it.
 void print_frame_loop(const nlohmann::json& cells, const std::vector<std::string>& gpus, bool pipelined) {
-  std::printf("\nmobirt's frame loop, %s, ms (median): render = upload, passes, decoding and ray tree on the\n"
-              "rendering thread, cpu = its own CPU time in them (the rest it waits on fences while the driver's\n"
-              "threads run the passes, or for its decoding threads); ahead = posing + kd-tree build of the next frame on the worker meanwhile;\n"
-              "wait = the rendering thread waiting for the worker afterwards (the build not hidden); frame = the\n"
-              "loop's period.%s\n",
+  std::printf("\nmobirt's frame loop, %s, ms (median): render = upload, passes, decoding and ray tree on\n"
+              "the rendering thread; cpu = its own CPU time in them (the rest it waits: on fences while the\n"
+              "driver's threads run the passes, or for its decoding threads); ahead = posing + kd-tree build\n"
+              "of the next frame on the worker meanwhile; wait = the rendering thread waiting for the worker\n"
+              "afterwards (the build not hidden); frame = the loop's period.%s\n",
               pipelined ? "pipelined" : "serial",
-              pipelined ? " In the stage tables above, anim and build are the worker's, not parts of the frame." : "");
+              pipelined ? "\nIn the stage tables above, anim and build are the worker's, not parts of the frame." : "");
   std::printf("%-28s %-8s %7s %7s %7s %7s %7s\n", "scene, level", "backend", "render", "cpu", "ahead", "wait", "frame");
   for (const nlohmann::json& c : cells) {
     for (const std::string& g : gpus) {
@@ -676,8 +676,8 @@ int cmd_bench(const std::vector<std::string>& args) {
   std::printf("mobirt bench: %d frames per cell after %d warm-up frames, animation playing, kd-tree rebuilt every frame\n",
               o.frames, o.warmup);
   std::printf("%s; kd-tree build on %d threads\n",
-              o.pipelined ? "mobirt's frames pipelined: frame N+1 posed and its kd-tree built on a worker while frame N "
-                            "renders (--serial: one after the other)"
+              o.pipelined ? "mobirt's frames pipelined: frame N+1 posed and its kd-tree built on a worker while\n"
+                            "frame N renders (--serial: one after the other)"
                           : "mobirt's frames serial (--serial): pose, build, passes, one after the other",
               o.settings.kd.threads);
   std::printf("machine: %u cores; %s, %s, %s, LP_NUM_THREADS=%s; %s on %u threads\n",

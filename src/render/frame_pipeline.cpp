@@ -39,9 +39,9 @@ PipelineStep FramePipeline::step(size_t index, const std::function<void(Prepared
   }
   const auto start = std::chrono::steady_clock::now();
   PipelineStep s;
-  // The first frame, and every frame of the serial loop, is prepared here; the others were
-  // prepared on the worker during the previous step.
-  if (!pipelined_ || index == 0) prepare(index);
+  // The first frame, every frame of the serial loop and one whose preparation on the worker
+  // failed are prepared here; the others were prepared on the worker during the previous step.
+  if (ready_ != index) prepare(index);
   ++next_;
   if (pipelined_ && next_ < frames_) {
     ahead_ = std::async(std::launch::async, [this, ahead = next_] { return prepare(ahead); });
@@ -60,6 +60,7 @@ PipelineStep FramePipeline::step(size_t index, const std::function<void(Prepared
     const auto wait_start = std::chrono::steady_clock::now();
     s.ahead_ms = ahead_.get();  // rethrows the worker's error
     s.wait_ms = elapsed_ms(wait_start);
+    ready_ = next_;
   }
   s.period_ms = elapsed_ms(start);
   return s;

@@ -14,6 +14,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <future>
 #include <utility>
@@ -87,6 +88,7 @@ class FramePipeline {
   std::vector<glm::vec3> built_positions_;  // of the last tree built (when not always_rebuild)
   bool built_any_ = false;
   size_t next_ = 0;                // the index the next step must have
+  size_t ready_ = SIZE_MAX;        // the index the worker prepared, once it finished without error
   std::future<double> ahead_;      // the worker preparing frame next_
 };
 
