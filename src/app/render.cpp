@@ -155,7 +155,8 @@ FrameTimings median_timings(const std::vector<FrameTimings>& frames) {
 }
 
 // built_ahead: the frames came pipelined, their trees built on a worker during the previous frame.
-void print_timings(const FrameTimings& t, bool built_ahead) {
+// period_ms: --frames' loop period (posing and build included), else negative.
+void print_timings(const FrameTimings& t, bool built_ahead, double period_ms) {
   const GenerationTimings& s = t.sum;
   auto mrays = [](double rays, double ms) { return ms > 0 ? rays / (ms * 1e3) : 0.0; };
   std::printf("stage                   ms\n");
@@ -174,6 +175,10 @@ void print_timings(const FrameTimings& t, bool built_ahead) {
   std::printf("accumulate         %9.2f\n", s.accumulate_ms);
   std::printf("secondary rays     %9.2f\n", s.secondary_ms);
   std::printf("frame              %9.2f   (%.1f fps)\n", t.total_ms, t.total_ms > 0 ? 1000.0 / t.total_ms : 0.0);
+  if (period_ms >= 0) {
+    std::printf("frame loop period  %9.2f   (%.1f fps; %s)\n", period_ms, period_ms > 0 ? 1000.0 / period_ms : 0.0,
+                built_ahead ? "pipelined: the next frame posed and built meanwhile" : "serial: posing, build and frame");
+  }
   if (t.generations.size() > 1) {
     std::printf("generation   rays   shadow   traversal ms  Mrays/s   shading ms\n");
     for (size_t g = 0; g < t.generations.size(); ++g) {
@@ -290,6 +295,7 @@ int cmd_render(const std::vector<std::string>& args) {
   auto backend = create_backend(common.backend_name, common.backend);
   Renderer renderer(*backend, settings);
   std::vector<FrameTimings> measured;
+  std::vector<double> periods;  // --frames: the frame loop's period, posing and build included
   auto check_messages = [&] {
     for (const std::string& message : backend->take_debug_messages()) {
       throw Error(ErrorKind::Internal, "validation: " + message);
@@ -324,8 +330,11 @@ int cmd_render(const std::vector<std::string>& args) {
       const int frame = frame_list[i];
       FrameTimings t;
       Image image;
-      pipeline.step(i, [&](PreparedFrame& f) { image = render_prepared(renderer, f, &t); });
-      if (i > 0 || frame_list.size() == 1) measured.push_back(t);
+      const PipelineStep step = pipeline.step(i, [&](PreparedFrame& f) { image = render_prepared(renderer, f, &t); });
+      if (i > 0 || frame_list.size() == 1) {
+        measured.push_back(t);
+        periods.push_back(step.period_ms);
+      }
       check_messages();
       if (const int code = write_output(output_for(frame), image)) return code;
       if (tty) {
@@ -349,7 +358,12 @@ int cmd_render(const std::vector<std::string>& args) {
       std::printf("median of %d frames after one warm-up frame\n", repeat);
     }
     const FrameTimings median = median_timings(measured);
-    print_timings(median, frames && !serial);
+    double period = -1.0;
+    if (!periods.empty()) {
+      std::nth_element(periods.begin(), periods.begin() + long(periods.size() / 2), periods.end());
+      period = periods[periods.size() / 2];
+    }
+    print_timings(median, frames && !serial, period);
     if (!timings_json_path.empty()) {
       nlohmann::json j{{"scene", scene_path},
                        {"triangles", scene.mesh.triangle_count()},
@@ -364,6 +378,10 @@ int cmd_render(const std::vector<std::string>& args) {
                        {"backend", common.backend_name},
                        {"frames", measured.size()},
                        {"median", timings_json(median)}};
+      if (frames) {
+        j["pipelined"] = !serial;
+        j["median"]["period_ms"] = period;
+      }
       if (!write_text_file(timings_json_path, j.dump(2) + "\n")) {
         throw Error(ErrorKind::BadInput, "--timings-json " + timings_json_path + ": cannot write the file");
       }
