@@ -2,8 +2,9 @@
 // interleaved, so that a loaded machine's drift hits both alike: the same animated scene rendered
 // by two renderers on two backends of the same API, one posing and building each frame before its
 // passes, the other building frame N+1 on a worker while frame N renders. Prints each mode's median
-// frame time, their ratio, and how busy the machine's cores were (process CPU time over wall time x
-// cores), and checks that both modes give the same images.
+// frame time, their ratio, how busy the machine's cores were (process CPU time over wall time x
+// cores) and the process's CPU time per frame (the same work in both modes: pipelining can only
+// fill idle cores), and checks that both modes give the same images.
 //
 //   mobirt_pipeline_ab SCENE [--frames N] [--warmup N] [--depth N] [--no-shadows] [--size WxH] [--build-threads N]
 //                      [--backend vulkan|gles] [--nice N]
@@ -42,9 +43,10 @@ double median(std::vector<double> v) {
 }
 
 struct Mode {
-  std::vector<double> frame_ms, busy, build_ms, render_ms, render_cpu_ms, wait_ms;
+  std::vector<double> frame_ms, cpu_ms, busy, build_ms, render_ms, render_cpu_ms, wait_ms;
   void add(double wall, double cpu, double build) {
     frame_ms.push_back(wall);
+    cpu_ms.push_back(cpu);
     busy.push_back(cpu / (wall * std::max(1u, std::thread::hardware_concurrency())));
     build_ms.push_back(build);
   }
@@ -154,11 +156,12 @@ int main(int argc, char** argv) {
                 backend_name.c_str(), lp ? lp : "(all)",
                 build_threads ? std::to_string(build_threads).c_str() : "(all)", nice, frames, warmup,
                 std::thread::hardware_concurrency());
-    std::printf("%-10s %9s %9s %9s %9s %9s %7s\n", "mode", "frame ms", "build ms", "render", "render cpu", "wait",
-                "busy");
+    std::printf("%-10s %9s %9s %9s %9s %9s %7s %9s\n", "mode", "frame ms", "build ms", "render", "render cpu", "wait",
+                "busy", "cpu ms");
     for (const auto& [name, m] : {std::pair<const char*, const Mode*>{"serial", &s}, {"pipelined", &p}}) {
-      std::printf("%-10s %9.2f %9.2f %9.2f %9.2f %9.2f %6.0f%%\n", name, median(m->frame_ms), median(m->build_ms),
-                  median(m->render_ms), median(m->render_cpu_ms), median(m->wait_ms), 100.0 * median(m->busy));
+      std::printf("%-10s %9.2f %9.2f %9.2f %9.2f %9.2f %6.0f%% %9.2f\n", name, median(m->frame_ms), median(m->build_ms),
+                  median(m->render_ms), median(m->render_cpu_ms), median(m->wait_ms), 100.0 * median(m->busy),
+                  median(m->cpu_ms));
     }
     std::printf("pipelined fps / serial fps: %.3f (median frame times); pixels differing: %zu\n",
                 median(s.frame_ms) / std::max(median(p.frame_ms), 1e-9), differing);
