@@ -45,7 +45,8 @@ the driver's own ray queries (lavapipe's BVH built every frame, rayQueryEXT in a
 same ray tree, hit decoding and shading pass as mobirt's; skipped with the reason where the driver
 lacks VK_KHR_ray_query). Prints the table, the stages, and the ratios mobirt / Embree and mobirt /
 ray query per cell, for the traversal alone (Mrays/s over the same rays) and for the build alone
-(kd-tree vs Embree BVH).
+(kd-tree vs Embree BVH). mobirt's frames are pipelined (frame N+1 posed and its kd-tree built on a
+worker while frame N renders; the frame time is the loop's period) unless --serial.
 
 Without SCENE: the paper's scenes (scenes/toaster.gltf 400x240, marbles 240x400, fish 400x240)
 and, when ../shared/scenes has them, the real Utah toasters and the wood doll.
