@@ -6,7 +6,10 @@
 #define MOBIRT_COMPUTE
 #include "prelude_vk.glsl"
 
-// Element i of a data array is element i of its buffer (indices are exact floats below 2^23).
+// Element i of a data array is element i of its buffer (indices are exact floats below 2^23);
+// with MOBIRT_DATA_TEXEL_BUFFERS (trace_compute_texel_buffers.comp) prelude_vk.glsl's uniform
+// texel buffers instead, as the fragment pass reads them.
+#ifndef MOBIRT_DATA_TEXEL_BUFFERS
 #define DATA_TEXEL(data, index) data[data_index(index)]
 // Each array's element type, by the name traverse.glsl gives it.
 #define MOBIRT_ELEMENT_u_nodes vec4
@@ -14,3 +17,4 @@
 #define MOBIRT_ELEMENT_u_triangles vec4
 #define DATA_SAMPLER(slot, name) \
   layout(std430, set = 0, binding = slot) readonly buffer name##_data { MOBIRT_ELEMENT_##name name[]; }
+#endif

@@ -59,17 +59,17 @@ int data_index(float index) {
   precise float biased = index + 8388608.0;
   return floatBitsToInt(biased) - 0x4B000000;
 }
-#ifndef MOBIRT_COMPUTE  // prelude_compute.glsl gives a compute shader its own accessors
 #ifdef MOBIRT_DATA_TEXEL_BUFFERS
-// Data textures as uniform texel buffers (trace_texel_buffers.frag), with no mip-level work or 2D
-// bounds checks in llvmpipe's fetch.
+// Data textures as uniform texel buffers (trace_texel_buffers.frag, and the compute pass's
+// trace_compute_texel_buffers.comp), with no mip-level work or 2D bounds checks in llvmpipe's fetch.
 #define DATA_TEXEL(tex, index) texelFetch(tex, data_index(index))
 // A textureBuffer, not a samplerBuffer: SPIR-V forbids a sampled image of a buffer (Mesa warns),
 // so the includer enables GL_EXT_samplerless_texture_functions for texelFetch on it.
 #define DATA_SAMPLER(slot, name) layout(set = 0, binding = slot) uniform textureBuffer name
-#else
+#elif !defined(MOBIRT_COMPUTE)  // prelude_compute.glsl: storage buffers
 #define DATA_TEXEL(tex, index) texelFetch(tex, data_coord(index), 0)
 #endif
+#ifndef MOBIRT_COMPUTE  // a compute shader reads its ray and writes its result itself
 // Per-ray textures share the pass's layout: this fragment's own ray.
 #define RAY_TEXEL(tex) texelFetch(tex, small_floats_to_ints(floor(gl_FragCoord.xy)), 0)
 // Texture atlas (RGBA8, NEAREST): the texel at integer coordinates xy (exact floats), no filtering.

@@ -135,12 +135,13 @@ TEST(Bench, NoBaselineSkipsEveryPeer) {
   EXPECT_GT(c["mobirt"]["fps"]["median"].get<double>(), 0.0);
   for (const char* peer : {"embree", "cpu_kd", "ray_query", "compute", "ratios"}) EXPECT_FALSE(c.contains(peer)) << peer;
   EXPECT_EQ(j["machine"]["compute"]["skipped"], "--no-baseline");
+  EXPECT_EQ(j["settings"]["compute_data"], "storage-buffers");
 }
 
 TEST(Bench, BadOptionsAreRefusedBeforeTheRun) {
   const fs::path dir = test::temp_dir();
   for (const std::string& args :
-       {std::string("--levels cast,bogus"), std::string("--frames 0"),
+       {std::string("--levels cast,bogus"), std::string("--frames 0"), std::string("--compute-data textures"),
         "--json '" + (dir / "no-such-folder" / "b.json").string() + "'",
         std::string("--scenes '") + (dir / "empty").string() + "'"}) {
     SCOPED_TRACE(args);

@@ -93,9 +93,14 @@ Agreement compare(const std::vector<HitRecord>& records, const TraceResult& frag
 }
 
 // Ray by ray against mobirt's fragment pass (Vulkan, texel buffers) on the project's scenes:
-// camera rays and rays from anywhere in the scene box, with shadow rays.
-TEST(Compute, RecordsEqualTheFragmentPassRayByRay) {
-  ComputeEngine engine(validated());
+// camera rays and rays from anywhere in the scene box, with shadow rays; the scene read from
+// storage buffers and from texel buffers.
+class ComputeReads : public ::testing::TestWithParam<ComputeData> {};
+
+TEST_P(ComputeReads, RecordsEqualTheFragmentPassRayByRay) {
+  ComputeEngine engine(validated(), GetParam());
+  EXPECT_NE(join(engine.info()).find(GetParam() == ComputeData::TexelBuffers ? "texel buffers" : "storage buffers"),
+            std::string::npos) << join(engine.info());
   VulkanOptions options;
   options.validation = true;
   const std::unique_ptr<Backend> backend = create_vulkan_backend(options);
@@ -117,9 +122,9 @@ TEST(Compute, RecordsEqualTheFragmentPassRayByRay) {
     EXPECT_GT(timings.trace_ms, 0.0);
     const TraceResult fragment = renderer.trace(scene, tree, rays);
     const Agreement a = compare(records, fragment, tree, rays, scene.lights);
-    std::printf("%s: %u rays, %u hits, %u lit; %u differ in the hit, %u in the mask; %u off the CPU's t/u/v, %u "
+    std::printf("%s, %s: %u rays, %u hits, %u lit; %u differ in the hit, %u in the mask; %u off the CPU's t/u/v, %u "
                 "without barycentrics; %llu shadow rays (CPU: %llu)\n",
-                name, a.rays, a.hits, a.lit, a.prim_differs, a.mask_differs, a.off_cpu, a.no_barycentrics,
+                compute_data_name(GetParam()), name, a.rays, a.hits, a.lit, a.prim_differs, a.mask_differs, a.off_cpu, a.no_barycentrics,
                 static_cast<unsigned long long>(a.shadow_rays), static_cast<unsigned long long>(a.cpu_shadow_rays));
     EXPECT_GT(a.hits, a.rays / 4);  // enough hits and lit hits for the comparison to mean something
     EXPECT_GT(a.lit, a.hits / 4);
@@ -136,6 +141,11 @@ TEST(Compute, RecordsEqualTheFragmentPassRayByRay) {
   messages = backend->take_debug_messages();
   EXPECT_TRUE(messages.empty()) << join(messages);
 }
+
+INSTANTIATE_TEST_SUITE_P(Data, ComputeReads, ::testing::Values(ComputeData::StorageBuffers, ComputeData::TexelBuffers),
+                         [](const ::testing::TestParamInfo<ComputeData>& param) {
+                           return param.param == ComputeData::TexelBuffers ? "texel_buffers" : "storage_buffers";
+                         });
 
 // The whole frame through render_whitted(): mobirt's kd-tree, rays, ray tree and shading pass with
 // the compute pass tracing, against mobirt's Vulkan frame.

@@ -187,6 +187,7 @@ struct BenchOptions {
   unsigned threads = 0;
   bool baseline = true;
   bool cpu = true;
+  ComputeData compute_data = ComputeData::StorageBuffers;  // how the compute peer reads the scene
   std::vector<std::string> backends = {"vulkan", "gles"};
   VulkanOptions backend_options;  // the pipeline cache is Vulkan's
   RenderSettings settings;  // kd, stack, max_steps
@@ -540,6 +541,14 @@ int cmd_bench(const std::vector<std::string>& args) {
   cl.flag("--no-baseline", "leave out the peers: the ray-query, compute, Embree and CPU kd-tree columns",
           [&] { o.baseline = false; });
   cl.flag("--no-cpu", "leave out the CPU kd-tree column only", [&] { o.cpu = false; });
+  cl.option("--compute-data", "READS",
+            "how the compute column reads the scene: storage-buffers (default) or\n"
+            "texel-buffers (as mobirt's fragment pass reads it)",
+            [&](const cli::Value& v) {
+              if (!parse_compute_data(v.text, o.compute_data)) {
+                cli::usage_error("--compute-data " + v.text + ": expected storage-buffers or texel-buffers", kHelp);
+              }
+            });
   cl.option("--json", "FILE", "every number as JSON (- = standard output)",
             [&](const cli::Value& v) { json_path = v.text; });
   cl.option("--scenes", "DIR", "the project's scenes (default: ./scenes, else the source tree's)",
@@ -614,7 +623,7 @@ int cmd_bench(const std::vector<std::string>& args) {
     }
     compute_skipped = ComputeEngine::unavailable_reason(o.backend_options);
     if (compute_skipped.empty()) {
-      peers.compute = std::make_unique<ComputeEngine>(o.backend_options);
+      peers.compute = std::make_unique<ComputeEngine>(o.backend_options, o.compute_data);
     } else {
       std::fputs(("bench: compute peer skipped: " + compute_skipped + "\n").c_str(), stderr);
     }
@@ -641,6 +650,7 @@ int cmd_bench(const std::vector<std::string>& args) {
                         {"build", kd_build_mode_name(o.settings.kd.build)},
                         {"stack", o.settings.stack_depth},
                         {"max_steps", o.settings.max_steps},
+                        {"compute_data", compute_data_name(o.compute_data)},
                         {"kd_rebuilt_every_frame", true}};
   std::printf("mobirt bench: %d frames per cell after %d warm-up frames, animation playing, kd-tree rebuilt every frame\n",
               o.frames, o.warmup);

@@ -40,12 +40,32 @@ constexpr uint32_t kBindings[kSlots] = {MOBIRT_BIND_NODES,      MOBIRT_BIND_PRIM
 
 double ms_since(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
 
-const ShaderSource& shader() { return shader_source(ShaderId::TraverseCompute); }
+const ShaderSource& shader(ComputeData data = ComputeData::StorageBuffers) {
+  return shader_source(data == ComputeData::TexelBuffers ? ShaderId::TraverseComputeTexelBuffers
+                                                         : ShaderId::TraverseCompute);
+}
+
+// The scene data's texel formats (Nodes, PrimList, Triangles), for their texel-buffer views.
+constexpr VkFormat kDataFormats[3] = {VK_FORMAT_R32G32B32A32_SFLOAT, VK_FORMAT_R32_SFLOAT,
+                                      VK_FORMAT_R32G32B32A32_SFLOAT};
+// data_index() turns an exact float into an int by its bits: below 2^23 (prelude_vk.glsl).
+constexpr size_t kMaxDataElements = size_t(1) << 23;
 
 }  // namespace
 
+const char* compute_data_name(ComputeData data) {
+  return data == ComputeData::TexelBuffers ? "texel-buffers" : "storage-buffers";
+}
+
+bool parse_compute_data(std::string_view text, ComputeData& data) {
+  if (text == "storage-buffers") data = ComputeData::StorageBuffers;
+  else if (text == "texel-buffers") data = ComputeData::TexelBuffers;
+  else return false;
+  return true;
+}
+
 struct ComputeEngine::Impl {
-  explicit Impl(const VulkanOptions& options);
+  Impl(const VulkanOptions& options, ComputeData data);
   ~Impl() {
     if (!hung) vkDeviceWaitIdle(device.handle());
   }
@@ -58,6 +78,7 @@ struct ComputeEngine::Impl {
   void submit_and_wait();
 
   vk::Device device;
+  ComputeData reads;
   bool hung = false;
   vk::CommandPool command_pool;
   VkCommandBuffer commands = VK_NULL_HANDLE;  // freed with the pool
@@ -72,11 +93,12 @@ struct ComputeEngine::Impl {
   std::map<std::tuple<int, int, int, int, int, int>, vk::Pipeline> pipelines;
   vk::HostBuffer uniforms;
   vk::HostBuffer buffers[kSlots];
+  vk::BufferView views[3];  // TexelBuffers: over buffers[Nodes .. Triangles], destroyed first
   FlatKdTree tree_box;  // the uploaded tree's box (trace_uniforms reads bounds only)
   bool uploaded = false;
 };
 
-ComputeEngine::Impl::Impl(const VulkanOptions& options) : device(options) {
+ComputeEngine::Impl::Impl(const VulkanOptions& options, ComputeData data_reads) : device(options), reads(data_reads) {
   const VkDevice d = device.handle();
   uint32_t families = 0;
   vkGetPhysicalDeviceQueueFamilyProperties(device.physical(), &families, nullptr);
@@ -113,8 +135,12 @@ ComputeEngine::Impl::Impl(const VulkanOptions& options) : device(options) {
 
   std::vector<VkDescriptorSetLayoutBinding> bindings;
   bindings.push_back({MOBIRT_BIND_TRACE_PARAMS, VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr});
-  for (const uint32_t b : kBindings) {
-    bindings.push_back({b, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr});
+  const bool texel = reads == ComputeData::TexelBuffers;
+  for (int slot = 0; slot < kSlots; ++slot) {
+    const bool scene_data = slot <= Triangles;
+    bindings.push_back({kBindings[slot],
+                        texel && scene_data ? VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
+                        1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr});
   }
   VkDescriptorSetLayoutCreateInfo set_info{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO};
   set_info.bindingCount = uint32_t(bindings.size());
@@ -132,10 +158,12 @@ ComputeEngine::Impl::Impl(const VulkanOptions& options) : device(options) {
   VK_CHECK(vkCreatePipelineLayout(d, &layout_info, nullptr, &pl));
   pipeline_layout = vk::PipelineLayout(d, pl);
 
-  const VkDescriptorPoolSize sizes[] = {{VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1}, {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, kSlots}};
+  const VkDescriptorPoolSize sizes[] = {{VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1},
+                                        {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, texel ? kSlots - 3u : uint32_t(kSlots)},
+                                        {VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, 3}};
   VkDescriptorPoolCreateInfo dp_info{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
   dp_info.maxSets = 1;
-  dp_info.poolSizeCount = 2;
+  dp_info.poolSizeCount = texel ? 3 : 2;
   dp_info.pPoolSizes = sizes;
   VkDescriptorPool dp = VK_NULL_HANDLE;
   VK_CHECK(vkCreateDescriptorPool(d, &dp_info, nullptr, &dp));
@@ -146,7 +174,7 @@ ComputeEngine::Impl::Impl(const VulkanOptions& options) : device(options) {
   set_alloc.pSetLayouts = &layout;
   VK_CHECK(vkAllocateDescriptorSets(d, &set_alloc, &descriptor_set));
 
-  const std::span<const uint32_t> code = shader().spirv;
+  const std::span<const uint32_t> code = shader(reads).spirv;
   VkShaderModuleCreateInfo module_info{VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO};
   module_info.codeSize = code.size_bytes();
   module_info.pCode = code.data();
@@ -166,7 +194,8 @@ ComputeEngine::Impl::Impl(const VulkanOptions& options) : device(options) {
 void ComputeEngine::Impl::ensure(vk::HostBuffer& buffer, size_t bytes, VkBufferUsageFlags usage, bool cached) {
   bytes = std::max<size_t>(bytes, 16);
   if (buffer.size >= bytes) return;
-  const size_t grown = std::max<size_t>(bytes, size_t(buffer.size) + size_t(buffer.size) / 2);
+  // Whole RGBA32F texels, so that a texel-buffer view covers the buffer exactly.
+  const size_t grown = (std::max<size_t>(bytes, size_t(buffer.size) + size_t(buffer.size) / 2) + 15) / 16 * 16;
   buffer.reset();
   buffer = vk::create_host_buffer(device, grown, usage, cached);
 }
@@ -221,7 +250,8 @@ void ComputeEngine::Impl::submit_and_wait() {
   VK_CHECK(vkResetFences(device.handle(), 1, &f));
 }
 
-ComputeEngine::ComputeEngine(const VulkanOptions& options) : impl_(std::make_unique<Impl>(options)) {}
+ComputeEngine::ComputeEngine(const VulkanOptions& options, ComputeData data)
+    : impl_(std::make_unique<Impl>(options, data)) {}
 ComputeEngine::~ComputeEngine() = default;
 
 std::vector<std::string> ComputeEngine::info() const {
@@ -229,9 +259,10 @@ std::vector<std::string> ComputeEngine::info() const {
   std::vector<std::string> lines;
   lines.push_back("compute engine: " + d.device + " (" + d.api + "), " + d.driver);
   lines.push_back("mobirt's kd-tree traversal (traverse.glsl) as a compute shader, " +
-                  std::to_string(MOBIRT_COMPUTE_GROUP_SIZE) +
-                  " rays a workgroup: read-only storage buffers in, one " +
-                  std::to_string(MOBIRT_HIT_RECORD_BYTES) + "-byte hit record per ray out");
+                  std::to_string(MOBIRT_COMPUTE_GROUP_SIZE) + " rays a workgroup: the scene from " +
+                  (impl_->reads == ComputeData::TexelBuffers ? "uniform texel buffers (as the fragment pass reads it)"
+                                                            : "read-only storage buffers") +
+                  ", one " + std::to_string(MOBIRT_HIT_RECORD_BYTES) + "-byte hit record per ray out");
   for (const std::string& c : broken_constraints()) lines.push_back("breaks the OpenGL ES 2.0 constraints: " + c);
   return lines;
 }
@@ -239,11 +270,27 @@ std::vector<std::string> ComputeEngine::info() const {
 double ComputeEngine::upload_tree(const FlatKdTree& tree) {
   Impl& d = *impl_;
   if (d.hung) throw Error(ErrorKind::Internal, "the compute engine is unusable: an earlier pass never finished");
+  const size_t most = std::max({tree.nodes.size(), tree.prim_list.size(), tree.triangles.size()});
+  if (most > kMaxDataElements) {
+    throw Error(ErrorKind::BadInput, "the kd-tree needs " + std::to_string(most) + " texels in one array; the compute "
+                                     "pass indexes at most 2^23 (render a smaller scene, or split it)");
+  }
   const auto start = Clock::now();
-  const VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
-  d.write(d.buffers[Nodes], tree.nodes.data(), tree.nodes.size() * sizeof(glm::vec4), storage);
-  d.write(d.buffers[PrimList], tree.prim_list.data(), tree.prim_list.size() * sizeof(float), storage);
-  d.write(d.buffers[Triangles], tree.triangles.data(), tree.triangles.size() * sizeof(glm::vec4), storage);
+  const bool texel = d.reads == ComputeData::TexelBuffers;
+  const VkBufferUsageFlags usage = texel ? VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT : VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
+  for (vk::BufferView& v : d.views) v.reset();  // before a buffer they view may be replaced
+  d.write(d.buffers[Nodes], tree.nodes.data(), tree.nodes.size() * sizeof(glm::vec4), usage);
+  d.write(d.buffers[PrimList], tree.prim_list.data(), tree.prim_list.size() * sizeof(float), usage);
+  d.write(d.buffers[Triangles], tree.triangles.data(), tree.triangles.size() * sizeof(glm::vec4), usage);
+  for (int i = 0; texel && i < 3; ++i) {
+    VkBufferViewCreateInfo info{VK_STRUCTURE_TYPE_BUFFER_VIEW_CREATE_INFO};
+    info.buffer = d.buffers[i].buffer.get();
+    info.format = kDataFormats[i];
+    info.range = VK_WHOLE_SIZE;
+    VkBufferView view = VK_NULL_HANDLE;
+    VK_CHECK(vkCreateBufferView(d.device.handle(), &info, nullptr, &view));
+    d.views[i] = vk::BufferView(d.device.handle(), view);
+  }
   d.tree_box.bounds = tree.bounds;
   d.uploaded = true;
   return ms_since(start);
@@ -277,6 +324,7 @@ void ComputeEngine::trace(const RayBatch& rays, std::span<const Light> lights, c
   // Every earlier submission has finished: the set may be rewritten (a buffer may have grown).
   VkDescriptorBufferInfo infos[kSlots + 1];
   VkWriteDescriptorSet writes[kSlots + 1];
+  const VkBufferView views[3] = {d.views[0].get(), d.views[1].get(), d.views[2].get()};
   for (uint32_t i = 0; i <= kSlots; ++i) {
     const vk::HostBuffer& b = i == 0 ? d.uniforms : d.buffers[i - 1];
     infos[i] = {b.buffer.get(), 0, VK_WHOLE_SIZE};
@@ -286,6 +334,12 @@ void ComputeEngine::trace(const RayBatch& rays, std::span<const Light> lights, c
     writes[i].descriptorCount = 1;
     writes[i].descriptorType = i == 0 ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
     writes[i].pBufferInfo = &infos[i];
+    const VkBufferView* view = i >= 1 && i <= 3 ? &views[i - 1] : nullptr;
+    if (view && *view != VK_NULL_HANDLE) {  // TexelBuffers: the scene data through its views
+      writes[i].descriptorType = VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER;
+      writes[i].pBufferInfo = nullptr;
+      writes[i].pTexelBufferView = view;
+    }
   }
   vkUpdateDescriptorSets(d.device.handle(), kSlots + 1, writes, 0, nullptr);
   const double upload_ms = ms_since(upload_start);

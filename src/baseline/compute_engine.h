@@ -19,6 +19,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "accel/kdtree.h"
@@ -46,10 +47,19 @@ struct ComputeTraversal {
   int max_steps = 2048;  // the loop cap; a capped ray comes back with MOBIRT_HIT_CAPPED
 };
 
+// How the pass reads the scene data (nodes, primitive lists, triangles): read-only storage buffers
+// (glsl/trace_compute.comp), or uniform texel buffers as mobirt's fragment pass reads them
+// (trace_compute_texel_buffers.comp), which tells the cost of the stage from the cost of the reads.
+enum class ComputeData { StorageBuffers, TexelBuffers };
+
+// "storage-buffers" / "texel-buffers"; parse_compute_data returns false for any other text.
+const char* compute_data_name(ComputeData data);
+bool parse_compute_data(std::string_view text, ComputeData& data);
+
 class ComputeEngine {
  public:
   // options: the device, validation (also MOBIRT_VALIDATION=1); its pipeline cache stays in memory.
-  explicit ComputeEngine(const VulkanOptions& options = {});
+  explicit ComputeEngine(const VulkanOptions& options = {}, ComputeData data = ComputeData::StorageBuffers);
   ~ComputeEngine();
   ComputeEngine(const ComputeEngine&) = delete;
   ComputeEngine& operator=(const ComputeEngine&) = delete;
@@ -59,8 +69,9 @@ class ComputeEngine {
   // breaks, one per line.
   std::vector<std::string> info() const;
 
-  // The tree's nodes, primitive lists and triangles into the pass's storage buffers; returns the
-  // milliseconds it took (CPU copies into mapped memory).
+  // The tree's nodes, primitive lists and triangles into the pass's buffers; returns the
+  // milliseconds it took (CPU copies into mapped memory). Throws Error(BadInput) for an array over
+  // 2^23 elements (the shaders' index conversion, as on the fragment path).
   double upload_tree(const FlatKdTree& tree);
 
   // One hit record per ray of `rays` into out[0, rays.count()), against the last uploaded tree,
