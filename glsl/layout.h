@@ -55,6 +55,16 @@
 #define MOBIRT_MAX_PRIMS_16_16 65535
 #define MOBIRT_MAX_LIGHTS_16_16 16
 
+// ---- Compute pass output (glsl/trace_compute.comp, a peer outside the ES 2.0 constraints) -----
+// One wide hit record per ray in a storage buffer, 32 bytes: vec4 (t, u, v, 0), u and v the
+// barycentric weights of v1 and v2, then uvec4 (primitive index + 1, 0 = miss; shadow mask, bit i
+// = light i visible; shadow rays cast; flags). The CPU makes the surface record from it without
+// intersecting the triangle again.
+#define MOBIRT_HIT_RECORD_BYTES 32
+#define MOBIRT_HIT_CAPPED 1           // the loop cap stopped the ray: the CPU traces it itself
+#define MOBIRT_HIT_NO_BARYCENTRICS 2  // the hit's second test missed (rounding): the CPU intersects it
+#define MOBIRT_COMPUTE_GROUP_SIZE 64  // invocations per workgroup, one ray each
+
 // ---- Limits mirrored from OpenGL ES 2.0 ------------------------------------------------------
 #define MOBIRT_MAX_SAMPLED_TEXTURES 8  // GL_MAX_TEXTURE_IMAGE_UNITS minimum of ES 2.0
 #define MOBIRT_MAX_LIGHTS 16
@@ -80,6 +90,7 @@
 #define MOBIRT_BIND_TRIANGLES 3
 #define MOBIRT_BIND_RAY_ORIGIN 4
 #define MOBIRT_BIND_RAY_DIRECTION 5
+#define MOBIRT_BIND_HIT_RECORDS 6     // compute pass: the hit records it writes
 // Shading pass
 #define MOBIRT_BIND_SHADE_PARAMS 0    // uniform block
 #define MOBIRT_BIND_HIT_POSITION 1

@@ -52,21 +52,24 @@ ivec2 data_coord(float index) {
   precise float column = index - row * float(MOBIRT_DATA_WIDTH);
   return small_floats_to_ints(vec2(column, row));
 }
-#ifdef MOBIRT_DATA_TEXEL_BUFFERS
-// Data textures as uniform texel buffers (trace_texel_buffers.frag): element i is texel i, with
-// no mip-level work or 2D bounds checks in llvmpipe's fetch. Indices are exact floats below 2^23
-// (the backend refuses larger buffers), so the same bit trick makes them ints.
+// Data as one-dimensional arrays (texel buffers here, storage buffers in prelude_compute.glsl):
+// element i is texel i. Indices are exact floats below 2^23 (the backend refuses larger buffers),
+// so the same bit trick makes them ints.
 int data_index(float index) {
   precise float biased = index + 8388608.0;
   return floatBitsToInt(biased) - 0x4B000000;
 }
+#ifdef MOBIRT_DATA_TEXEL_BUFFERS
+// Data textures as uniform texel buffers (trace_texel_buffers.frag, and the compute pass's
+// trace_compute_texel_buffers.comp), with no mip-level work or 2D bounds checks in llvmpipe's fetch.
 #define DATA_TEXEL(tex, index) texelFetch(tex, data_index(index))
 // A textureBuffer, not a samplerBuffer: SPIR-V forbids a sampled image of a buffer (Mesa warns),
 // so the includer enables GL_EXT_samplerless_texture_functions for texelFetch on it.
 #define DATA_SAMPLER(slot, name) layout(set = 0, binding = slot) uniform textureBuffer name
-#else
+#elif !defined(MOBIRT_COMPUTE)  // prelude_compute.glsl: storage buffers
 #define DATA_TEXEL(tex, index) texelFetch(tex, data_coord(index), 0)
 #endif
+#ifndef MOBIRT_COMPUTE  // a compute shader reads its ray and writes its result itself
 // Per-ray textures share the pass's layout: this fragment's own ray.
 #define RAY_TEXEL(tex) texelFetch(tex, small_floats_to_ints(floor(gl_FragCoord.xy)), 0)
 // Texture atlas (RGBA8, NEAREST): the texel at integer coordinates xy (exact floats), no filtering.
@@ -78,3 +81,4 @@ int data_index(float index) {
 
 layout(location = 0) out vec4 o_color;
 #define OUTPUT(value) o_color = (value)
+#endif  // MOBIRT_COMPUTE

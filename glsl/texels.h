@@ -148,6 +148,22 @@ struct AtlasTileParams {
 };
 static_assert(sizeof(AtlasTileParams) == MOBIRT_SP_VEC4S_PER_TEXTURE * sizeof(glm::vec4));
 
+// ---- Compute pass output (MOBIRT_BIND_HIT_RECORDS): one wide hit record per ray --------------
+struct HitRecord {
+  float t;
+  float u, v;               // barycentric weights of v1 and v2
+  float unused;
+  uint32_t prim_plus_one;   // 0 = miss
+  uint32_t mask;            // shadow bits, bit i = light i visible
+  uint32_t shadow_rays;     // shadow rays the pass cast for this hit
+  uint32_t flags;           // MOBIRT_HIT_CAPPED, MOBIRT_HIT_NO_BARYCENTRICS
+
+  bool hit() const { return prim_plus_one != 0; }
+  int32_t prim() const { return int32_t(prim_plus_one) - 1; }
+  bool capped() const { return (flags & MOBIRT_HIT_CAPPED) != 0; }
+};
+static_assert(sizeof(HitRecord) == MOBIRT_HIT_RECORD_BYTES && std::is_trivially_copyable_v<HitRecord>);
+
 // The largest passes fit the uniform array.
 static_assert(MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * MOBIRT_MAX_LIGHTS <= MOBIRT_MAX_PARAM_VEC4S);
 static_assert(MOBIRT_SP_TEXTURES(MOBIRT_MAX_LIGHTS) + MOBIRT_SP_VEC4S_PER_TEXTURE * MOBIRT_ATLAS_MAX_TEXTURES <=

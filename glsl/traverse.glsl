@@ -26,26 +26,28 @@ DATA_SAMPLER(MOBIRT_BIND_TRIANGLES, u_triangles);
 // The ray/triangle test, by INTERSECT and PRECISION (specialization constants, glsl/layout.h):
 // the CPU mirror, operation for operation, is src/accel/kdtree_traverse.cpp. Each returns t of a
 // hit in [tmin, tmax], else -1; comparisons are written so that NaN rejects. Under mediump mp()
-// rounds the vertices and every intermediate result to fp16; the ray arrives rounded.
+// rounds the vertices and every intermediate result to fp16; the ray arrives rounded. Each returns
+// (t, u, v), u and v the barycentric weights of v1 and v2 as the CPU's test computes them: the
+// traversal reads t alone (the rest folds away), the compute pass's wide hit record all three.
 
 // Möller-Trumbore (1997).
-float intersect_mt(float prim, vec3 o, vec3 d, float tmin, float tmax) {
+vec3 intersect_mt(float prim, vec3 o, vec3 d, float tmin, float tmax) {
   float base = prim * float(MOBIRT_TEXELS_PER_TRIANGLE);
   vec3 v0 = mp(DATA_TEXEL(u_triangles, base).xyz);
   vec3 e1 = mp(mp(DATA_TEXEL(u_triangles, base + 1.0).xyz) - v0);
   vec3 e2 = mp(mp(DATA_TEXEL(u_triangles, base + 2.0).xyz) - v0);
   vec3 p = mp(mp_cross(d, e2));
   float det = mp(mp_dot(e1, p));
-  if (!(det != 0.0)) return -1.0;
+  if (!(det != 0.0)) return vec3(-1.0);
   float inv_det = mp(1.0 / det);
   vec3 s = mp(o - v0);
   float u = mp(mp(mp_dot(s, p)) * inv_det);
-  if (!(u >= 0.0 && u <= 1.0)) return -1.0;
+  if (!(u >= 0.0 && u <= 1.0)) return vec3(-1.0);
   vec3 q = mp(mp_cross(s, e1));
   float v = mp(mp(mp_dot(d, q)) * inv_det);
-  if (!(v >= 0.0 && mp(u + v) <= 1.0)) return -1.0;
+  if (!(v >= 0.0 && mp(u + v) <= 1.0)) return vec3(-1.0);
   float t = mp(mp(mp_dot(e2, q)) * inv_det);
-  return (t >= tmin && t <= tmax) ? t : -1.0;
+  return (t >= tmin && t <= tmax) ? vec3(t, u, v) : vec3(-1.0);
 }
 
 // The axis permutation (kx, ky, kz) of the watertight test, applied to v: kz is the largest
@@ -67,7 +69,7 @@ vec3 watertight_permute(vec3 v, vec3 d) {
 // shared edge computes exactly its negation, so a ray through an edge or a vertex meets at least
 // one triangle there. The paper's retry in double for edge functions of exactly 0 is left out: 0 is accepted on both
 // sides instead.
-float intersect_watertight(float prim, vec3 o, vec3 d, float tmin, float tmax) {
+vec3 intersect_watertight(float prim, vec3 o, vec3 d, float tmin, float tmax) {
   float base = prim * float(MOBIRT_TEXELS_PER_TRIANGLE);
   vec3 pd = watertight_permute(d, d);
   bool flip = pd.z < 0.0;
@@ -95,17 +97,23 @@ float intersect_watertight(float prim, vec3 o, vec3 d, float tmin, float tmax) {
   PRECISE vec3 edge_plus = x.zxy * y.yzx;
   PRECISE vec3 edge_minus = y.zxy * x.yzx;
   vec3 uvw = mp(mp(edge_plus) - mp(edge_minus));
-  if ((uvw.x < 0.0 || uvw.y < 0.0 || uvw.z < 0.0) && (uvw.x > 0.0 || uvw.y > 0.0 || uvw.z > 0.0)) return -1.0;
+  if ((uvw.x < 0.0 || uvw.y < 0.0 || uvw.z < 0.0) && (uvw.x > 0.0 || uvw.y > 0.0 || uvw.z > 0.0)) return vec3(-1.0);
   float det = mp(mp(uvw.x + uvw.y) + uvw.z);
-  if (!(det != 0.0)) return -1.0;
+  if (!(det != 0.0)) return vec3(-1.0);
   float big_t = mp(mp_dot(uvw, mp(sz * pz)));
-  float t = mp(big_t * mp(1.0 / det));
-  return (t >= tmin && t <= tmax) ? t : -1.0;
+  float inv_det = mp(1.0 / det);
+  float t = mp(big_t * inv_det);
+  return (t >= tmin && t <= tmax) ? vec3(t, mp(uvw.y * inv_det), mp(uvw.z * inv_det)) : vec3(-1.0);
+}
+
+// (t, u, v) of a hit in [tmin, tmax], else t = -1.
+vec3 intersect_triangle_tuv(float prim, vec3 o, vec3 d, float tmin, float tmax) {
+  if (INTERSECT == MOBIRT_INTERSECT_WATERTIGHT) return intersect_watertight(prim, o, d, tmin, tmax);
+  return intersect_mt(prim, o, d, tmin, tmax);
 }
 
 float intersect_triangle(float prim, vec3 o, vec3 d, float tmin, float tmax) {
-  if (INTERSECT == MOBIRT_INTERSECT_WATERTIGHT) return intersect_watertight(prim, o, d, tmin, tmax);
-  return intersect_mt(prim, o, d, tmin, tmax);
+  return intersect_triangle_tuv(prim, o, d, tmin, tmax).x;
 }
 
 // Slab test against the scene box; returns (t0, t1), empty when t0 > t1.
@@ -304,9 +312,11 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
 
 // The shadow mask of a hit: bit i set when light i is visible. Lights behind the surface as seen
 // from the ray and points outside a spot's outer cone get no shadow ray: they cannot light it.
-// Returns -1.0 when a shadow ray hit the loop cap.
-float shadow_mask(float prim, vec3 o, vec3 d, float t) {
+// Returns -1.0 when a shadow ray hit the loop cap. rays_cast: the shadow rays it cast (the compute
+// pass's hit record counts them; the fragment passes leave it to the CPU).
+float shadow_mask_counted(float prim, vec3 o, vec3 d, float t, out float rays_cast) {
   float mask = 0.0;
+  rays_cast = 0.0;
   if (LIGHT_COUNT == 0) return mask;
   float base = prim * float(MOBIRT_TEXELS_PER_TRIANGLE);
   vec3 v0 = DATA_TEXEL(u_triangles, base).xyz;
@@ -335,6 +345,7 @@ float shadow_mask(float prim, vec3 o, vec3 d, float t) {
       lit = dot(normalize(-to_light), spot.xyz) > spot.w;
     }
     if (lit) {
+      rays_cast = rays_cast + 1.0;
       vec3 r = traverse(origin, mp(to_light), 0.0, tmax, true);
       if (r.z > 0.5) return -1.0;
       if (r.x < 0.0) mask = mask + bit;
@@ -343,4 +354,9 @@ float shadow_mask(float prim, vec3 o, vec3 d, float t) {
     lights_done = lights_done + 1;
   }
   return lights_done == LIGHT_COUNT ? mask : -1.0;
+}
+
+float shadow_mask(float prim, vec3 o, vec3 d, float t) {
+  float rays_cast;
+  return shadow_mask_counted(prim, o, d, t, rays_cast);
 }

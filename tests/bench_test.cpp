@@ -9,6 +9,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "layout.h"
 #include "test_support.h"
 
 namespace mobirt {
@@ -48,10 +49,18 @@ TEST(Bench, OneSmallCellWithEveryColumn) {
     EXPECT_FALSE(j["cells"][0].contains("ray_query"));
     EXPECT_FALSE(j["cells"][0]["ratios"]["mobirt"].contains("fps_over_ray_query"));
   }
+  // The compute peer needs only a compute queue: it runs wherever mobirt's Vulkan backend does.
+  EXPECT_EQ(r.output.find("bench: compute peer skipped: "), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find(" fps, compute "), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("compute (Vulkan)"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("fps/cp"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("mobirt's kd-tree as a compute pass, per stage"), std::string::npos) << r.output;
+  ASSERT_TRUE(j["machine"]["compute"].is_array()) << j["machine"];
+  EXPECT_NE(j["machine"]["compute"].dump().find("is a compute shader"), std::string::npos) << j["machine"]["compute"];
   for (const nlohmann::json& c : j["cells"]) {
     SCOPED_TRACE(c["level"].get<std::string>());
     EXPECT_EQ(c["triangles"].get<int>(), 1392);
-    std::vector<std::string> columns = {"mobirt", "mobirt_gles", "embree", "cpu_kd"};
+    std::vector<std::string> columns = {"mobirt", "mobirt_gles", "embree", "cpu_kd", "compute"};
     if (ray_query) columns.push_back("ray_query");
     for (const std::string& column : columns) {
       SCOPED_TRACE(column);
@@ -77,7 +86,16 @@ TEST(Bench, OneSmallCellWithEveryColumn) {
         EXPECT_GT(c["ratios"][column]["fps_over_ray_query"].get<double>(), 0.0);
         EXPECT_GT(c["ratios"][column]["traversal_over_ray_query"].get<double>(), 0.0);
       }
+      EXPECT_GT(c["ratios"][column]["fps_over_compute"].get<double>(), 0.0);
+      EXPECT_GT(c["ratios"][column]["traversal_over_compute"].get<double>(), 0.0);
     }
+    // The compute peer traces mobirt's rays with mobirt's tree: a wide record per ray from its
+    // traversal pass, 4 bytes per ray from the shading pass.
+    const nlohmann::json& cp = c["compute"]["stages_ms"];
+    EXPECT_EQ(cp["bytes_read"].get<double>(), (MOBIRT_HIT_RECORD_BYTES + 4.0) * cp["traced_rays"].get<double>());
+    EXPECT_EQ(cp["pass0_rays"].get<double>(), 64.0 * 40.0);
+    EXPECT_NEAR(cp["traced_rays"].get<double>(), c["mobirt"]["stages_ms"]["traced_rays"].get<double>(),
+                0.01 * c["mobirt"]["stages_ms"]["traced_rays"].get<double>());
     if (ray_query) {
       // The peer traces the same rays as mobirt's passes and reads back as much.
       const nlohmann::json& rq = c["ray_query"]["stages_ms"];
@@ -100,7 +118,8 @@ TEST(Bench, OneSmallCellWithEveryColumn) {
   EXPECT_TRUE(bounce["paper_fps"].is_null());  // a scene given on the command line: no paper figure
 }
 
-// --no-baseline leaves out every peer, the ray query included, and says nothing about it.
+// --no-baseline leaves out every peer, the ray query and the compute pass included, and says
+// nothing about it.
 TEST(Bench, NoBaselineSkipsEveryPeer) {
   const fs::path json = test::temp_dir() / "bench.json";
   const test::CommandResult r =
@@ -108,12 +127,15 @@ TEST(Bench, NoBaselineSkipsEveryPeer) {
                        "--levels cast --backend vulkan --no-baseline --json '" + json.string() + "'");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_EQ(r.output.find("ray-query peer skipped"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("compute peer skipped"), std::string::npos) << r.output;
   std::ifstream in(json);
   const nlohmann::json j = nlohmann::json::parse(in);
   ASSERT_EQ(j["cells"].size(), 1u);
   const nlohmann::json& c = j["cells"][0];
   EXPECT_GT(c["mobirt"]["fps"]["median"].get<double>(), 0.0);
-  for (const char* peer : {"embree", "cpu_kd", "ray_query", "ratios"}) EXPECT_FALSE(c.contains(peer)) << peer;
+  for (const char* peer : {"embree", "cpu_kd", "ray_query", "compute", "ratios"}) EXPECT_FALSE(c.contains(peer)) << peer;
+  EXPECT_EQ(j["machine"]["compute"]["skipped"], "--no-baseline");
+  EXPECT_EQ(j["settings"]["compute_data"], "storage-buffers");
 }
 
 // mobirt's frames are pipelined unless --serial, and the table and the JSON say which; pipelined,
@@ -151,7 +173,7 @@ TEST(Bench, SaysWhetherItsFramesArePipelined) {
 TEST(Bench, BadOptionsAreRefusedBeforeTheRun) {
   const fs::path dir = test::temp_dir();
   for (const std::string& args :
-       {std::string("--levels cast,bogus"), std::string("--frames 0"),
+       {std::string("--levels cast,bogus"), std::string("--frames 0"), std::string("--compute-data textures"),
         "--json '" + (dir / "no-such-folder" / "b.json").string() + "'",
         std::string("--scenes '") + (dir / "empty").string() + "'"}) {
     SCOPED_TRACE(args);

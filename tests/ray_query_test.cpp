@@ -20,6 +20,7 @@
 #include "render/whitted.h"
 #include "scene/animation.h"
 #include "scene/loader.h"
+#include "render_checks.h"
 #include "test_support.h"
 
 // SPIR-V built from glsl/ (build/spirv/).
@@ -125,26 +126,7 @@ Agreement compare(const std::vector<uint32_t>& got, const std::vector<uint32_t>&
   return a;
 }
 
-// Camera rays through random points of the image, and rays from random points in and around the
-// scene box in random directions; `width` rays a row.
-RayBatch random_rays(const Scene& scene, const Camera& camera, uint32_t count, uint32_t width, uint32_t seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
-  const CameraBasis basis(camera, 400, 240);
-  const Aabb box = scene.bounds();
-  const glm::vec3 lo = box.lo - 0.1f * box.extent(), size = 1.2f * box.extent();
-  RayBatch rays;
-  rays.width = width;
-  for (uint32_t i = 0; i < count; ++i) {
-    if (i % 2 == 0) {
-      rays.push(basis.ray(400.0f * unit(rng), 240.0f * unit(rng)), i, glm::vec3(1.0f));
-    } else {
-      const glm::vec3 o = lo + size * glm::vec3(unit(rng), unit(rng), unit(rng));
-      rays.push(Ray{o, test::random_direction(rng), 0.0f, kInfinity}, i, glm::vec3(1.0f));
-    }
-  }
-  return rays;
-}
+using test::random_rays;
 
 Agreement trace_and_compare(RayQueryEngine& engine, const Scene& scene, const RayBatch& rays, const char* what) {
   const FlatKdTree tree = build_kdtree(scene.mesh.positions);
@@ -314,24 +296,10 @@ TEST(RayQuery, WhittedFramesEqualMobirtsVulkanFrames) {
       FrameTimings want_t, got_t;
       const Image want = mobirt.render(scene, *scene.camera, &want_t);
       const Image got = render_whitted(scene, *scene.camera, settings, peer, &got_t);
-      const ImageDiff diff = compare_images(want, got);
-      EXPECT_GE(diff.psnr, 45.0) << "max error " << diff.max_error;
-      if (diff.psnr < 45.0) {
-        write_image(test::output_path(std::string("ray_query_frame_") + name + ".png").string(),
-                    difference_image(want, got));
-      }
-      // The same rays were traced, generation by generation, within the few that differ.
-      ASSERT_EQ(got_t.generations.size(), want_t.generations.size());
-      for (size_t k = 0; k < got_t.generations.size(); ++k) {
-        EXPECT_NEAR(double(got_t.generations[k].rays), double(want_t.generations[k].rays),
-                    0.002 * want_t.generations[k].rays + 2) << "generation " << k;
-      }
+      test::expect_peer_frame_matches_mobirts(want, want_t, got, got_t, std::string("ray_query_frame_") + name, 0.002);
       EXPECT_GT(got_t.sum.hits, got_t.primary_rays() / 4);
       EXPECT_GT(got_t.sum.shadow_rays, 0u);
-      EXPECT_EQ(got_t.sum.capped, 0u);
       EXPECT_TRUE(got_t.tree_rebuilt);
-      EXPECT_GT(got_t.sum.trace_ms, 0.0);
-      EXPECT_GT(got_t.sum.shade_ms, 0.0);
       EXPECT_EQ(peer.last_build().triangles, scene.mesh.triangle_count());
       bounced += got_t.generations.size() > 1;
     }

@@ -47,4 +47,23 @@ CommandResult run_mobirt(const std::string& args) {
   return r;
 }
 
+RayBatch random_rays(const Scene& scene, const Camera& camera, uint32_t count, uint32_t width, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  const CameraBasis basis(camera, 400, 240);
+  const Aabb box = scene.bounds();
+  const glm::vec3 lo = box.lo - 0.1f * box.extent(), size = 1.2f * box.extent();
+  RayBatch rays;
+  rays.width = width;
+  for (uint32_t i = 0; i < count; ++i) {
+    if (i % 2 == 0) {
+      rays.push(basis.ray(400.0f * unit(rng), 240.0f * unit(rng)), i, glm::vec3(1.0f));
+    } else {
+      const glm::vec3 o = lo + size * glm::vec3(unit(rng), unit(rng), unit(rng));
+      rays.push(Ray{o, random_direction(rng), 0.0f, kInfinity}, i, glm::vec3(1.0f));
+    }
+  }
+  return rays;
+}
+
 }  // namespace mobirt::test

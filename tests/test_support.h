@@ -9,7 +9,10 @@
 #include <string>
 #include <vector>
 
+#include "core/camera.h"
 #include "core/error.h"
+#include "raytree/rays.h"
+#include "scene/scene.h"
 
 namespace mobirt::test {
 
@@ -59,6 +62,10 @@ inline glm::vec3 random_direction(std::mt19937& rng) {
     if (l > 1e-3f) return d / l;
   }
 }
+
+// Camera rays through random points of a 400x240 image, and rays from random points in and around
+// the scene box in random directions, alternately; `width` rays a row.
+RayBatch random_rays(const Scene& scene, const Camera& camera, uint32_t count, uint32_t width, uint32_t seed);
 
 }  // namespace mobirt::test
 

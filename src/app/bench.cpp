@@ -22,6 +22,8 @@
 #include "app/options.h"
 #include "app/scene_setup.h"
 #include "backend/vulkan/vulkan_backend.h"
+#include "baseline/compute_engine.h"
+#include "baseline/compute_whitted.h"
 #include "baseline/embree_engine.h"
 #include "baseline/ray_query_engine.h"
 #include "baseline/ray_query_whitted.h"
@@ -43,10 +45,12 @@ frame interleaved, the same frames rendered on the CPU by Embree 3 (rtcIntersect
 over a dynamic, LOW-quality BVH rebuilt every frame), by mobirt's own kd-tree on the CPU, and by
 the driver's own ray queries (lavapipe's BVH built every frame, rayQueryEXT in a fragment pass, the
 same ray tree, hit decoding and shading pass as mobirt's; skipped with the reason where the driver
-lacks VK_KHR_ray_query). Prints the table, the stages, and the ratios mobirt / Embree and mobirt /
-ray query per cell, for the traversal alone (Mrays/s over the same rays) and for the build alone
-(kd-tree vs Embree BVH). mobirt's frames are pipelined (frame N+1 posed and its kd-tree built on a
-worker while frame N renders; the frame time is the loop's period) unless --serial.
+lacks VK_KHR_ray_query), and by mobirt's own kd-tree traversal as a Vulkan compute shader over
+storage buffers with a wide hit record (the paper's future work; the same kd-tree, rays, ray tree
+and shading pass). Prints the table, the stages, and the ratios mobirt / Embree, mobirt / ray query
+and mobirt / compute per cell, for the traversal alone (Mrays/s over the same rays) and for the
+build alone (kd-tree vs Embree BVH). mobirt's frames are pipelined (frame N+1 posed and its kd-tree
+built on a worker while frame N renders; the frame time is the loop's period) unless --serial.
 
 Without SCENE: the paper's scenes (scenes/toaster.gltf 400x240, marbles 240x400, fish 400x240)
 and, when ../shared/scenes has them, the real Utah toasters and the wood doll.
@@ -194,6 +198,7 @@ struct BenchOptions {
   unsigned threads = 0;
   bool baseline = true;
   bool cpu = true;
+  ComputeData compute_data = ComputeData::StorageBuffers;  // how the compute peer reads the scene
   std::vector<std::string> backends = {"vulkan", "gles"};
   // mobirt's columns through the frame pipeline: frame N+1 posed and its kd-tree built on a worker
   // (in an arena of build_threads) while frame N renders; --serial: one after the other.
@@ -203,12 +208,14 @@ struct BenchOptions {
   RenderSettings settings;  // kd, stack, max_steps
 };
 
-// The ray-query column: the driver's BVH and rayQueryEXT pass, and a Vulkan backend of its own for
-// mobirt's shading pass (so that the mobirt columns' textures and passes stay theirs). Made once per
-// run, absent where the driver lacks ray queries or with --no-baseline.
-struct RayQueryPeer {
+// The GPU peers' columns: the driver's BVH and rayQueryEXT pass, mobirt's kd-tree as a compute
+// pass, and a Vulkan backend of their own for mobirt's shading pass (so that the mobirt columns'
+// textures and passes stay theirs). Made once per run; a peer is absent where the driver lacks it,
+// both with --no-baseline.
+struct GpuPeers {
   std::unique_ptr<RayQueryEngine> rq;
-  std::unique_ptr<Backend> shading;
+  std::unique_ptr<ComputeEngine> compute;
+  std::unique_ptr<Backend> shading;  // when either is there
 };
 
 // Throws when a Vulkan context of the run reported validation messages.
@@ -233,7 +240,7 @@ struct GpuColumn {
   std::unique_ptr<Backend> backend;
 };
 
-nlohmann::json run_cell(std::vector<GpuColumn>& columns, RayQueryPeer* peer, const BenchScene& bs,
+nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const BenchScene& bs,
                         const AnimatedScene& animation, const Level& level, const BenchOptions& o) {
   RenderSettings settings = o.settings;
   settings.width = bs.width;
@@ -247,14 +254,16 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, RayQueryPeer* peer, con
   std::optional<KdTreeEngine> kd;
   if (o.baseline) embree.emplace(EmbreeOptions{o.threads, true});
   if (o.baseline && o.cpu) kd.emplace(settings.kd, settings.shadow_rays.ray_test);
-  std::optional<Renderer> peer_shading;
+  std::optional<Renderer> rq_shading, compute_shading;
   std::optional<RayQueryWhittedEngine> ray_query;
-  if (peer) ray_query.emplace(*peer->rq, peer_shading.emplace(*peer->shading, settings));
+  std::optional<ComputeWhittedEngine> compute;
+  if (peers.rq) ray_query.emplace(*peers.rq, rq_shading.emplace(*peers.shading, settings));
+  if (peers.compute) compute.emplace(*peers.compute, compute_shading.emplace(*peers.shading, settings));
 
   PosedScene posed(animation, bs.edits, bs.width, bs.height);
   const Scene& scene = posed.scene;
   std::vector<Samples> gpu(columns.size());
-  Samples emb, cpu, rqs;
+  Samples emb, cpu, rqs, cps;
   const double fps = animation.fps() > 0 ? animation.fps() : 24.0;
   // Each GPU column's frames go through a frame pipeline of its own (serial with --serial), posing
   // into two scenes of its own, one per slot; the peers render the shared posed scene.
@@ -289,13 +298,16 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, RayQueryPeer* peer, con
       check_messages(columns[c].backend->take_debug_messages());
       if (timed) add_frame(gpu[c], pose_ms, ft, &step);
     }
-    if (ray_query) {
+    // A GPU peer's frame: mobirt's loop with the peer tracing, its validation messages checked.
+    auto peer_frame = [&](WhittedEngine& engine, std::vector<std::string> messages, Samples& samples) {
       FrameTimings ft;
-      render_whitted(scene, view, settings, *ray_query, &ft);
-      check_messages(peer->rq->take_debug_messages());
-      check_messages(peer->shading->take_debug_messages());
-      if (timed) add_frame(rqs, animate_ms, ft);
-    }
+      render_whitted(scene, view, settings, engine, &ft);
+      check_messages(std::move(messages));
+      check_messages(peers.shading->take_debug_messages());
+      if (timed) add_frame(samples, animate_ms, ft);
+    };
+    if (ray_query) peer_frame(*ray_query, peers.rq->take_debug_messages(), rqs);
+    if (compute) peer_frame(*compute, peers.compute->take_debug_messages(), cps);
     if (embree) {
       FrameTimings ct;
       render_whitted_cpu(scene, view, settings, *embree, o.threads, &ct);
@@ -345,10 +357,15 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, RayQueryPeer* peer, con
       cell["ratios"][key]["fps_over_ray_query"] = fps_over(rqs);
       cell["ratios"][key]["traversal_over_ray_query"] = traversal_over(rqs);
     }
+    if (compute) {
+      cell["ratios"][key]["fps_over_compute"] = fps_over(cps);
+      cell["ratios"][key]["traversal_over_compute"] = traversal_over(cps);
+    }
   }
   cell["meets_target"] = std::isnan(paper) ? nlohmann::json(nullptr) : nlohmann::json(best_fps >= 2 * paper);
   if (embree) cell["embree"] = {{"fps", fps_json(emb.all("frame"))}, {"stages_ms", emb.medians()}};
   if (ray_query) cell["ray_query"] = {{"fps", fps_json(rqs.all("frame"))}, {"stages_ms", rqs.medians()}};
+  if (compute) cell["compute"] = {{"fps", fps_json(cps.all("frame"))}, {"stages_ms", cps.medians()}};
   if (kd) {
     cell["cpu_kd"] = {{"fps", fps_json(cpu.all("frame"))}, {"stages_ms", cpu.medians()}};
     cell["kd_tree"] = {{"sah_cost", kd_stats.sah_cost},
@@ -369,7 +386,7 @@ std::string opt(const nlohmann::json& j, const char* key, const char* fmt) {
 }
 
 const char* column_title(const std::string& key) {
-  return key == "mobirt" ? "Vulkan" : key == "mobirt_gles" ? "GLES 2.0" : "ray query";
+  return key == "mobirt" ? "Vulkan" : key == "mobirt_gles" ? "GLES 2.0" : key == "compute" ? "compute" : "ray query";
 }
 
 // mobirt's frame loop: what the rendering thread did and, pipelined, what the worker did beside it.
@@ -403,6 +420,7 @@ void print_tables(const nlohmann::json& result) {
   const bool baseline = cells[0].contains("embree");
   const bool cpu = cells[0].contains("cpu_kd");
   const bool ray_query = cells[0].contains("ray_query");
+  const bool compute = cells[0].contains("compute");
   auto label = [](const nlohmann::json& c) {
     return c["scene"].get<std::string>() + ", " + c["level_name"].get<std::string>();
   };
@@ -413,6 +431,7 @@ void print_tables(const nlohmann::json& result) {
   std::printf("%-28s %-8s %5s %6s", "scene, level", "size", "paper", "target");
   for (const std::string& g : gpus) std::printf("  %-18s", (std::string("mobirt ") + column_title(g)).c_str());
   if (ray_query) std::printf("  %-18s", "ray query (Vulkan)");
+  if (compute) std::printf("  %-18s", "compute (Vulkan)");
   if (baseline) std::printf("  %-18s", "Embree 3");
   if (cpu) std::printf("  %-18s", "CPU kd-tree");
   std::printf("\n");
@@ -421,21 +440,26 @@ void print_tables(const nlohmann::json& result) {
                 opt(c, "paper_fps", "%.0f").c_str(), opt(c, "target_fps", "%.0f").c_str());
     for (const std::string& g : gpus) std::printf("  %-18s", cell_fps(c[g]["fps"]).c_str());
     if (ray_query) std::printf("  %-18s", cell_fps(c["ray_query"]["fps"]).c_str());
+    if (compute) std::printf("  %-18s", cell_fps(c["compute"]["fps"]).c_str());
     if (baseline) std::printf("  %-18s", cell_fps(c["embree"]["fps"]).c_str());
     if (cpu) std::printf("  %-18s", cell_fps(c["cpu_kd"]["fps"]).c_str());
     std::printf("\n");
   }
 
-  // The ray-query peer has the same stages as mobirt's passes: its BVH build, its traversal pass,
-  // and mobirt's decoding, shading pass and ray tree.
+  // The GPU peers have the same stages as mobirt's passes: their build (the driver's BVH, or
+  // mobirt's kd-tree), their traversal pass, and mobirt's decoding, shading pass and ray tree.
   std::vector<std::string> staged = gpus;
   if (ray_query) staged.push_back("ray_query");
+  if (compute) staged.push_back("compute");
   for (const std::string& g : staged) {
+    const std::string title = g == "ray_query" ? "The driver's ray query"
+                              : g == "compute" ? "mobirt's kd-tree as a compute pass"
+                                               : "mobirt on " + std::string(column_title(g));
     std::printf("\n%s, per stage, ms (median): animate, %s build, primary rays, upload, traversal\n"
                 "passes, read-back, hit decoding, shading passes, accumulate, secondary rays, frame; Mrays/s of\n"
-                "the traversal passes (closest-hit + shadow rays); KB that left the GPU (4 bytes per ray and pass)\n",
-                g == "ray_query" ? "The driver's ray query" : ("mobirt on " + std::string(column_title(g))).c_str(),
-                g == "ray_query" ? "BLAS + TLAS" : "kd-tree");
+                "the traversal passes (closest-hit + shadow rays); KB that left the GPU (4 bytes per ray and pass;\n"
+                "the compute pass: %d per ray)\n",
+                title.c_str(), g == "ray_query" ? "BLAS + TLAS" : "kd-tree", MOBIRT_HIT_RECORD_BYTES);
     std::printf("%-28s %6s %6s %5s %6s %7s %6s %6s %6s %5s %6s %7s %7s %6s\n", "scene, level", "anim", "build",
                 "rays", "upload", "trace", "rdback", "decode", "shade", "accum", "second", "frame", "Mrays/s", "KB");
     for (const nlohmann::json& c : cells) {
@@ -483,13 +507,15 @@ void print_tables(const nlohmann::json& result) {
 
   std::printf("\nRatios mobirt / Embree, the same frames: fps; traversal alone (Mrays/s on the same rays: GPU\n"
               "traversal passes vs rtcIntersect1 + rtcOccluded1); build alone (kd-tree build ms / Embree BVH\n"
-              "build ms, >1 = slower); %sSAH cost of the kd-tree built\n",
+              "build ms, >1 = slower); %s%sSAH cost of the kd-tree built\n",
               ray_query ? "mobirt / ray query (fps/rq, trc/rq): fps, traversal alone\n(Mrays/s on the same rays); "
-                        : "");
+                        : "",
+              compute ? "mobirt / compute (fps/cp, trc/cp): the same; " : "");
   std::printf("%-28s", "scene, level");
   for (const std::string& g : gpus) {
     std::printf(" | %-8s %7s %7s %7s", column_title(g), "fps", "trace", "build");
     if (ray_query) std::printf(" %7s %7s", "fps/rq", "trc/rq");
+    if (compute) std::printf(" %7s %7s", "fps/cp", "trc/cp");
   }
   std::printf(" | %8s\n", "SAH");
   for (const nlohmann::json& c : cells) {
@@ -502,6 +528,9 @@ void print_tables(const nlohmann::json& result) {
         std::printf(" %6.2fx %6.2fx", r["fps_over_ray_query"].get<double>(),
                     r["traversal_over_ray_query"].get<double>());
       }
+      if (compute) {
+        std::printf(" %6.2fx %6.2fx", r["fps_over_compute"].get<double>(), r["traversal_over_compute"].get<double>());
+      }
     }
     std::printf(" | %8s\n", cpu ? opt(c["kd_tree"], "sah_cost", "%.1f").c_str() : "-");
   }
@@ -513,7 +542,7 @@ void print_progress(const nlohmann::json& cell, size_t done, size_t total, doubl
   std::string line = "bench: [" + std::to_string(done) + "/" + std::to_string(total) + "] " +
                      cell["scene"].get<std::string>() + ", " + cell["level_name"].get<std::string>() + ":";
   for (const auto& [key, title] : {std::pair<const char*, const char*>{"mobirt", "Vulkan"},
-                                   {"mobirt_gles", "GLES 2.0"}, {"ray_query", "ray query"},
+                                   {"mobirt_gles", "GLES 2.0"}, {"ray_query", "ray query"}, {"compute", "compute"},
                                    {"embree", "Embree 3"}, {"cpu_kd", "CPU kd-tree"}}) {
     if (!cell.contains(key)) continue;
     char buf[64];
@@ -575,9 +604,17 @@ int cmd_bench(const std::vector<std::string>& args) {
           "mobirt's frames one stage after the other (pose, build, passes) instead of\n"
           "pipelined (frame N+1 posed and built on a worker while frame N renders)",
           [&] { o.pipelined = false; });
-  cl.flag("--no-baseline", "leave out the peers: the ray-query, Embree and CPU kd-tree columns",
+  cl.flag("--no-baseline", "leave out the peers: the ray-query, compute, Embree and CPU kd-tree columns",
           [&] { o.baseline = false; });
   cl.flag("--no-cpu", "leave out the CPU kd-tree column only", [&] { o.cpu = false; });
+  cl.option("--compute-data", "READS",
+            "how the compute column reads the scene: storage-buffers (default) or\n"
+            "texel-buffers (as mobirt's fragment pass reads it)",
+            [&](const cli::Value& v) {
+              if (!parse_compute_data(v.text, o.compute_data)) {
+                cli::usage_error("--compute-data " + v.text + ": expected storage-buffers or texel-buffers", kHelp);
+              }
+            });
   cl.option("--json", "FILE", "every number as JSON (- = standard output)",
             [&](const cli::Value& v) { json_path = v.text; });
   cl.option("--scenes", "DIR", "the project's scenes (default: ./scenes, else the source tree's)",
@@ -635,22 +672,29 @@ int cmd_bench(const std::vector<std::string>& args) {
   for (const std::string& b : o.backends) {
     columns.push_back({b == "vulkan" ? "mobirt" : "mobirt_gles", create_backend(b, o.backend_options, kHelp)});
   }
-  // The ray-query peer where the driver has it; else one line says why and the run goes on.
-  std::optional<RayQueryPeer> peer;
-  std::string peer_skipped;
+  // The GPU peers where the driver has them; else one line each says why and the run goes on.
+  GpuPeers peers;
+  std::string rq_skipped = "--no-baseline", compute_skipped = "--no-baseline";
   if (o.baseline) {
     RayQueryOptions ro;
     ro.device = o.backend_options.device;
     ro.validation = o.backend_options.validation;
     ro.sync_validation = o.backend_options.sync_validation;
-    peer_skipped = o.settings.shadow_rays.ray_test.precision == Precision::Medium
-                       ? "it traces in fp32 only, and --precision mediump was asked for"
-                       : RayQueryEngine::unavailable_reason(ro);
-    if (peer_skipped.empty()) {
-      peer.emplace(RayQueryPeer{std::make_unique<RayQueryEngine>(ro), create_vulkan_backend(o.backend_options)});
+    rq_skipped = o.settings.shadow_rays.ray_test.precision == Precision::Medium
+                     ? "it traces in fp32 only, and --precision mediump was asked for"
+                     : RayQueryEngine::unavailable_reason(ro);
+    if (rq_skipped.empty()) {
+      peers.rq = std::make_unique<RayQueryEngine>(ro);
     } else {
-      std::fputs(("bench: ray-query peer skipped: " + peer_skipped + "\n").c_str(), stderr);
+      std::fputs(("bench: ray-query peer skipped: " + rq_skipped + "\n").c_str(), stderr);
     }
+    compute_skipped = ComputeEngine::unavailable_reason(o.backend_options);
+    if (compute_skipped.empty()) {
+      peers.compute = std::make_unique<ComputeEngine>(o.backend_options, o.compute_data);
+    } else {
+      std::fputs(("bench: compute peer skipped: " + compute_skipped + "\n").c_str(), stderr);
+    }
+    if (peers.rq || peers.compute) peers.shading = create_vulkan_backend(o.backend_options);
   }
   const DeviceInfo info = columns[0].backend->device_info();
   const char* lp = std::getenv("LP_NUM_THREADS");
@@ -662,8 +706,10 @@ int cmd_bench(const std::vector<std::string>& args) {
                        {"backends", o.backends},
                        {"lp_num_threads", lp ? std::string(lp) : std::string("default (all cores)")},
                        {"embree", EmbreeEngine::version()},
-                       {"ray_query", peer ? nlohmann::json(peer->rq->info())
-                                          : nlohmann::json::object({{"skipped", o.baseline ? peer_skipped : "--no-baseline"}})},
+                       {"ray_query", peers.rq ? nlohmann::json(peers.rq->info())
+                                              : nlohmann::json::object({{"skipped", rq_skipped}})},
+                       {"compute", peers.compute ? nlohmann::json(peers.compute->info())
+                                                 : nlohmann::json::object({{"skipped", compute_skipped}})},
                        {"threads", o.threads}};
   result["settings"] = {{"frames", o.frames},
                         {"warmup", o.warmup},
@@ -671,6 +717,7 @@ int cmd_bench(const std::vector<std::string>& args) {
                         {"build", kd_build_mode_name(o.settings.kd.build)},
                         {"stack", o.settings.stack_depth},
                         {"max_steps", o.settings.max_steps},
+                        {"compute_data", compute_data_name(o.compute_data)},
                         {"kd_rebuilt_every_frame", true},
                         {"pipelined", o.pipelined},
                         {"build_threads", o.settings.kd.threads}};
@@ -694,7 +741,7 @@ int cmd_bench(const std::vector<std::string>& args) {
     load.mtl = bs.mtl;
     const AnimatedScene animation = load_animated_scene(bs.path, load);
     for (int k : o.levels) {
-      cells.push_back(run_cell(columns, peer ? &*peer : nullptr, bs, animation, kLevels[k], o));
+      cells.push_back(run_cell(columns, peers, bs, animation, kLevels[k], o));
       print_progress(cells.back(), cells.size(), total, elapsed_ms(start) / 1000.0);
     }
   }

@@ -14,12 +14,13 @@ namespace {
 // The few SPIR-V opcodes, storage classes and decorations the check needs (SPIR-V 1.0 spec).
 enum Op : uint32_t {
   OpTypeImage = 25, OpTypeSampledImage = 27, OpTypeArray = 28, OpTypeStruct = 30,
-  OpTypePointer = 32, OpConstant = 43, OpVariable = 59, OpStore = 62, OpAccessChain = 65,
+  OpEntryPoint = 15, OpTypePointer = 32, OpConstant = 43, OpVariable = 59, OpStore = 62, OpAccessChain = 65,
   OpDecorate = 71, OpImageWrite = 99,
   OpAtomicFirst = 227, OpAtomicLast = 242,  // OpAtomicLoad .. OpAtomicXor
   OpTypeRayQueryKHR = 4472, OpTypeAccelerationStructureKHR = 5341,  // SPV_KHR_ray_query, _ray_tracing
 };
 enum StorageClass : uint32_t { UniformConstant = 0, Input = 1, Uniform = 2, Output = 3, StorageBuffer = 12 };
+enum ExecutionModel : uint32_t { GLCompute = 5 };
 enum Decoration : uint32_t { BufferBlock = 3, BuiltIn = 11, Location = 30 };
 
 }  // namespace
@@ -44,6 +45,7 @@ ShaderInterface reflect_spirv(std::span<const uint32_t> words) {
     if (count == 0 || i + count > words.size()) return result;
     const uint32_t* w = &words[i];
     switch (op) {
+      case OpEntryPoint: result.compute = result.compute || w[1] == GLCompute; break;
       case OpTypeImage: image_sampled[w[1]] = w[7]; break;
       case OpTypeSampledImage: sampled_image_types.insert(w[1]); break;
       case OpTypeAccelerationStructureKHR: acceleration_structure_types.insert(w[1]); break;
@@ -114,6 +116,9 @@ std::vector<std::string> es2_constraints_broken(std::span<const uint32_t> words)
   const ShaderInterface s = reflect_spirv(words);
   if (!s.valid) return {"is not a valid SPIR-V module"};
   std::vector<std::string> broken;
+  if (s.compute) {
+    broken.push_back("is a compute shader; OpenGL ES 2.0 has vertex and fragment shaders only");
+  }
   if (s.color_outputs != 1) {
     broken.push_back("writes " + std::to_string(s.color_outputs) +
                      " colour attachments; a pass writes exactly one RGBA8 texel");

@@ -1,7 +1,8 @@
 // The OpenGL ES 2.0 constraints that mobirt mirrors, checked on a compiled fragment shader's
 // SPIR-V rather than trusted by convention: exactly one vec4 colour output, no storage-buffer or
 // storage-image writes (no storage resources or atomics at all), at most 8 sampled textures, and
-// the scene in textures: no acceleration structures, no ray queries.
+// the scene in textures: no acceleration structures, no ray queries; and fragment passes only, no
+// compute shaders.
 #pragma once
 
 #include <cstdint>
@@ -18,6 +19,7 @@ struct ShaderInterface {
   int storage_writes = 0;       // OpImageWrite, OpAtomic*, stores through StorageBuffer pointers
   int acceleration_structures = 0;  // VK_KHR_acceleration_structure variables
   bool ray_queries = false;     // the module declares a ray query object (SPV_KHR_ray_query)
+  bool compute = false;         // a GLCompute entry point
   bool valid = false;           // the words parsed as a SPIR-V module
 };
 

@@ -1,18 +1,12 @@
 #include "baseline/ray_query_whitted.h"
 
-#include <chrono>
 
-#include "core/error.h"
 #include "raytree/ray_order.h"
 
 namespace mobirt {
 
 void RayQueryWhittedEngine::begin_frame(const Scene& scene, const RenderSettings& settings, FrameTimings& frame) {
-  const RenderSettings& own = shading_.settings();
-  if (own.colour != settings.colour || own.specialize != settings.specialize) {
-    throw Error(ErrorKind::Internal, "RayQueryWhittedEngine: the shading renderer was made with other settings "
-                                     "(colour depth or specialisation) than the frame's");
-  }
+  shading_.check_shades_like(settings, "RayQueryWhittedEngine");
   // Refuse a scene over a packing limit before any work, as mobirt's passes do.
   choose_packing(scene.mesh.triangle_count(), settings.shadows ? int(scene.lights.size()) : 0, scene.source);
   shadows_ = settings.shadows;
@@ -40,12 +34,7 @@ TracedGeneration RayQueryWhittedEngine::trace(const Scene& scene, const RayBatch
 
 std::vector<glm::vec3> RayQueryWhittedEngine::shade(const Scene& scene, const RayBatch& rays,
                                                     std::span<const SurfaceHit> hits, GenerationTimings& g) {
-  // The shading pass reads the ray directions from its own backend's textures: the peer uploads
-  // them there as well (mobirt's traversal pass shares them with its shading pass).
-  const auto start = std::chrono::steady_clock::now();
-  shading_.upload_rays(rays);
-  g.upload_ms += elapsed_ms(start);
-  return shading_.shade(scene, rays, hits, g);
+  return shading_.shade_traced_elsewhere(scene, rays, hits, g);
 }
 
 void RayQueryWhittedEngine::order_rays(RayBatch& rays) const { order_for_traversal(rays, rq_.triangles().bounds); }

@@ -178,6 +178,17 @@ SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ra
   return surface_from_hit(scene, ray, h);
 }
 
+SurfaceHit retrace_capped(const Scene& scene, const FlatKdTree& tree, const Ray& ray, std::span<const Light> lights,
+                          const ShadowSettings& shadows) {
+  TraversalStats steps;
+  const Hit h = traverse(tree, ray, -1, steps, fallback_step_bound(tree), shadows.ray_test);
+  if (steps.capped) corrupt_tree(fallback_step_bound(tree));
+  if (!h.valid()) return {};
+  SurfaceHit hit = surface_hit(scene, tree, ray, h.prim, shadows.ray_test.test);
+  hit.mask = shadow_mask(tree, lights, h.prim, ray, h.t, shadows, -1);
+  return hit;
+}
+
 SurfaceHit surface_from_hit(const Scene& scene, const Ray& ray, const Hit& h) {
   SurfaceHit hit;
   const int32_t prim = h.prim;
@@ -227,31 +238,22 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
   parallel_for(n, 0, [&](uint32_t i) {
     const TraceTexel texel = unpack_trace(packing, texels[i]);
     const Ray ray = rays.ray(i);
-    int32_t prim = -1;
-    uint32_t mask = 0;
     if (texel.capped) {
       capped_count.fetch_add(1, std::memory_order_relaxed);
-      TraversalStats steps;
-      const Hit h = traverse(tree, ray, -1, steps, fallback_step_bound(tree), shadows.ray_test);
-      if (steps.capped) corrupt_tree(fallback_step_bound(tree));
-      prim = h.prim;
-      if (h.valid()) mask = shadow_mask(tree, lights, prim, ray, h.t, shadows, -1);
-    } else if (texel.hit()) {
-      prim = texel.prim();
-      mask = texel.mask;
-      if (uint32_t(prim) >= prims) {
-        throw Error(ErrorKind::Internal, "traversal pass returned primitive " + std::to_string(prim) +
-                                             " of a scene with " + std::to_string(prims));
-      }
+      hits[i] = retrace_capped(scene, tree, ray, lights, shadows);
+      if (hits[i].valid()) hit_count.fetch_add(1, std::memory_order_relaxed);
+      return;
     }
-    if (prim < 0) return;
+    if (!texel.hit()) return;
+    const int32_t prim = texel.prim();
+    if (uint32_t(prim) >= prims) {
+      throw Error(ErrorKind::Internal, "traversal pass returned primitive " + std::to_string(prim) +
+                                           " of a scene with " + std::to_string(prims));
+    }
     hit_count.fetch_add(1, std::memory_order_relaxed);
     hits[i] = surface_hit(scene, tree, ray, prim, shadows.ray_test.test);
-    hits[i].mask = mask;
-    if (!texel.capped) {
-      shadow_count.fetch_add(shadow_ray_count(tree, lights, prim, ray, hits[i].t, shadows),
-                             std::memory_order_relaxed);
-    }
+    hits[i].mask = texel.mask;
+    shadow_count.fetch_add(shadow_ray_count(tree, lights, prim, ray, hits[i].t, shadows), std::memory_order_relaxed);
   }, 256);
   DecodeStats local;
   local.hits = hit_count.load();

@@ -109,6 +109,11 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
                                     std::span<const Light> lights, const ShadowSettings& shadows,
                                     DecodeStats* stats = nullptr);
 
+// A ray the GPU's loop cap stopped, traced on the CPU instead: the full-stack walk, the surface
+// record and the shadow mask (a miss: prim -1). Throws Error(Internal) on a corrupt tree.
+SurfaceHit retrace_capped(const Scene& scene, const FlatKdTree& tree, const Ray& ray, std::span<const Light> lights,
+                          const ShadowSettings& shadows);
+
 // The surface record of a hit whose t and barycentrics are known (hit.prim >= 0).
 SurfaceHit surface_from_hit(const Scene& scene, const Ray& ray, const Hit& hit);
 

@@ -66,7 +66,8 @@ struct TracedGeneration {
     // and retraces the rays the loop cap stopped.
     PackedTexels,
     // Engines that know t and barycentrics (a compute pass, ray queries): `hits` and `masks`;
-    // the surface records are made from them without intersecting again.
+    // the surface records are made from them without intersecting again; `capped` rays are traced
+    // on the CPU.
     Hits,
     // Engines that made the surface records themselves, shadow masks included (the CPU engines).
     Surfaces,
@@ -76,6 +77,7 @@ struct TracedGeneration {
   Packing packing = Packing::Bits24_8;
   std::vector<Hit> hits;         // Hits
   std::vector<uint32_t> masks;   // Hits: shadow bits per ray
+  std::vector<uint32_t> capped;  // Hits: rays the loop cap stopped, traced on the CPU against tree()
   std::vector<SurfaceHit> surfaces;  // Surfaces
   uint64_t shadow_rays = 0;      // Hits and Surfaces: shadow rays the engine cast
 };

@@ -427,6 +427,23 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   return colors;
 }
 
+void Renderer::check_shades_like(const RenderSettings& frame, const char* who) const {
+  if (settings_.colour != frame.colour || settings_.specialize != frame.specialize) {
+    throw Error(ErrorKind::Internal, std::string(who) + ": the shading renderer was made with other settings "
+                                                        "(colour depth or specialisation) than the frame's");
+  }
+}
+
+std::vector<glm::vec3> Renderer::shade_traced_elsewhere(const Scene& scene, const RayBatch& rays,
+                                                        std::span<const SurfaceHit> hits, GenerationTimings& timings) {
+  // mobirt's own frame shares the traversal pass's ray textures with the shading pass; an engine
+  // that traced elsewhere uploads them here as well.
+  const auto start = Clock::now();
+  upload_rays(rays);
+  timings.upload_ms += elapsed_ms(start);
+  return shade(scene, rays, hits, timings);
+}
+
 Image Renderer::render(const Scene& scene, const Camera& camera, FrameTimings* timings) {
   return render_whitted(scene, camera, settings_, *engine_, timings);
 }

@@ -86,8 +86,14 @@ class Renderer {
   // (each generation, before shade()).
   void upload_materials(const Scene& scene);
   void upload_rays(const RayBatch& rays);
+  // upload_rays() (timed as upload), then shade(): one generation shaded for such an engine.
+  std::vector<glm::vec3> shade_traced_elsewhere(const Scene& scene, const RayBatch& rays,
+                                                std::span<const SurfaceHit> hits, GenerationTimings& timings);
 
   const RenderSettings& settings() const { return settings_; }
+  // For an engine that shades with this renderer: throws Error(Internal) naming `who` unless the
+  // frame's colour depth and specialisation are the ones this renderer's passes were made for.
+  void check_shades_like(const RenderSettings& frame, const char* who) const;
   // Whether the traversal pass reads the scene data from texel buffers (settings.data and the backend).
   bool texel_buffers() const { return data_kind_ == TextureKind::TexelBuffer; }
 

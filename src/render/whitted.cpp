@@ -3,6 +3,7 @@
 #include <chrono>
 #include <utility>
 
+#include "core/parallel.h"
 #include "raytree/secondary.h"
 
 namespace mobirt {
@@ -51,11 +52,17 @@ std::vector<SurfaceHit> decode_generation(const Scene& scene, const RenderSettin
     }
     case TracedGeneration::Form::Hits:
       hits.resize(rays.count());
-      for (uint32_t i = 0; i < rays.count(); ++i) {
-        if (!traced.hits[i].valid()) continue;
+      // On all cores, as decode_hits() decodes the packed texels.
+      parallel_for(rays.count(), 0, [&](uint32_t i) {
+        if (!traced.hits[i].valid()) return;
         hits[i] = surface_from_hit(scene, rays.ray(i), traced.hits[i]);
         hits[i].mask = traced.masks[i];
-      }
+      }, 256);
+      parallel_for(uint32_t(traced.capped.size()), 0, [&](uint32_t k) {
+        const uint32_t i = traced.capped[k];
+        hits[i] = retrace_capped(scene, tree, rays.ray(i), lights, settings.shadow_rays);
+      }, 16);
+      g.capped += uint32_t(traced.capped.size());
       g.shadow_rays += traced.shadow_rays;
       break;
     case TracedGeneration::Form::Surfaces:

@@ -220,6 +220,28 @@ VkPipeline create_fullscreen_pipeline(VkDevice vk_device, VkRenderPass render_pa
   return pipeline;
 }
 
+SpecializationConstants::SpecializationConstants(std::span<const Specialization> constants) {
+  for (const Specialization& s : constants) {
+    entries_.push_back({s.id, uint32_t(values_.size() * sizeof(int32_t)), sizeof(int32_t)});
+    values_.push_back(s.value);
+  }
+  info_ = {uint32_t(entries_.size()), entries_.data(), values_.size() * sizeof(int32_t), values_.data()};
+}
+
+VkPipeline create_compute_pipeline(VkDevice vk_device, VkPipelineLayout pipeline_layout, VkShaderModule shader,
+                                   const VkSpecializationInfo* specialization, VkPipelineCache cache) {
+  VkComputePipelineCreateInfo info{VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO};
+  info.stage.sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
+  info.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
+  info.stage.module = shader;
+  info.stage.pName = "main";
+  info.stage.pSpecializationInfo = specialization;
+  info.layout = pipeline_layout;
+  VkPipeline pipeline = VK_NULL_HANDLE;
+  VK_CHECK(vkCreateComputePipelines(vk_device, cache, 1, &info, nullptr, &pipeline));
+  return pipeline;
+}
+
 Pass Pipelines::create_pass(const PassDesc& desc) const {
   const VkDevice vk_device = device_.handle();
   const std::span<const uint32_t> code = desc.shader.source().spirv;
@@ -306,19 +328,10 @@ Pass Pipelines::create_pass(const PassDesc& desc) const {
   VK_CHECK(vkCreateShaderModule(vk_device, &module_info, nullptr, &module_handle));
   const ShaderModule fragment_module(vk_device, module_handle);  // only needed until the pipeline exists
 
-  std::vector<VkSpecializationMapEntry> entries;
-  std::vector<int32_t> values;
-  for (const Specialization& s : desc.specialization) {
-    entries.push_back({s.id, uint32_t(values.size() * sizeof(int32_t)), sizeof(int32_t)});
-    values.push_back(s.value);
-  }
-  VkSpecializationInfo specialization{uint32_t(entries.size()), entries.data(), values.size() * sizeof(int32_t),
-                                      values.data()};
-
+  const SpecializationConstants specialization(desc.specialization);
   pass.pipeline = Pipeline(vk_device, create_fullscreen_pipeline(vk_device, render_pass_.get(), pipeline_layout,
                                                                 vertex_shader_.get(), fragment_module.get(),
-                                                                entries.empty() ? nullptr : &specialization,
-                                                                cache_.get()));
+                                                                specialization.info(), cache_.get()));
   return pass;
 }
 

@@ -6,6 +6,7 @@
 
 #include <vulkan/vulkan.h>
 
+#include <span>
 #include <string>
 #include <vector>
 
@@ -27,6 +28,25 @@ RenderPass create_target_render_pass(VkDevice device);
 VkPipeline create_fullscreen_pipeline(VkDevice device, VkRenderPass render_pass, VkPipelineLayout layout,
                                       VkShaderModule vertex, VkShaderModule fragment,
                                       const VkSpecializationInfo* specialization, VkPipelineCache cache);
+
+// A pass's specialization constants as Vulkan takes them; info() points into this object.
+class SpecializationConstants {
+ public:
+  explicit SpecializationConstants(std::span<const Specialization> constants);
+  SpecializationConstants(const SpecializationConstants&) = delete;
+  SpecializationConstants& operator=(const SpecializationConstants&) = delete;
+  const VkSpecializationInfo* info() const { return entries_.empty() ? nullptr : &info_; }
+
+ private:
+  std::vector<VkSpecializationMapEntry> entries_;
+  std::vector<int32_t> values_;
+  VkSpecializationInfo info_{};
+};
+
+// The compute pipeline of `shader` (entry point main) with its specialisation (may be null): the
+// compute engine's pass (src/baseline/compute_engine.h).
+VkPipeline create_compute_pipeline(VkDevice device, VkPipelineLayout layout, VkShaderModule shader,
+                                   const VkSpecializationInfo* specialization, VkPipelineCache cache);
 
 struct Pass {
   PassDesc desc;

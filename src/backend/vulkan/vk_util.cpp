@@ -1,5 +1,7 @@
 #include "backend/vulkan/vk_util.h"
 
+#include <cstdlib>
+
 #include "core/error.h"
 
 namespace mobirt::vk {
@@ -53,6 +55,14 @@ void check(VkResult result, const char* call, const char* file, int line) {
   }
   throw Error(ErrorKind::Internal,
               name + " failed (" + place + ":" + std::to_string(line) + "): " + result_name(result));
+}
+
+double pass_timeout_seconds() {
+  if (const char* value = std::getenv("MOBIRT_PASS_TIMEOUT_S")) {
+    const double seconds = std::atof(value);
+    if (seconds > 0.0) return seconds;
+  }
+  return 120.0;
 }
 
 std::atomic<long>& live_object_counter() {

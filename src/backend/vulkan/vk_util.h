@@ -19,6 +19,9 @@ std::string result_name(VkResult result);
 // is what comes before the first '('.
 void check(VkResult result, const char* call, const char* file, int line);
 
+// How long one GPU submission may run before mobirt gives up: MOBIRT_PASS_TIMEOUT_S, default 120 s.
+double pass_timeout_seconds();
+
 }  // namespace mobirt::vk
 
 // VK_CHECK(vkCreateFence(device, &info, nullptr, &fence)): the call, checked, its name and

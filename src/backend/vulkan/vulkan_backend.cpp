@@ -36,14 +36,6 @@ using Clock = std::chrono::steady_clock;
 constexpr size_t kStagingChunkBytes = size_t(16) << 20;  // uploads go through at most 16 MiB
 constexpr uint32_t kTimestampCount = 3;
 
-double pass_timeout_seconds() {
-  if (const char* value = std::getenv("MOBIRT_PASS_TIMEOUT_S")) {
-    const double seconds = std::atof(value);
-    if (seconds > 0.0) return seconds;
-  }
-  return 120.0;
-}
-
 // ---- The backend's state ---------------------------------------------------------------------
 
 class Impl {
@@ -97,7 +89,7 @@ class Impl {
   uint32_t next_texture_ = 1;
   uint32_t next_pass_ = 1;
   double pending_upload_ms_ = 0.0;
-  double timeout_s_ = pass_timeout_seconds();
+  double timeout_s_ = vk::pass_timeout_seconds();
   bool lost_ = false;
   bool hung_ = false;
 };
