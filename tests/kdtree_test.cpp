@@ -424,6 +424,21 @@ TEST(KdTree, TraversalMatchesBruteForceOnGeneratedScenes) {
   }
 }
 
+// Nodes of 8,192 references or more choose their plane from a sample of them: the 40,000-triangle
+// soup's top levels do, and the tree must still hold every triangle and traverse exactly.
+TEST(KdTree, SampledBinningOfLargeNodesTraversesCorrectly) {
+  const Positions soup = random_soup(40000, 41);
+  for (KdBuildMode mode : {KdBuildMode::Quality, KdBuildMode::Fast}) {
+    SCOPED_TRACE(kd_build_mode_name(mode));
+    KdBuildOptions o;
+    o.build = mode;
+    const FlatKdTree tree = build_kdtree(soup, o);
+    check_layout(tree, soup, o);
+    // Few rays: the brute-force oracle tests all 40,000 triangles for each.
+    EXPECT_EQ(check_rays(tree, make_rays(tree, soup, 400, 77), "soup 40000"), 0);
+  }
+}
+
 TEST(KdTree, EveryBuildOptionTraversesCorrectly) {
   const std::vector<NamedScene> scenes = {{"soup", random_soup(600, 7)},
                                           {"grid_boxes", grid_with_boxes()},
