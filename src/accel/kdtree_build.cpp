@@ -1055,11 +1055,23 @@ class Builder {
       lane_best = _mm256_blendv_ps(lane_best, cost, better);
       lane_plane = _mm256_blendv_ps(lane_plane, fi, better);
     }
-    alignas(32) float costs[8];
-    alignas(32) float planes[8];
-    _mm256_store_ps(costs, lane_best);
-    _mm256_store_ps(planes, lane_plane);
-    take_best_lane(costs, planes, 8, s, axis, best_cost, best);
+    // take_best_lane's choice (the smallest cost, then the lowest plane) by shuffles instead of a
+    // loop over the lanes, which was a tenth of the sweeps of a toaster build.
+    const __m256 min_cost = min_lanes_avx2(lane_best);
+    const __m256 tied = _mm256_cmp_ps(lane_best, min_cost, _CMP_EQ_OQ);
+    const float cost = _mm256_cvtss_f32(min_cost);
+    if (cost < best_cost) {
+      best_cost = cost;
+      best.axis = axis;
+      best.position = s.lo + _mm256_cvtss_f32(min_lanes_avx2(_mm256_blendv_ps(inf, lane_plane, tied))) * s.step;
+    }
+  }
+
+  // Every lane set to the smallest of v's eight.
+  __attribute__((target("avx2"))) static __m256 min_lanes_avx2(__m256 v) {
+    v = _mm256_min_ps(v, _mm256_permute2f128_ps(v, v, 1));
+    v = _mm256_min_ps(v, _mm256_shuffle_ps(v, v, _MM_SHUFFLE(1, 0, 3, 2)));
+    return _mm256_min_ps(v, _mm256_shuffle_ps(v, v, _MM_SHUFFLE(2, 3, 0, 1)));
   }
 #endif
 
