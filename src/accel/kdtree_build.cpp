@@ -556,6 +556,9 @@ class Builder {
       return part;
     }
     const double box_area = area(box);
+    // The sample's stride was set from the parent's count: after a very uneven split it can leave
+    // a node with too few references binned, and the node is binned again in full.
+    if (hist && hist->binned() < std::min(n, kBinSampleRefs / 2)) bin_into(*hist, refs.data(), n, box);
     const Split split =
         can_split(n, depth, box_area) ? choose_split(*hist, box, n, box_area, hist->binned()) : Split{};
     if (split.axis < 0) {
