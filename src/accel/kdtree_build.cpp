@@ -40,11 +40,11 @@
 //   top nodes bin in the partition pass itself, subtree nodes right after it while the references
 //   are in cache, and only children that can split. A node's split thus needs no pass of its own
 //   over its references; only the root is binned separately.
-// - Nodes of 2 kBinSampleRefs references or more (the root, and top nodes that partition in
-//   blocks) bin a fixed-stride sample of their references, about kBinSampleRefs or more (Shevtsov
-//   et al. 2007). Measured (callgrind, one thread, fast): torus 1M 5,065M -> 4,739M instructions,
-//   SAH 6684 -> 6628, steps per ray 89.0 -> 88.0; torus 100K -1 % and the same tree; smaller
-//   meshes never sample.
+// - Nodes of about 2 kBinSampleRefs references or more (the root, and the children of top nodes
+//   of twice that) bin a fixed-stride sample of their references, about kBinSampleRefs or more
+//   (Shevtsov et al. 2007). Measured (callgrind, one thread, fast): torus 1M 5,065M -> 4,739M
+//   instructions, SAH 6684 -> 6628, steps per ray 89.0 -> 88.0; torus 100K -1 %; the toaster,
+//   Utah toasters and torus 100K sample their top nodes and still make the same trees.
 // - The sweep of a small node (up to kSparseSweepRefs references, kSparseSweepRefsAvx2 on AVX2
 //   CPUs) visits only the planes next to an occupied bin (a bit per bin); larger nodes, whose
 //   bins are mostly occupied, evaluate every plane four (SSE2) or eight (AVX2) at a time. Deep nodes hold a handful of references, and a dense sweep over
