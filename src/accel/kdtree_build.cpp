@@ -47,9 +47,10 @@
 //   Utah toasters and torus 100K sample their top nodes and still make the same trees.
 // - The sweep of a small node (up to kSparseSweepRefs references, kSparseSweepRefsAvx2 on AVX2
 //   CPUs) visits only the planes next to an occupied bin (a bit per bin); larger nodes, whose
-//   bins are mostly occupied, evaluate every plane four (SSE2) or eight (AVX2) at a time. Deep nodes hold a handful of references, and a dense sweep over
-//   every bin of every axis was the largest cost of the first builder (perf: 40% of its time on
-//   the toaster, 58% on a 100K-triangle soup).
+//   bins are mostly occupied, evaluate every plane four (SSE2) or eight (AVX2) at a time. Deep
+//   nodes hold a handful of references, and a dense sweep over every bin of every axis was the
+//   largest cost of the first builder (perf: 40% of its time on the toaster, 58% on a
+//   100K-triangle soup).
 // - Nodes of at least kSubtreeRefs references are "top nodes": each is a task, its children run
 //   in parallel (tbb::parallel_invoke), the below child keeps the node's reference buffer (the
 //   partition writes it in place), the above child gets one from a pool, and the largest nodes
@@ -121,9 +122,9 @@ constexpr float kMinWidthRelative = 1e-5f;
 constexpr size_t kSubtreeRefs = 1024;  // a node with fewer references: one task builds its subtree
 constexpr size_t kBlockRefs = 8192;    // top nodes of 2 blocks or more partition blocks in parallel
 // Nodes of up to this many references sweep only the planes next to occupied bins; larger ones
-// (whose bins are mostly occupied) evaluate every plane, four at a time.
-// With the AVX2 sweep (eight planes at a time) the dense sweep pays from fewer references on: the
-// same tree either way (both sweeps take the same plane), fewer instructions (toaster -3.5 %).
+// (whose bins are mostly occupied) evaluate every plane, four at a time. The AVX2 sweep (eight
+// planes at a time) pays from fewer references on: the same tree either way (both sweeps take the
+// same plane), fewer instructions (torus 100K -11 %, toaster -2.5 %).
 constexpr size_t kSparseSweepRefs = 16;
 constexpr size_t kSparseSweepRefsAvx2 = 4;
 // Large nodes choose their plane from a sample of their references (Shevtsov et al. 2007 bin a
@@ -556,11 +557,11 @@ class Builder {
       return part;
     }
     const double box_area = area(box);
+    const bool splittable = can_split(n, depth, box_area);
     // The sample's stride was set from the parent's count: after a very uneven split it can leave
     // a node with too few references binned, and the node is binned again in full.
-    if (hist && hist->binned() < std::min(n, kBinSampleRefs / 2)) bin_into(*hist, refs.data(), n, box);
-    const Split split =
-        can_split(n, depth, box_area) ? choose_split(*hist, box, n, box_area, hist->binned()) : Split{};
+    if (splittable && hist->binned() < std::min(n, kBinSampleRefs / 2)) bin_into(*hist, refs.data(), n, box);
+    const Split split = splittable ? choose_split(*hist, box, n, box_area, hist->binned()) : Split{};
     if (split.axis < 0) {
       make_leaf(refs.data(), n, depth, box_area, *part);
       pool_.give(std::move(refs));
