@@ -124,9 +124,9 @@ constexpr size_t kBlockRefs = 8192;    // top nodes of 2 blocks or more partitio
 // Nodes of up to this many references sweep only the planes next to occupied bins; larger ones
 // (whose bins are mostly occupied) evaluate every plane, four at a time. The AVX2 sweep (eight
 // planes at a time) pays from fewer references on: the same tree either way (both sweeps take the
-// same plane), fewer instructions (torus 100K -11 %, toaster -2.5 %).
+// same plane), fewer instructions (torus 100K -11 %, toaster -3 %).
 constexpr size_t kSparseSweepRefs = 16;
-constexpr size_t kSparseSweepRefsAvx2 = 4;
+constexpr size_t kSparseSweepRefsAvx2 = 3;
 // Large nodes choose their plane from a sample of their references (Shevtsov et al. 2007 bin a
 // subset of a large node): a node of n references bins every m-th, m the largest power of two
 // with about kBinSampleRefs or more references left in the sample, so that n >= 2 kBinSampleRefs
