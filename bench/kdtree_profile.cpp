@@ -6,7 +6,7 @@
 // driver for profilers, which need one process per mesh rather than Google Benchmark's loop over
 // all of them: valgrind --tool=callgrind --toggle-collect='mobirt::build_kdtree*' with THREADS 1
 // (callgrind counts only the threads that enter build_kdtree). Environment knobs for experiments
-// are read below (MOBIRT_KD_ISECT, _LEAF, _FRAMES, _COLD, _PAUSE_MS).
+// are read below (MOBIRT_KD_ISECT, _LEAF, _DEPTH, _FRAMES, _COLD, _PAUSE_MS).
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -39,9 +39,11 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "mobirt_kdprofile: no build mode named %s (quality, fast)\n", argv[4]);
     return 2;
   }
-  // Exploration of the cost model: MOBIRT_KD_ISECT (intersection cost), MOBIRT_KD_LEAF.
+  // Exploration of the cost model and the termination: MOBIRT_KD_ISECT (intersection cost),
+  // MOBIRT_KD_LEAF (max_leaf_prims), MOBIRT_KD_DEPTH (max_depth).
   if (const char* isect = std::getenv("MOBIRT_KD_ISECT")) options.intersection_cost = std::strtof(isect, nullptr);
   if (const char* leaf = std::getenv("MOBIRT_KD_LEAF")) options.max_leaf_prims = std::atoi(leaf);
+  if (const char* depth = std::getenv("MOBIRT_KD_DEPTH")) options.max_depth = std::atoi(depth);
   bench::BenchMesh* mesh = nullptr;
   for (bench::BenchMesh* m : bench::build_meshes()) {
     if (m->name() == name) mesh = m;
@@ -117,9 +119,9 @@ int main(int argc, char** argv) {
   const double trace_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - trace_start).count();
   const double tris = double(positions.size() / 3);
   std::printf("%s %s: %.0f triangles, build median %.3f ms (min %.3f, CPU median %.3f) over %d, nodes %zu, refs/tri %.3f, "
-              "sah %.2f, hash %016llx; traversal: %zu hits, %.2f steps/ray, %.2f Mrays/s (1 thread)\n",
+              "sah %.2f, depth %d/%d, hash %016llx; traversal: %zu hits, %.2f steps/ray, %.2f Mrays/s (1 thread)\n",
               name.c_str(), kd_build_mode_name(options.build), tris, ms[ms.size() / 2], ms[0], cpu[cpu.size() / 2], iterations, stats.nodes,
-              double(stats.prim_references) / std::max(tris, 1.0), stats.sah_cost, static_cast<unsigned long long>(hash), hits,
+              double(stats.prim_references) / std::max(tris, 1.0), stats.sah_cost, stats.max_depth_reached, tree.max_depth, static_cast<unsigned long long>(hash), hits,
               double(traversal.steps) / double(rays.size()), double(rays.size()) / trace_s * 1e-6);
   return 0;
 }

@@ -22,7 +22,7 @@ constexpr int kKdMaxBins = 1024;
 // quality: exact split clipping of every straddling reference (the triangle clipped to the node
 //   box, then split), the tree of the first builder, byte for byte.
 // fast (the default): the triangle is only split by the plane and its parts' bounds cut to the
-//   reference's box, a looser but conservative clip: 9-21% fewer build instructions, SAH cost
+//   reference's box, a looser but conservative clip: 11-22% fewer build instructions, SAH cost
 //   and traversal steps within 1% of quality's on the project's scenes (README, "The kd-tree
 //   build").
 enum class KdBuildMode { Quality, Fast };
