@@ -149,7 +149,8 @@ Atlas assemble_atlas(const std::vector<AtlasTexture>& textures) {
   atlas.tiles = pack_tiles(sizes);
   int pages = 0;
   for (const AtlasTile& tile : atlas.tiles) pages = std::max(pages, tile.page + 1);
-  atlas.pages.assign(size_t(pages), std::vector<uint32_t>(size_t(atlas.size) * size_t(atlas.size), 0u));
+  atlas.pages.resize(size_t(pages));
+  for (std::vector<uint32_t>& page : atlas.pages) page.assign(size_t(atlas.size) * size_t(atlas.size), 0u);
   for (size_t i = 0; i < textures.size(); ++i) {
     AtlasTile& tile = atlas.tiles[i];
     tile.wrap_s = wrap_value(textures[i].wrap_s);
