@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <iterator>
 #include <map>
 #include <tuple>
 #include <type_traits>
@@ -241,10 +242,13 @@ PassHandle Renderer::shade_pass(int lights, int textures, int pages, int colour)
                          {MOBIRT_SPEC_ATLAS_PAGES, pages},
                          {MOBIRT_SPEC_COLOUR, colour}};
   desc.uniform_vec4s = MOBIRT_SP_TEXTURES(uint32_t(lights)) + MOBIRT_SP_VEC4S_PER_TEXTURE * uint32_t(textures);
-  desc.texture_bindings = {MOBIRT_BIND_HIT_POSITION, MOBIRT_BIND_HIT_NORMAL, MOBIRT_BIND_MATERIALS,
-                           MOBIRT_BIND_SHADE_RAY_DIRECTION, MOBIRT_BIND_HIT_TEXCOORD, MOBIRT_BIND_ATLAS_PAGE_0,
-                           MOBIRT_BIND_ATLAS_PAGE_1, MOBIRT_BIND_ATLAS_PAGE_2};
-  static_assert(MOBIRT_SHADE_DATA_TEXTURES + MOBIRT_ATLAS_MAX_PAGES == 8, "the bindings above");
+  // The pages get the units that the data textures leave (layout.h counts both).
+  constexpr uint32_t data_slots[] = {MOBIRT_BIND_HIT_POSITION, MOBIRT_BIND_HIT_NORMAL, MOBIRT_BIND_MATERIALS,
+                                     MOBIRT_BIND_SHADE_RAY_DIRECTION, MOBIRT_BIND_HIT_TEXCOORD};
+  constexpr uint32_t page_slots[] = {MOBIRT_BIND_ATLAS_PAGE_0, MOBIRT_BIND_ATLAS_PAGE_1, MOBIRT_BIND_ATLAS_PAGE_2};
+  static_assert(std::size(data_slots) == MOBIRT_SHADE_DATA_TEXTURES && std::size(page_slots) == MOBIRT_ATLAS_MAX_PAGES);
+  desc.texture_bindings.assign(std::begin(data_slots), std::end(data_slots));
+  desc.texture_bindings.insert(desc.texture_bindings.end(), std::begin(page_slots), std::end(page_slots));
   PassHandle pass = backend_.create_pass(desc);
   data_->shade_passes.emplace(key, pass);
   return pass;
