@@ -1,6 +1,6 @@
 // Atlas packing (scene/atlas.h):
 // PackTiles/<n>: the shelf packer alone on n tiles of mixed sizes (fixed list, non-square ones).
-// AssembleAtlas/<n>: pack and copy n decoded tiles into the 2048x2048 atlas (no file decoding).
+// AssembleAtlas/<n>: pack and copy n decoded tiles into 2048x2048 atlas pages (no file decoding).
 // BuildAtlas/<scene>: the whole per-scene step from the texture files: decode, downscale, pack.
 #include <benchmark/benchmark.h>
 
@@ -45,7 +45,7 @@ void atlas_assembly(benchmark::State& state) {
   }
   for (auto _ : state) {
     Atlas atlas = assemble_atlas(textures);
-    benchmark::DoNotOptimize(atlas.pixels.data());
+    benchmark::DoNotOptimize(atlas.pages.data());
   }
 }
 
@@ -53,7 +53,7 @@ void atlas_from_files(benchmark::State& state, std::string name) {
   const Scene& scene = project_scene_loaded(name);
   for (auto _ : state) {
     Atlas atlas = build_atlas(scene);
-    benchmark::DoNotOptimize(atlas.pixels.data());
+    benchmark::DoNotOptimize(atlas.pages.data());
   }
   state.counters["textures"] = double(scene.textures.size());
 }

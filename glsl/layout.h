@@ -98,13 +98,17 @@
 #define MOBIRT_BIND_MATERIALS 3
 #define MOBIRT_BIND_SHADE_RAY_DIRECTION 4
 #define MOBIRT_BIND_HIT_TEXCOORD 5    // xy = texture coordinate of the hit, zw = unused
-#define MOBIRT_BIND_ATLAS 6           // RGBA8 texture atlas (only in scenes with textures)
+// The shading pass's data textures above: the 8 units of ES 2.0 less these are the atlas pages.
+#define MOBIRT_SHADE_DATA_TEXTURES 5
+#define MOBIRT_BIND_ATLAS_PAGE_0 6    // RGBA8 atlas pages (only read in scenes with textures; a
+#define MOBIRT_BIND_ATLAS_PAGE_1 7    // pass binds all three, a page the scene lacks is never read)
+#define MOBIRT_BIND_ATLAS_PAGE_2 8
 
 // ---- Uniforms: one array of vec4 at binding 0 (Vulkan: a std140 uniform block; GLES: a uniform
 // vec4 array), at most MOBIRT_MAX_PARAM_VEC4S entries. Index of each entry:
 // The least self-intersection offset at a point p, relative to max |p|: 2 ulps of a float (2^-22).
 #define MOBIRT_OFFSET_ULPS 2.384185791015625e-07
-#define MOBIRT_MAX_PARAM_VEC4S 112  // 1 + 4 x 16 lights + 2 x 16 textures = 97
+#define MOBIRT_MAX_PARAM_VEC4S 176  // 1 + 4 x 16 lights + 2 x 48 textures = 161
 // Traversal pass
 #define MOBIRT_TP_BOUNDS_LO 0      // xyz = scene box min, w = self-intersection offset (absolute:
                                    // epsilon x the scene box's largest side)
@@ -123,16 +127,22 @@
                                    //   [3] x = cos(outer), yzw = unused
 #define MOBIRT_SP_VEC4S_PER_LIGHT 4
 // Texture atlas: after the lights, MOBIRT_SP_VEC4S_PER_TEXTURE vec4 per texture (see atlas.glsl):
-//   [0] xy = tile origin in atlas texels, zw = tile size in texels
-//   [1] x = wrap s, y = wrap t (MOBIRT_WRAP_*), zw = unused
+//   [0] xy = tile origin in its page's texels, zw = tile size in texels
+//   [1] x = wrap s, y = wrap t (MOBIRT_WRAP_*), z = page (0 .. MOBIRT_ATLAS_MAX_PAGES - 1), w = unused
 #define MOBIRT_SP_TEXTURES(light_count) (MOBIRT_SP_LIGHTS + MOBIRT_SP_VEC4S_PER_LIGHT * (light_count))
 #define MOBIRT_SP_VEC4S_PER_TEXTURE 2
 #define MOBIRT_WRAP_REPEAT 0.0
 #define MOBIRT_WRAP_MIRRORED_REPEAT 1.0
 #define MOBIRT_WRAP_CLAMP 2.0
+// Atlas pages of MOBIRT_ATLAS_SIZE^2 texels, the paper's atlas repeated: as many as the units that
+// the shading pass's data textures leave, up to MOBIRT_ATLAS_TILES_PER_PAGE tiles each (the
+// paper's 16), a tile at most a page. Any 16 tiles up to MOBIRT_ATLAS_SURE_TILE on a side fit one
+// page (4 x 512 = 2048), so every scene within MOBIRT_ATLAS_MAX_TEXTURES packs.
 #define MOBIRT_ATLAS_SIZE 2048
-#define MOBIRT_ATLAS_MAX_TEXTURES 16
-#define MOBIRT_ATLAS_MAX_TILE 512
+#define MOBIRT_ATLAS_MAX_PAGES 3  // MOBIRT_MAX_SAMPLED_TEXTURES - MOBIRT_SHADE_DATA_TEXTURES
+#define MOBIRT_ATLAS_TILES_PER_PAGE 16
+#define MOBIRT_ATLAS_MAX_TEXTURES 48  // MOBIRT_ATLAS_MAX_PAGES x MOBIRT_ATLAS_TILES_PER_PAGE
+#define MOBIRT_ATLAS_SURE_TILE 512
 
 // ---- Specialization constants (Vulkan constant_id; #defines on GLES) -------------------------
 #define MOBIRT_SPEC_LIGHT_COUNT 0  // lights in the scene, 0..MOBIRT_MAX_LIGHTS
@@ -145,6 +155,7 @@
 #define MOBIRT_SPEC_PRECISION 6    // trace: MOBIRT_PRECISION_* (--precision)
 #define MOBIRT_SPEC_OFFSET 7       // trace: MOBIRT_OFFSET_* (--offset), the shadow-ray origins
 #define MOBIRT_SPEC_COLOUR 8       // shade: MOBIRT_COLOUR_* (--colour), what the RGBA8 texel holds
+#define MOBIRT_SPEC_ATLAS_PAGES 9  // shade: atlas pages, 0..MOBIRT_ATLAS_MAX_PAGES; code for pages beyond folds away
 
 // Ray/triangle test: Moller-Trumbore (1997), or the watertight test of Woop, Benthin and Wald
 // (JCGT 2013), which never lets a ray slip between two triangles that share an edge.

@@ -39,6 +39,9 @@ precision highp sampler2D;
 #ifndef COLOUR
 #define COLOUR MOBIRT_COLOUR_8
 #endif
+#ifndef ATLAS_PAGES
+#define ATLAS_PAGES 0
+#endif
 
 #define PRECISE
 #include "precision.glsl"
@@ -86,7 +89,7 @@ struct MobirtSampler {
 // Per-ray textures share the pass's layout: this fragment's own ray. gl_FragCoord.xy is already
 // the texel centre (x + 0.5, y + 0.5); window row 0 is texture row 0 and glReadPixels' first row.
 #define RAY_TEXEL(s) texture2D((s).tex, gl_FragCoord.xy * (s).inv_size)
-// Texture atlas (RGBA8, NEAREST): the texel at integer coordinates xy (exact floats).
+// Texture atlas page (RGBA8, NEAREST): the texel at integer coordinates xy (exact floats).
 #define ATLAS_TEXEL(s, xy) texture2D((s).tex, ((xy) + 0.5) * (s).inv_size)
 
 #define OUTPUT(value) gl_FragColor = (value)

@@ -16,6 +16,7 @@ layout(constant_id = MOBIRT_SPEC_INTERSECT) const int INTERSECT = MOBIRT_INTERSE
 layout(constant_id = MOBIRT_SPEC_PRECISION) const int PRECISION = MOBIRT_PRECISION_HIGH;
 layout(constant_id = MOBIRT_SPEC_OFFSET) const int OFFSET_MODE = MOBIRT_OFFSET_SCALED;
 layout(constant_id = MOBIRT_SPEC_COLOUR) const int COLOUR = MOBIRT_COLOUR_8;
+layout(constant_id = MOBIRT_SPEC_ATLAS_PAGES) const int ATLAS_PAGES = 0;
 
 // No contraction into fused multiply-adds where an expression must round as the CPU's does
 // (precision.glsl) or the same way in every triangle that computes it (the watertight test).
@@ -72,7 +73,7 @@ int data_index(float index) {
 #ifndef MOBIRT_COMPUTE  // a compute shader reads its ray and writes its result itself
 // Per-ray textures share the pass's layout: this fragment's own ray.
 #define RAY_TEXEL(tex) texelFetch(tex, small_floats_to_ints(floor(gl_FragCoord.xy)), 0)
-// Texture atlas (RGBA8, NEAREST): the texel at integer coordinates xy (exact floats), no filtering.
+// Texture atlas page (RGBA8, NEAREST): the texel at integer coordinates xy (exact floats), no filtering.
 // The GLES prelude reads it with texture2D at the texel centre (xy + 0.5) / MOBIRT_ATLAS_SIZE.
 // The clamp keeps a NaN coordinate (which the bit trick turns into a huge index) inside the atlas.
 #define ATLAS_TEXEL(tex, xy) texelFetch(tex, clamp(small_floats_to_ints(xy), 0, MOBIRT_ATLAS_SIZE - 1), 0)

@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <memory>
 #include <random>
 #include <string>
 #include <vector>
@@ -88,18 +89,32 @@ bool overlap(const AtlasTile& a, const AtlasTile& b) {
   return a.x < b.x + b.width && b.x < a.x + a.width && a.y < b.y + b.height && b.y < a.y + a.height;
 }
 
+// Every tile at its size, inside a page, no two overlapping on a page, at most 16 a page.
 void expect_valid_packing(const std::vector<glm::ivec2>& sizes, const std::vector<AtlasTile>& tiles) {
   ASSERT_EQ(tiles.size(), sizes.size());
+  std::vector<int> per_page(MOBIRT_ATLAS_MAX_PAGES, 0);
   for (size_t i = 0; i < tiles.size(); ++i) {
     SCOPED_TRACE("tile " + std::to_string(i));
     EXPECT_EQ(tiles[i].width, sizes[i].x);
     EXPECT_EQ(tiles[i].height, sizes[i].y);
+    ASSERT_GE(tiles[i].page, 0);
+    ASSERT_LT(tiles[i].page, MOBIRT_ATLAS_MAX_PAGES);
+    ++per_page[size_t(tiles[i].page)];
     EXPECT_GE(tiles[i].x, 0);
     EXPECT_GE(tiles[i].y, 0);
     EXPECT_LE(tiles[i].x + tiles[i].width, MOBIRT_ATLAS_SIZE);
     EXPECT_LE(tiles[i].y + tiles[i].height, MOBIRT_ATLAS_SIZE);
-    for (size_t j = 0; j < i; ++j) EXPECT_FALSE(overlap(tiles[i], tiles[j])) << "overlaps tile " << j;
+    for (size_t j = 0; j < i; ++j) {
+      EXPECT_FALSE(tiles[i].page == tiles[j].page && overlap(tiles[i], tiles[j])) << "overlaps tile " << j;
+    }
   }
+  for (int n : per_page) EXPECT_LE(n, MOBIRT_ATLAS_TILES_PER_PAGE);
+}
+
+int pages_used(const std::vector<AtlasTile>& tiles) {
+  int pages = 0;
+  for (const AtlasTile& t : tiles) pages = std::max(pages, t.page + 1);
+  return pages;
 }
 
 float lin(uint32_t byte) { return srgb_to_linear(float(byte) / 255.0f); }
@@ -126,6 +141,7 @@ TEST(AtlasPacking, SixteenFullTilesFillTheAtlasExactly) {
   // 16 x 512^2 = 2048^2: no overlap and inside means the 4 x 4 grid.
   std::vector<int> seen(16, 0);
   for (const AtlasTile& t : tiles) {
+    EXPECT_EQ(t.page, 0);
     EXPECT_EQ(t.x % 512, 0);
     EXPECT_EQ(t.y % 512, 0);
     ++seen[size_t(t.y / 512 * 4 + t.x / 512)];
@@ -144,9 +160,98 @@ TEST(AtlasPacking, AnySixteenTilesUpTo512Fit) {
       for (auto& s : sizes) s = round % 10 == 0 ? glm::ivec2(side(rng), 512) : glm::ivec2(512, side(rng));
     }
     SCOPED_TRACE("round " + std::to_string(round));
+    const auto tiles = pack_tiles(sizes);
+    expect_valid_packing(sizes, tiles);
+    EXPECT_EQ(pages_used(tiles), 1) << "16 tiles up to 512 fit one page";
+    if (HasFailure()) return;
+  }
+}
+
+TEST(AtlasPacking, SeventeenTilesOpenASecondPage) {
+  const std::vector<glm::ivec2> sizes(17, glm::ivec2(512, 512));
+  const auto tiles = pack_tiles(sizes);
+  expect_valid_packing(sizes, tiles);
+  EXPECT_EQ(pages_used(tiles), 2);
+  // A page holds the paper's 16 tiles at most, even small ones that would fit its area.
+  const std::vector<glm::ivec2> small(17, glm::ivec2(8, 8));
+  const auto small_tiles = pack_tiles(small);
+  expect_valid_packing(small, small_tiles);
+  EXPECT_EQ(pages_used(small_tiles), 2);
+  EXPECT_EQ(small_tiles[16].page, 1);
+  EXPECT_EQ(small_tiles[16].x, 0);
+  EXPECT_EQ(small_tiles[16].y, 0);
+}
+
+TEST(AtlasPacking, FortyEightFullTilesFillThreePagesAndNoMore) {
+  const std::vector<glm::ivec2> sizes(MOBIRT_ATLAS_MAX_TEXTURES, glm::ivec2(512, 512));
+  const auto tiles = pack_tiles(sizes);
+  expect_valid_packing(sizes, tiles);
+  EXPECT_EQ(pages_used(tiles), MOBIRT_ATLAS_MAX_PAGES);
+  std::vector<glm::ivec2> one_more = sizes;
+  one_more.emplace_back(1, 1);
+  EXPECT_FALSE(try_pack_tiles(one_more).has_value());
+  EXPECT_THROW(pack_tiles(one_more), Error);
+}
+
+TEST(AtlasPacking, PageSizedTilesTakeAPageEach) {
+  const std::vector<glm::ivec2> sizes = {{2048, 2048}, {5, 7}, {2048, 1024}, {2048, 2048}};
+  const auto tiles = pack_tiles(sizes);
+  expect_valid_packing(sizes, tiles);
+  EXPECT_EQ(pages_used(tiles), 3);
+  EXPECT_NE(tiles[0].page, tiles[3].page);
+  EXPECT_EQ(tiles[1].page, tiles[2].page) << "the small tile goes beside the half-page one";
+  EXPECT_FALSE(try_pack_tiles({{2048, 2048}, {2048, 2048}, {2048, 2048}, {1, 1}}).has_value());
+  EXPECT_FALSE(try_pack_tiles({{2049, 16}}).has_value()) << "wider than a page";
+  EXPECT_FALSE(try_pack_tiles({{16, 16}}, 1, 8).has_value()) << "larger than a smaller page";
+}
+
+TEST(AtlasPacking, AnyFortyEightTilesUpTo512Fit) {
+  std::mt19937 rng(17);
+  std::uniform_int_distribution<int> side(1, 512);
+  std::uniform_int_distribution<int> count(17, MOBIRT_ATLAS_MAX_TEXTURES);
+  for (int round = 0; round < 200; ++round) {
+    std::vector<glm::ivec2> sizes(size_t(count(rng)));
+    for (auto& s : sizes) s = round % 4 == 0 ? glm::ivec2(512, side(rng)) : glm::ivec2(side(rng), side(rng));
+    SCOPED_TRACE("round " + std::to_string(round));
     expect_valid_packing(sizes, pack_tiles(sizes));
     if (HasFailure()) return;
   }
+}
+
+// ---- tile sizes: the largest cap at which the scene's textures pack ----------------------------
+
+TEST(AtlasTileLimit, TexturesKeepTheirSizeWhenThePagesHoldThem) {
+  EXPECT_EQ(atlas_tile_limit({{1024, 1024}}), 1024) << "one 1024 texture stays whole";
+  EXPECT_EQ(atlas_tile_limit({{2048, 2048}}), 2048);
+  EXPECT_EQ(atlas_tile_limit({{4096, 4096}}), 2048) << "a tile is at most a page";
+  EXPECT_EQ(atlas_tile_limit({{3000, 100}}), 2048);
+  EXPECT_EQ(atlas_tile_limit({{2048, 2048}, {2048, 2048}, {1000, 700}}), 2048) << "one page each";
+  EXPECT_EQ(atlas_tile_limit({{64, 32}, {300, 200}}), 300) << "the longest side, when nothing needs scaling";
+  EXPECT_EQ(atlas_tile_limit(std::vector<glm::ivec2>(12, {1024, 1024})), 1024) << "4 a page, 3 pages";
+  EXPECT_EQ(atlas_tile_limit(std::vector<glm::ivec2>(40, {64, 64})), 64);
+}
+
+TEST(AtlasTileLimit, DownscaleOnlyAsFarAsThePagesRequire) {
+  // Four page-sized textures: three pages hold three; at 1024 all four share one page.
+  EXPECT_EQ(atlas_tile_limit(std::vector<glm::ivec2>(4, {2048, 2048})), 1024);
+  // Thirteen 1024s: 12 fit at 1024; at 682 (3 x 682 = 2046) nine share a page.
+  EXPECT_EQ(atlas_tile_limit(std::vector<glm::ivec2>(13, {1024, 1024})), 682);
+  // Forty-eight of anything: 16 a page, so 512.
+  EXPECT_EQ(atlas_tile_limit(std::vector<glm::ivec2>(48, {2048, 2048})), 512);
+  EXPECT_EQ(atlas_tile_limit(std::vector<glm::ivec2>(48, {600, 600})), 512);
+  // Each answer is the largest cap that packs: one texel more does not.
+  for (const auto& sizes : {std::vector<glm::ivec2>(4, {2048, 2048}), std::vector<glm::ivec2>(13, {1024, 1024}),
+                            std::vector<glm::ivec2>{{2048, 2048}, {2048, 2048}, {2048, 2048}, {100, 100}}}) {
+    const int limit = atlas_tile_limit(sizes);
+    auto fitted = [&](int cap) {
+      std::vector<glm::ivec2> f(sizes.size());
+      for (size_t i = 0; i < sizes.size(); ++i) fitted_size(sizes[i].x, sizes[i].y, cap, f[i].x, f[i].y);
+      return f;
+    };
+    EXPECT_TRUE(try_pack_tiles(fitted(limit)).has_value()) << limit;
+    EXPECT_FALSE(try_pack_tiles(fitted(limit + 1)).has_value()) << limit;
+  }
+  EXPECT_THROW(atlas_tile_limit(std::vector<glm::ivec2>(49, {1, 1})), Error);
 }
 
 TEST(AtlasPacking, TilesAreCopiedWithoutGutter) {
@@ -154,12 +259,13 @@ TEST(AtlasPacking, TilesAreCopiedWithoutGutter) {
   std::vector<AtlasTexture> textures = {{random_image(37, 300, rng)}, {random_image(512, 128, rng)},
                                         {random_image(5, 5, rng)}};
   const Atlas atlas = assemble_atlas(textures);
-  ASSERT_EQ(atlas.pixels.size(), size_t(MOBIRT_ATLAS_SIZE) * MOBIRT_ATLAS_SIZE);
+  ASSERT_EQ(atlas.page_count(), 1);
+  ASSERT_EQ(atlas.pages[0].size(), size_t(MOBIRT_ATLAS_SIZE) * MOBIRT_ATLAS_SIZE);
   ASSERT_EQ(atlas.tiles.size(), 3u);
   for (size_t i = 0; i < textures.size(); ++i) {
     const AtlasTile& t = atlas.tiles[i];
     for (int y = 0; y < t.height; ++y) {
-      for (int x = 0; x < t.width; ++x) ASSERT_EQ(atlas.at(t.x + x, t.y + y), textures[i].image.at(x, y));
+      for (int x = 0; x < t.width; ++x) ASSERT_EQ(atlas.at(t.page, t.x + x, t.y + y), textures[i].image.at(x, y));
     }
   }
   // The tallest tile comes first; the next one starts right after it: no gutter.
@@ -172,7 +278,7 @@ TEST(AtlasPacking, NoTexturesNoAtlas) {
   Scene scene = scene_with_textures({}, "empty.gltf");
   const Atlas atlas = build_atlas(scene);
   EXPECT_TRUE(atlas.empty());
-  EXPECT_TRUE(atlas.pixels.empty());
+  EXPECT_TRUE(atlas.pages.empty());
   std::vector<float> uniforms(4 * 5, 1.0f);
   append_atlas_uniforms(atlas, 1, uniforms);
   EXPECT_EQ(uniforms.size(), 4u * 5u);
@@ -180,14 +286,18 @@ TEST(AtlasPacking, NoTexturesNoAtlas) {
 
 // ---- limits and errors -------------------------------------------------------------------------
 
-TEST(AtlasLimits, SeventeenTexturesAreRefused) {
-  std::vector<TextureRef> refs(17);
+TEST(AtlasLimits, FortyNineTexturesAreRefused) {
+  // Refused on the count, before any file is opened.
+  std::vector<TextureRef> refs(49);
   for (size_t i = 0; i < refs.size(); ++i) refs[i].path = "/nonexistent/t" + std::to_string(i) + ".png";
   const Scene scene = scene_with_textures(refs, "big.gltf");
   expect_bad_input([&] { build_atlas(scene); },
-                   {"big.gltf", "17 textures", "at most 16", "2048x2048", "merge textures"});
-  std::vector<AtlasTexture> textures(17, AtlasTexture{solid(2, 2, 0)});
-  expect_bad_input([&] { assemble_atlas(textures); }, {"17 textures", "at most 16"});
+                   {"big.gltf", "49 textures", "at most 48", "3 pages of 2048x2048", "8 texture units",
+                    "merge textures"});
+  std::vector<AtlasTexture> textures(49, AtlasTexture{solid(2, 2, 0)});
+  expect_bad_input([&] { assemble_atlas(textures); }, {"49 textures", "at most 48"});
+  textures.pop_back();
+  EXPECT_EQ(assemble_atlas(textures).page_count(), 3);
 }
 
 TEST(AtlasLimits, MissingTextureFileNamesFileSceneAndMaterial) {
@@ -267,35 +377,47 @@ TEST(AtlasDecode, JpegFromEmbeddedBytes) {
   }
 }
 
-TEST(AtlasDecode, LargeTextureIsDownscaledOnceWithAWarning) {
+TEST(AtlasDecode, TexturesAreDownscaledOnlyWhereThePagesRequireWithAWarning) {
   const auto dir = test::temp_dir();
   const uint32_t colour = pack_rgba8(200, 100, 50, 255);
-  TextureImage big = solid(1024, 768, colour);
-  write_test_image(dir / "big.png", big, 4);
-  TextureImage small = solid(64, 32, pack_rgba8(1, 2, 3, 255));
-  write_test_image(dir / "small.png", small, 4);
+  write_test_image(dir / "big.png", solid(1024, 768, colour), 4);
+  write_test_image(dir / "small.png", solid(64, 32, pack_rgba8(1, 2, 3, 255)), 4);
+  write_test_image(dir / "wide.png", solid(4096, 8, colour), 4);
   ASSERT_FALSE(HasFailure());
-  TextureRef a;
-  a.name = "bigtex";
-  a.path = (dir / "big.png").string();
-  TextureRef b;
-  b.path = (dir / "small.png").string();
-  const Scene scene = scene_with_textures({a, b}, "scene.gltf");
+  TextureRef big;
+  big.name = "bigtex";
+  big.path = (dir / "big.png").string();
+  TextureRef small;
+  small.path = (dir / "small.png").string();
+  TextureRef wide;
+  wide.path = (dir / "wide.png").string();
+  {
+    // The pages hold 1024x768 and 64x32 as they are: no warning, no scaling.
+    testing::internal::CaptureStderr();
+    const Atlas atlas = build_atlas(scene_with_textures({big, small}, "scene.gltf"));
+    EXPECT_EQ(testing::internal::GetCapturedStderr(), "");
+    ASSERT_EQ(atlas.tiles.size(), 2u);
+    EXPECT_EQ(atlas.tiles[0].width, 1024);
+    EXPECT_EQ(atlas.tiles[0].height, 768);
+    EXPECT_EQ(atlas.tiles[1].width, 64);
+    EXPECT_EQ(atlas.tiles[1].height, 32);
+    EXPECT_EQ(atlas.tile_limit, 1024);
+  }
+  // Wider than a page: 2048 on its long side, the others untouched.
   testing::internal::CaptureStderr();
-  const Atlas atlas = build_atlas(scene);
-  const std::string err = testing::internal::GetCapturedStderr();
-  const std::string warning =
-      "mobirt: warning: scene.gltf: texture 'bigtex' 1024x768 downscaled to 512x384 for the atlas\n";
-  EXPECT_EQ(err, warning);
-  ASSERT_EQ(atlas.tiles.size(), 2u);
-  EXPECT_EQ(atlas.tiles[0].width, 512);
-  EXPECT_EQ(atlas.tiles[0].height, 384);
+  const Atlas atlas = build_atlas(scene_with_textures({wide, small}, "scene.gltf"));
+  EXPECT_EQ(testing::internal::GetCapturedStderr(),
+            "mobirt: warning: scene.gltf: texture 'wide.png' 4096x8 downscaled to 2048x4 for the atlas\n");
+  EXPECT_EQ(atlas.tiles[0].width, 2048);
+  EXPECT_EQ(atlas.tiles[0].height, 4);
   EXPECT_EQ(atlas.tiles[1].width, 64);
-  EXPECT_EQ(atlas.tiles[1].height, 32);
+  // (Which cap the pages need is atlas_tile_limit()'s, tested above on sizes alone: scaling real
+  // images of that area costs seconds.)
+  EXPECT_EQ(atlas.tile_limit, 2048);
   // A constant image stays that constant (filtering in linear light, re-encoded).
-  for (int y : {0, 100, 383}) {
-    for (int x : {0, 255, 511}) {
-      const uint32_t p = atlas.at(atlas.tiles[0].x + x, atlas.tiles[0].y + y);
+  for (int y : {0, 3}) {
+    for (int x : {0, 1000, 2047}) {
+      const uint32_t p = atlas.at(atlas.tiles[0].page, atlas.tiles[0].x + x, atlas.tiles[0].y + y);
       for (int c = 0; c < 4; ++c) EXPECT_NEAR(double(channel(p, c)), double(channel(colour, c)), 1.0);
     }
   }
@@ -384,10 +506,10 @@ TEST(AtlasWrap, SampledValuesHaveKnownAnswers) {
 // One red tile of 5 x 3 at (8, 8) in an atlas that is green everywhere else.
 Atlas red_tile_in_green(TextureWrap wrap_s, TextureWrap wrap_t) {
   Atlas atlas;
-  atlas.pixels.assign(size_t(atlas.size) * size_t(atlas.size), pack_rgba8(0, 255, 0, 255));
-  atlas.tiles.push_back(AtlasTile{8, 8, 5, 3, wrap_value(wrap_s), wrap_value(wrap_t)});
+  atlas.pages.assign(1, std::vector<uint32_t>(size_t(atlas.size) * size_t(atlas.size), pack_rgba8(0, 255, 0, 255)));
+  atlas.tiles.push_back(AtlasTile{0, 8, 8, 5, 3, wrap_value(wrap_s), wrap_value(wrap_t)});
   for (int y = 8; y < 11; ++y) {
-    for (int x = 8; x < 13; ++x) atlas.pixels[size_t(y) * size_t(atlas.size) + size_t(x)] = pack_rgba8(255, 0, 0, 255);
+    for (int x = 8; x < 13; ++x) atlas.pages[0][size_t(y) * size_t(atlas.size) + size_t(x)] = pack_rgba8(255, 0, 0, 255);
   }
   return atlas;
 }
@@ -446,50 +568,93 @@ TEST(AtlasFilter, UniformsFollowTheLights) {
   EXPECT_EQ(uniforms[size_t(MOBIRT_SP_TEXTURES(lights)) * 4 - 1], 99.0f);  // lights untouched
   const AtlasTile& a = atlas.tiles[0];
   const std::vector<float> want0 = {float(a.x), float(a.y), 37.0f, 300.0f, float(MOBIRT_WRAP_MIRRORED_REPEAT),
-                                    float(MOBIRT_WRAP_CLAMP), 0.0f, 0.0f};
+                                    float(MOBIRT_WRAP_CLAMP), float(a.page), 0.0f};
   EXPECT_EQ(std::vector<float>(t0, t0 + 8), want0);
   const AtlasTile& b = atlas.tiles[1];
   const std::vector<float> want1 = {float(b.x), float(b.y), 512.0f, 128.0f, float(MOBIRT_WRAP_REPEAT),
-                                    float(MOBIRT_WRAP_REPEAT), 0.0f, 0.0f};
+                                    float(MOBIRT_WRAP_REPEAT), float(b.page), 0.0f};
   EXPECT_EQ(std::vector<float>(t0 + 8, t0 + 16), want1);
+  // On a later page, the page number is the tile's third wrap component.
+  std::vector<AtlasTexture> seventeen(17, AtlasTexture{solid(512, 512, 0)});
+  const Atlas two_pages = assemble_atlas(seventeen);
+  ASSERT_EQ(two_pages.page_count(), 2);
+  std::vector<float> u;
+  append_atlas_uniforms(two_pages, 0, u);
+  for (size_t t = 0; t < 17; ++t) {
+    EXPECT_EQ(u[(size_t(MOBIRT_SP_TEXTURES(0)) + 2 * t + 1) * 4 + 2], float(two_pages.tiles[t].page));
+  }
 }
 
 // ---- the GPU lookup (glsl/atlas.glsl) against sample_atlas() -----------------------------------
 
+// Runs the test shader for lookups (uv, texture) with `lights` light slots before the textures;
+// returns the RGBA8 texels.
+std::vector<uint32_t> run_gpu_lookups(Backend& backend, const Atlas& atlas, const std::vector<glm::vec3>& lookups,
+                                  int lights) {
+  const uint32_t width = 256;
+  const uint32_t count = uint32_t(lookups.size());
+  const uint32_t height = (count + width - 1) / width;
+  std::vector<float> texels(size_t(width) * height * 4, 0.0f);
+  for (size_t i = 0; i < lookups.size(); ++i) {
+    texels[i * 4 + 0] = lookups[i].x;
+    texels[i * 4 + 1] = lookups[i].y;
+    texels[i * 4 + 2] = lookups[i].z;
+  }
+  const TextureHandle input = backend.create_texture(width, height, TexelFormat::RGBA32F);
+  backend.upload(input, texels.data(), texels.size() * sizeof(float));
+  std::vector<TextureHandle> pages;
+  for (const std::vector<uint32_t>& page : atlas.pages) {
+    pages.push_back(backend.create_texture(uint32_t(atlas.size), uint32_t(atlas.size), TexelFormat::RGBA8));
+    backend.upload(pages.back(), page.data(), page.size() * sizeof(uint32_t));
+  }
+
+  std::vector<float> uniforms(size_t(MOBIRT_SP_TEXTURES(lights)) * 4, 123.0f);  // junk lights
+  append_atlas_uniforms(atlas, lights, uniforms);
+  PassDesc desc;
+  desc.shader = test_shader(TestShader::AtlasLookup);
+  desc.specialization = {{MOBIRT_SPEC_LIGHT_COUNT, lights},
+                         {MOBIRT_SPEC_TEXTURE_COUNT, int32_t(atlas.tiles.size())},
+                         {MOBIRT_SPEC_ATLAS_PAGES, atlas.page_count()}};
+  desc.uniform_vec4s = uint32_t(uniforms.size() / 4);
+  desc.texture_bindings = {MOBIRT_BIND_HIT_TEXCOORD, MOBIRT_BIND_ATLAS_PAGE_0, MOBIRT_BIND_ATLAS_PAGE_1,
+                           MOBIRT_BIND_ATLAS_PAGE_2};
+  const PassHandle pass = backend.create_pass(desc);
+  // Every page slot is bound; one the atlas lacks gets its last page (never read).
+  const TextureHandle textures[4] = {input, pages[0], pages[std::min<size_t>(1, pages.size() - 1)],
+                                     pages[std::min<size_t>(2, pages.size() - 1)]};
+  std::vector<uint32_t> out(count);
+  backend.run_pass(pass, textures, uniforms, width, count, out);
+  backend.destroy(pass);
+  backend.destroy(input);
+  for (TextureHandle page : pages) backend.destroy(page);
+  return out;
+}
+
+// Each GPU lookup against sample_atlas(); returns the largest difference in 1/255.
+double expect_lookups_match_cpu(const Atlas& atlas, const std::vector<glm::vec3>& lookups,
+                                const std::vector<uint32_t>& out) {
+  size_t bad = 0;
+  double worst = 0.0;
+  for (size_t i = 0; i < lookups.size(); ++i) {
+    const glm::vec3 want = sample_atlas(atlas, int(lookups[i].z), glm::vec2(lookups[i]));
+    for (int c = 0; c < 3; ++c) {
+      const double diff = std::abs(double(channel(out[i], c)) - double(want[c]) * 255.0);
+      worst = std::max(worst, diff);
+      if (diff > 1.0 && ++bad <= 5) {
+        ADD_FAILURE() << "texture " << lookups[i].z << " uv " << lookups[i].x << ", " << lookups[i].y << " channel "
+                      << c << ": GPU " << channel(out[i], c) << ", CPU " << want[c] * 255.0f;
+      }
+    }
+    EXPECT_EQ(channel(out[i], 3), 255u);
+  }
+  EXPECT_EQ(bad, 0u) << "of " << lookups.size() << " lookups";
+  return worst;
+}
+
 class AtlasGpuTest : public test::VulkanTest {
  protected:
-  // Runs the test shader for lookups (uv, texture) with `lights` light slots before the textures;
-  // returns the RGBA8 texels.
   std::vector<uint32_t> gpu_lookups(const Atlas& atlas, const std::vector<glm::vec3>& lookups, int lights) {
-    const uint32_t width = 256;
-    const uint32_t count = uint32_t(lookups.size());
-    const uint32_t height = (count + width - 1) / width;
-    std::vector<float> texels(size_t(width) * height * 4, 0.0f);
-    for (size_t i = 0; i < lookups.size(); ++i) {
-      texels[i * 4 + 0] = lookups[i].x;
-      texels[i * 4 + 1] = lookups[i].y;
-      texels[i * 4 + 2] = lookups[i].z;
-    }
-    const TextureHandle input = backend->create_texture(width, height, TexelFormat::RGBA32F);
-    backend->upload(input, texels.data(), texels.size() * sizeof(float));
-    const TextureHandle atlas_texture = backend->create_texture(uint32_t(atlas.size), uint32_t(atlas.size), TexelFormat::RGBA8);
-    backend->upload(atlas_texture, atlas.pixels.data(), atlas.pixels.size() * sizeof(uint32_t));
-
-    std::vector<float> uniforms(size_t(MOBIRT_SP_TEXTURES(lights)) * 4, 123.0f);  // junk lights
-    append_atlas_uniforms(atlas, lights, uniforms);
-    PassDesc desc;
-    desc.shader = test_shader(TestShader::AtlasLookup);
-    desc.specialization = {{MOBIRT_SPEC_LIGHT_COUNT, lights}, {MOBIRT_SPEC_TEXTURE_COUNT, int32_t(atlas.tiles.size())}};
-    desc.uniform_vec4s = uint32_t(uniforms.size() / 4);
-    desc.texture_bindings = {MOBIRT_BIND_HIT_TEXCOORD, MOBIRT_BIND_ATLAS};
-    const PassHandle pass = backend->create_pass(desc);
-    const TextureHandle textures[2] = {input, atlas_texture};
-    std::vector<uint32_t> out(count);
-    backend->run_pass(pass, textures, uniforms, width, count, out);
-    backend->destroy(pass);
-    backend->destroy(input);
-    backend->destroy(atlas_texture);
-    return out;
+    return run_gpu_lookups(*backend, atlas, lookups, lights);
   }
 };
 
@@ -512,23 +677,41 @@ TEST_F(AtlasGpuTest, LookupMatchesTheCpuInEveryWrapMode) {
     for (const glm::vec2& uv : uvs) lookups.emplace_back(uv, float(t));
   }
   const std::vector<uint32_t> out = gpu_lookups(atlas, lookups, 2);
-  size_t bad = 0;
-  double worst = 0.0;
-  for (size_t i = 0; i < lookups.size(); ++i) {
-    const glm::vec3 want = sample_atlas(atlas, int(lookups[i].z), glm::vec2(lookups[i]));
-    for (int c = 0; c < 3; ++c) {
-      const double diff = std::abs(double(channel(out[i], c)) - double(want[c]) * 255.0);
-      worst = std::max(worst, diff);
-      if (diff > 1.0 && ++bad <= 5) {
-        ADD_FAILURE() << "texture " << lookups[i].z << " uv " << lookups[i].x << ", " << lookups[i].y << " channel "
-                      << c << ": GPU " << channel(out[i], c) << ", CPU " << want[c] * 255.0f;
-      }
-    }
-    EXPECT_EQ(channel(out[i], 3), 255u);
-  }
-  EXPECT_EQ(bad, 0u) << "of " << lookups.size() << " lookups";
+  const double worst = expect_lookups_match_cpu(atlas, lookups, out);
   std::printf("atlas lookups: %zu, largest GPU-CPU difference %.3f / 255\n", lookups.size(), worst);
 }
+
+// Three pages on both backends: 40 textures of 320x320 (a cap of 512 packs 16 a page), each a
+// random image of its own; lookups in every texture match the CPU, so each reads its own page.
+class AtlasPagesTest : public ::testing::TestWithParam<bool> {};
+
+TEST_P(AtlasPagesTest, LookupsOnEveryPageMatchTheCpu) {
+  const bool gles = GetParam();
+  std::unique_ptr<Backend> backend = gles ? create_gles_backend(test::validated_options())
+                                          : create_vulkan_backend(test::validated_options());
+  std::mt19937 rng(41);
+  std::vector<AtlasTexture> textures;
+  for (int t = 0; t < 40; ++t) {
+    const TextureWrap s = kModes[t % 3], w = kModes[(t / 3) % 3];
+    textures.push_back({random_image(t % 2 ? 320 : 301, t % 5 ? 320 : 97, rng), s, w});
+  }
+  const Atlas atlas = assemble_atlas(textures);
+  ASSERT_EQ(atlas.page_count(), 3);
+  std::vector<glm::vec3> lookups;
+  std::uniform_real_distribution<float> coord(-1.5f, 2.5f);
+  for (int t = 0; t < 40; ++t) {
+    for (int k = 0; k < 200; ++k) lookups.emplace_back(coord(rng), coord(rng), float(t));
+  }
+  const std::vector<uint32_t> out = run_gpu_lookups(*backend, atlas, lookups, 1);
+  const double worst = expect_lookups_match_cpu(atlas, lookups, out);
+  std::printf("%s: 3-page atlas lookups: %zu, largest GPU-CPU difference %.3f / 255\n", gles ? "gles" : "vulkan",
+              lookups.size(), worst);
+  const std::vector<std::string> messages = backend->take_debug_messages();
+  EXPECT_TRUE(messages.empty()) << test::join(messages);
+}
+
+INSTANTIATE_TEST_SUITE_P(Backends, AtlasPagesTest, ::testing::Values(false, true),
+                         [](const testing::TestParamInfo<bool>& p) { return p.param ? "gles" : "vulkan"; });
 
 TEST_F(AtlasGpuTest, BilinearNeverReadsANeighbourTile) {
   std::mt19937 rng(9);
@@ -556,14 +739,15 @@ TEST(AtlasRealData, BoxTexturedExternalPng) {
   const Atlas atlas = build_atlas(scene);
   ASSERT_EQ(atlas.tiles.size(), 1u);
   const AtlasTile& t = atlas.tiles[0];
-  EXPECT_GT(t.width, 0);
-  EXPECT_LE(t.width, MOBIRT_ATLAS_MAX_TILE);
-  EXPECT_LE(t.height, MOBIRT_ATLAS_MAX_TILE);
+  // A single texture keeps its size up to a page.
+  const TextureImage original = decode_texture(scene, 0);
+  EXPECT_EQ(t.width, std::min(original.width, MOBIRT_ATLAS_SIZE));
+  EXPECT_LE(t.height, MOBIRT_ATLAS_SIZE);
   // Not blank: the logo has more than one colour.
-  const uint32_t first = atlas.at(t.x, t.y);
+  const uint32_t first = atlas.at(t.page, t.x, t.y);
   bool varied = false;
   for (int y = 0; y < t.height && !varied; ++y) {
-    for (int x = 0; x < t.width && !varied; ++x) varied = atlas.at(t.x + x, t.y + y) != first;
+    for (int x = 0; x < t.width && !varied; ++x) varied = atlas.at(t.page, t.x + x, t.y + y) != first;
   }
   EXPECT_TRUE(varied);
 }
@@ -579,10 +763,10 @@ TEST(AtlasRealData, FoxEmbeddedTexture) {
   ASSERT_EQ(atlas.tiles.size(), scene.textures.size());
   const TextureImage original = decode_texture(scene, 0);
   int w = 0, h = 0;
-  fitted_size(original.width, original.height, MOBIRT_ATLAS_MAX_TILE, w, h);
+  fitted_size(original.width, original.height, MOBIRT_ATLAS_SIZE, w, h);
   EXPECT_EQ(atlas.tiles[0].width, w);
   EXPECT_EQ(atlas.tiles[0].height, h);
-  const bool downscaled = original.width > MOBIRT_ATLAS_MAX_TILE || original.height > MOBIRT_ATLAS_MAX_TILE;
+  const bool downscaled = original.width > MOBIRT_ATLAS_SIZE || original.height > MOBIRT_ATLAS_SIZE;
   EXPECT_EQ(err.find("downscaled to") != std::string::npos, downscaled) << err;
   std::printf("Fox texture %dx%d -> tile %dx%d\n", original.width, original.height, w, h);
 }

@@ -70,8 +70,8 @@ const Setting kSettings[] = {
     {"--no-shadows", nullptr, kViews, "no shadow rays: every light lights every surface that faces it",
      [](CommonOptions& o, const Value&) { o.settings.shadows = false; }},
     {"--general", nullptr, kFrames,
-     "general passes sized for 8 (or 16) lights and 16 textures instead of\n"
-     "passes specialised to the scene (same image; for comparisons)",
+     "general passes sized for 8 (or 16) lights and 48 textures on 3 atlas pages\n"
+     "instead of passes specialised to the scene (same image; for comparisons)",
      [](CommonOptions& o, const Value&) { o.settings.specialize = false; }},
     {"--always-rebuild", nullptr, kViews,
      "rebuild the kd-tree every frame even when the triangles did not move",

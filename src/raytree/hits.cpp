@@ -217,10 +217,11 @@ SurfaceHit surface_from_hit(const Scene& scene, const Ray& ray, const Hit& h) {
   }
   // The shading normal faces the same side as the geometric one seen from the ray.
   hit.normal = glm::dot(n, hit.geometric) < 0.0f ? -n : n;
-  if (!mesh.texcoords.empty()) {
-    hit.texcoord = w * mesh.texcoords[i0] + h.u * mesh.texcoords[i0 + 1] + h.v * mesh.texcoords[i0 + 2];
-  }
   hit.material = mesh.material_ids[size_t(prim)];
+  if (!mesh.texcoords.empty()) {
+    const glm::vec2 uv = w * mesh.texcoords[i0] + h.u * mesh.texcoords[i0 + 1] + h.v * mesh.texcoords[i0 + 2];
+    hit.texcoord = transform_texcoord(scene.materials[hit.material].texture_transform, uv);
+  }
   return hit;
 }
 

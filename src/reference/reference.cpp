@@ -300,11 +300,13 @@ class Tracer {
       n = nl > 1e-300 && std::isfinite(nl) ? n / nl : ng;
     }
     s.normal = glm::dot(n, s.geometric) < 0.0 ? -n : n;
-    if (!mesh.texcoords.empty()) {
-      s.texcoord = w * dvec2(mesh.texcoords[i0]) + h.u * dvec2(mesh.texcoords[i0 + 1]) +
-                   h.v * dvec2(mesh.texcoords[i0 + 2]);
-    }
     s.material = mesh.material_ids[size_t(h.prim)];
+    if (!mesh.texcoords.empty()) {
+      const dvec2 uv = w * dvec2(mesh.texcoords[i0]) + h.u * dvec2(mesh.texcoords[i0 + 1]) +
+                       h.v * dvec2(mesh.texcoords[i0 + 2]);
+      // KHR_texture_transform, in double like the rest.
+      s.texcoord = dvec2(glm::dmat3(scene_.materials[s.material].texture_transform) * glm::dvec3(uv, 1.0));
+    }
     return s;
   }
 

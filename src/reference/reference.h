@@ -11,9 +11,10 @@
 // - shadow and secondary rays start at the hit point offset along the geometric normal by
 //   epsilon * (1 + max |p|) (default 1e-9, relative to the point's magnitude) and never hit the
 //   triangle they leave (a planar triangle cannot occlude or re-hit itself);
-// - textures are sampled from the ORIGINAL decoded images (not the atlas: an image over the
-//   atlas's 512-texel tile limit is read at full resolution), bilinear at texel centres with the
-//   sampler's wrap modes, each texel sRGB-decoded in double before the blend, as atlas.glsl does;
+// - textures are sampled from the ORIGINAL decoded images (not the atlas: an image that the
+//   atlas pages had to downscale is read at full resolution), at the texture coordinate the
+//   material's KHR_texture_transform gives, bilinear at texel centres with the sampler's wrap
+//   modes, each texel sRGB-decoded in double before the blend, as atlas.glsl does;
 // - no 8-bit quantisation anywhere. What the reference does keep is the model's own definition of
 //   a ray's colour: each shaded colour (Phong of one hit, or the background of a miss) is clamped
 //   to [0, 1], exactly as the shading pass clamps it, because that clamp is part of the Whitted

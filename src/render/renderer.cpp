@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <iterator>
 #include <map>
 #include <tuple>
 #include <type_traits>
@@ -96,7 +97,8 @@ struct Renderer::Data {
   };
   Texture nodes, prim_list, triangles, materials;
   Texture ray_origin, ray_direction, hit_position, hit_normal, hit_texcoord;
-  TextureHandle atlas;          // the scene's texture atlas, or a 1x1 stand-in without textures
+  // The scene's atlas pages, or one 1x1 stand-in without textures (the pass binds every page slot).
+  std::vector<TextureHandle> atlas_pages;
   Atlas atlas_data;             // placements for the uniforms, kept while the scene's textures stay
   std::string atlas_scene;      // the scene (source + texture count) the atlas was built for
   bool has_atlas = false;
@@ -107,7 +109,7 @@ struct Renderer::Data {
   double prebuilt_ms = 0.0;
   uint32_t ray_width = 0;  // the ray textures' row width; a change recreates them
   std::map<std::pair<int, int>, PassHandle> trace_passes;  // (lights, packing)
-  std::map<std::tuple<int, int, int>, PassHandle> shade_passes;  // (lights, textures, colour)
+  std::map<std::tuple<int, int, int, int>, PassHandle> shade_passes;  // (lights, textures, pages, colour)
 };
 
 // The frame loop's view of the passes: the tree built or kept once per frame, one traversal and one
@@ -197,7 +199,7 @@ Renderer::~Renderer() {
                            &d.ray_direction, &d.hit_position, &d.hit_normal, &d.hit_texcoord}) {
     if (t->handle) backend_.destroy(t->handle);
   }
-  if (d.atlas) backend_.destroy(d.atlas);
+  for (TextureHandle page : d.atlas_pages) backend_.destroy(page);
   for (auto& [key, pass] : d.trace_passes) backend_.destroy(pass);
   for (auto& [key, pass] : d.shade_passes) backend_.destroy(pass);
 }
@@ -237,18 +239,24 @@ PassHandle Renderer::trace_pass(int lights, Packing packing) {
   return pass;
 }
 
-PassHandle Renderer::shade_pass(int lights, int textures, int colour) {
-  const auto key = std::make_tuple(lights, textures, colour);
+PassHandle Renderer::shade_pass(int lights, int textures, int pages, int colour) {
+  const auto key = std::make_tuple(lights, textures, pages, colour);
   auto it = data_->shade_passes.find(key);
   if (it != data_->shade_passes.end()) return it->second;
   PassDesc desc;
   desc.shader = ShaderId::Shade;
   desc.specialization = {{MOBIRT_SPEC_LIGHT_COUNT, lights},
                          {MOBIRT_SPEC_TEXTURE_COUNT, textures},
+                         {MOBIRT_SPEC_ATLAS_PAGES, pages},
                          {MOBIRT_SPEC_COLOUR, colour}};
   desc.uniform_vec4s = MOBIRT_SP_TEXTURES(uint32_t(lights)) + MOBIRT_SP_VEC4S_PER_TEXTURE * uint32_t(textures);
-  desc.texture_bindings = {MOBIRT_BIND_HIT_POSITION, MOBIRT_BIND_HIT_NORMAL, MOBIRT_BIND_MATERIALS,
-                           MOBIRT_BIND_SHADE_RAY_DIRECTION, MOBIRT_BIND_HIT_TEXCOORD, MOBIRT_BIND_ATLAS};
+  // The pages get the units that the data textures leave (layout.h counts both).
+  constexpr uint32_t data_slots[] = {MOBIRT_BIND_HIT_POSITION, MOBIRT_BIND_HIT_NORMAL, MOBIRT_BIND_MATERIALS,
+                                     MOBIRT_BIND_SHADE_RAY_DIRECTION, MOBIRT_BIND_HIT_TEXCOORD};
+  constexpr uint32_t page_slots[] = {MOBIRT_BIND_ATLAS_PAGE_0, MOBIRT_BIND_ATLAS_PAGE_1, MOBIRT_BIND_ATLAS_PAGE_2};
+  static_assert(std::size(data_slots) == MOBIRT_SHADE_DATA_TEXTURES && std::size(page_slots) == MOBIRT_ATLAS_MAX_PAGES);
+  desc.texture_bindings.assign(std::begin(data_slots), std::end(data_slots));
+  desc.texture_bindings.insert(desc.texture_bindings.end(), std::begin(page_slots), std::end(page_slots));
   PassHandle pass = backend_.create_pass(desc);
   data_->shade_passes.emplace(key, pass);
   return pass;
@@ -262,18 +270,21 @@ void Renderer::prepare_atlas(const Scene& scene) {
     key.append("|").append(t.name).append(":").append(t.path).append(":").append(std::to_string(t.data.size()));
     key.append(":").append(std::to_string(int(t.wrap_s))).append(std::to_string(int(t.wrap_t)));
   }
-  if (d.atlas && key == d.atlas_scene) return;
-  if (d.atlas) backend_.destroy(d.atlas);
+  if (!d.atlas_pages.empty() && key == d.atlas_scene) return;
+  for (TextureHandle page : d.atlas_pages) backend_.destroy(page);
+  d.atlas_pages.clear();
   d.atlas_data = build_atlas(scene);
   d.has_atlas = !d.atlas_data.empty();
-  if (d.has_atlas) {
-    d.atlas = backend_.create_texture(uint32_t(d.atlas_data.size), uint32_t(d.atlas_data.size), TexelFormat::RGBA8);
-    backend_.upload(d.atlas, d.atlas_data.pixels.data(), d.atlas_data.pixels.size() * sizeof(uint32_t));
-  } else {
-    // The shading pass always binds the slot; specialised to no textures, it never reads it.
-    d.atlas = backend_.create_texture(1, 1, TexelFormat::RGBA8);
+  const uint32_t size = uint32_t(d.atlas_data.size);
+  for (const std::vector<uint32_t>& pixels : d.atlas_data.pages) {
+    d.atlas_pages.push_back(backend_.create_texture(size, size, TexelFormat::RGBA8));
+    backend_.upload(d.atlas_pages.back(), pixels.data(), pixels.size() * sizeof(uint32_t));
+  }
+  if (d.atlas_pages.empty()) {
+    // The shading pass always binds the page slots; specialised to no textures, it never reads them.
+    d.atlas_pages.push_back(backend_.create_texture(1, 1, TexelFormat::RGBA8));
     const uint32_t black = 0;
-    backend_.upload(d.atlas, &black, sizeof(black));
+    backend_.upload(d.atlas_pages.back(), &black, sizeof(black));
   }
   d.atlas_scene = key;
 }
@@ -396,22 +407,25 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
     texcoords = d.hit_texcoord.handle;
   }
 
-  // A general pass is sized for the most lights and textures, not for this scene.
+  // A general pass is sized for the most lights, textures and pages, not for this scene.
   const int texture_count = settings_.specialize ? int(d.atlas_data.tiles.size()) : MOBIRT_ATLAS_MAX_TEXTURES;
+  const int pages = settings_.specialize ? d.atlas_data.page_count() : MOBIRT_ATLAS_MAX_PAGES;
   const int lights = pass_lights(int(scene.lights.size()));
   std::vector<float> uniforms = shade_uniforms(scene, lights);
   append_atlas_uniforms(d.atlas_data, lights, uniforms);
   const size_t uniform_floats = 4 * size_t(MOBIRT_SP_TEXTURES(lights) + MOBIRT_SP_VEC4S_PER_TEXTURE * texture_count);
   if (uniforms.size() < uniform_floats) uniforms.resize(uniform_floats, 0.0f);
+  // A slot beyond the scene's pages gets its last page: bound, never read.
+  const auto page = [&](size_t i) { return d.atlas_pages[std::min(i, d.atlas_pages.size() - 1)]; };
   const TextureHandle textures[] = {d.hit_position.handle, d.hit_normal.handle, d.materials.handle,
-                                    d.ray_direction.handle, texcoords, d.atlas};
+                                    d.ray_direction.handle, texcoords, page(0), page(1), page(2)};
   // 16-bit colour: the same shading twice, the high bytes, then the low bytes of each channel.
   const bool deep = settings_.colour == ColourDepth::Bits16;
   std::vector<uint32_t> texels[2];
   for (int half = 0; half < (deep ? 2 : 1); ++half) {
     const int colour = !deep ? MOBIRT_COLOUR_8 : half == 0 ? MOBIRT_COLOUR_16_HIGH : MOBIRT_COLOUR_16_LOW;
     texels[half].resize(rays.count());
-    const PassTiming shaded = backend_.run_pass(shade_pass(lights, texture_count, colour), textures, uniforms,
+    const PassTiming shaded = backend_.run_pass(shade_pass(lights, texture_count, pages, colour), textures, uniforms,
                                                 rays.width, rays.count(), texels[half]);
     timings.upload_ms += shaded.upload_ms;
     timings.shade_ms += shaded.gpu_ms;

@@ -103,7 +103,7 @@ class Renderer {
   TextureHandle ensure_texture(TextureHandle& handle, uint32_t& capacity_rows, uint32_t width,
                                uint32_t rows, TexelFormat format, TextureKind kind = TextureKind::Image2D);
   PassHandle trace_pass(int lights, Packing packing);
-  PassHandle shade_pass(int lights, int textures, int colour);
+  PassHandle shade_pass(int lights, int textures, int pages, int colour);
   void prepare_atlas(const Scene& scene);
   void upload_tree(const FlatKdTree& tree);
   // The lights the traversal pass casts shadow rays to: the scene's, or none without shadows.

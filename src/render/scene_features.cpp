@@ -3,6 +3,7 @@
 #include <sstream>
 
 #include "layout.h"
+#include "scene/atlas.h"
 
 namespace mobirt {
 
@@ -63,8 +64,13 @@ SceneFeatures analyze_scene(const AnimatedScene& animation, const RenderSettings
     add("shading pass: TEXTURE_COUNT 0", "no textures: no atlas built or uploaded, no texture coordinates, "
                                          "the atlas code folds away");
   } else {
-    add("shading pass: TEXTURE_COUNT " + std::to_string(f.textures),
-        "one 2048x2048 atlas holding the scene's " + std::to_string(f.textures) + " textures");
+    // The page count depends on the images' sizes: the atlas is built as rendering builds it.
+    const Atlas atlas = build_atlas(scene);
+    const std::string pages = std::to_string(atlas.page_count());
+    const std::string limit = std::to_string(atlas.tile_limit);
+    add("shading pass: TEXTURE_COUNT " + std::to_string(f.textures) + ", ATLAS_PAGES " + pages,
+        pages + (atlas.page_count() == 1 ? " 2048x2048 atlas page" : " 2048x2048 atlas pages") + " holding the scene's " +
+            std::to_string(f.textures) + " textures, tiles up to " + limit + "x" + limit);
   }
   if (!f.reflective && !f.refractive) {
     add("one generation of rays", "no reflective or refractive material: --depth has nothing to bounce");

@@ -35,11 +35,15 @@ void check_texture_count(size_t count, const std::string& source) {
   std::string message(std::to_string(count));
   message.append(" textures, but the texture atlas holds at most ")
       .append(std::to_string(MOBIRT_ATLAS_MAX_TEXTURES))
-      .append(" (one ")
+      .append(" (")
+      .append(std::to_string(MOBIRT_ATLAS_MAX_PAGES))
+      .append(" pages of ")
       .append(size_text(MOBIRT_ATLAS_SIZE, MOBIRT_ATLAS_SIZE))
-      .append(" RGBA8 atlas, tiles up to ")
-      .append(size_text(MOBIRT_ATLAS_MAX_TILE, MOBIRT_ATLAS_MAX_TILE))
-      .append("); merge textures into fewer images or remove some materials' base-colour textures");
+      .append(" RGBA8, ")
+      .append(std::to_string(MOBIRT_ATLAS_TILES_PER_PAGE))
+      .append(" textures each: the 8 texture units of OpenGL ES 2.0 less the shading pass's ")
+      .append(std::to_string(MOBIRT_SHADE_DATA_TEXTURES))
+      .append(" other inputs); merge textures into fewer images or remove some materials' base-colour textures");
   throw input_error(source, message);
 }
 
@@ -48,8 +52,8 @@ float channel_linear(uint32_t texel, int channel) {
   return srgb_to_linear(float((texel >> (8 * channel)) & 0xffu) / 255.0f);
 }
 
-glm::vec3 texel_linear(const Atlas& atlas, float x, float y) {
-  const uint32_t texel = atlas.at(int(x), int(y));
+glm::vec3 texel_linear(const Atlas& atlas, int page, float x, float y) {
+  const uint32_t texel = atlas.at(page, int(x), int(y));
   return glm::vec3(channel_linear(texel, 0), channel_linear(texel, 1), channel_linear(texel, 2));
 }
 
@@ -67,7 +71,8 @@ float wrap_value(TextureWrap wrap) {
   return float(MOBIRT_WRAP_REPEAT);
 }
 
-std::vector<AtlasTile> pack_tiles(const std::vector<glm::ivec2>& sizes, int atlas_size) {
+std::optional<std::vector<AtlasTile>> try_pack_tiles(const std::vector<glm::ivec2>& sizes, int max_pages,
+                                                     int page_size) {
   std::vector<size_t> order(sizes.size());
   std::iota(order.begin(), order.end(), size_t(0));
   // Tallest first (then widest, then input order): each shelf's first tile sets its height.
@@ -76,29 +81,53 @@ std::vector<AtlasTile> pack_tiles(const std::vector<glm::ivec2>& sizes, int atla
     return sizes[a].x > sizes[b].x;
   });
   std::vector<AtlasTile> tiles(sizes.size());
-  int x = 0, y = 0, shelf_height = 0;
+  int page = 0, on_page = 0, x = 0, y = 0, shelf_height = 0;
   for (size_t i : order) {
     const int w = sizes[i].x, h = sizes[i].y;
-    if (w <= 0 || h <= 0 || w > atlas_size || h > atlas_size) {
-      std::string message("atlas tile ");
-      message.append(std::to_string(i)).append(" has an invalid size ").append(size_text(w, h));
-      throw Error(ErrorKind::Internal, message);
-    }
-    if (x + w > atlas_size) {  // next shelf
+    if (w <= 0 || h <= 0 || w > page_size || h > page_size) return std::nullopt;
+    if (x + w > page_size) {  // next shelf
       y += shelf_height;
       x = 0;
       shelf_height = 0;
     }
-    if (y + h > atlas_size) {
-      std::string message("atlas tiles do not fit into ");
-      message.append(size_text(atlas_size, atlas_size));
-      throw Error(ErrorKind::Internal, message);
+    if (y + h > page_size || on_page == MOBIRT_ATLAS_TILES_PER_PAGE) {  // next page
+      ++page;
+      on_page = x = y = shelf_height = 0;
     }
-    tiles[i] = AtlasTile{x, y, w, h, 0.0f, 0.0f};
+    if (page >= max_pages) return std::nullopt;
+    tiles[i] = AtlasTile{page, x, y, w, h, 0.0f, 0.0f};
     x += w;
     shelf_height = std::max(shelf_height, h);
+    ++on_page;
   }
   return tiles;
+}
+
+std::vector<AtlasTile> pack_tiles(const std::vector<glm::ivec2>& sizes, int max_pages, int page_size) {
+  std::optional<std::vector<AtlasTile>> tiles = try_pack_tiles(sizes, max_pages, page_size);
+  if (!tiles) {
+    std::string message(std::to_string(sizes.size()));
+    message.append(" atlas tiles do not fit into ").append(std::to_string(max_pages)).append(" pages of ");
+    message.append(size_text(page_size, page_size));
+    throw Error(ErrorKind::Internal, message);
+  }
+  return *std::move(tiles);
+}
+
+int atlas_tile_limit(const std::vector<glm::ivec2>& sizes) {
+  if (sizes.size() > size_t(MOBIRT_ATLAS_MAX_TEXTURES)) {
+    throw Error(ErrorKind::Internal, "atlas_tile_limit: " + std::to_string(sizes.size()) + " textures");
+  }
+  int longest = 1;
+  for (const glm::ivec2& s : sizes) longest = std::max({longest, s.x, s.y});
+  // Downward from the longest side (or a page): the first cap that packs is the largest. At most
+  // 1,537 packings of at most 48 tiles, once per scene; MOBIRT_ATLAS_SURE_TILE always packs.
+  std::vector<glm::ivec2> fitted(sizes.size());
+  for (int limit = std::min(longest, MOBIRT_ATLAS_SIZE); limit > MOBIRT_ATLAS_SURE_TILE; --limit) {
+    for (size_t i = 0; i < sizes.size(); ++i) fitted_size(sizes[i].x, sizes[i].y, limit, fitted[i].x, fitted[i].y);
+    if (try_pack_tiles(fitted)) return limit;
+  }
+  return std::min(longest, MOBIRT_ATLAS_SURE_TILE);
 }
 
 Atlas assemble_atlas(const std::vector<AtlasTexture>& textures) {
@@ -108,25 +137,29 @@ Atlas assemble_atlas(const std::vector<AtlasTexture>& textures) {
   std::vector<glm::ivec2> sizes;
   for (size_t i = 0; i < textures.size(); ++i) {
     const TextureImage& image = textures[i].image;
-    if (image.width > MOBIRT_ATLAS_MAX_TILE || image.height > MOBIRT_ATLAS_MAX_TILE ||
-        image.pixels.size() != size_t(image.width) * size_t(image.height)) {
+    if (image.pixels.size() != size_t(image.width) * size_t(image.height)) {
       std::string message("atlas texture ");
       message.append(std::to_string(i)).append(" is ").append(size_text(image.width, image.height));
-      message.append(": not downscaled to the tile size, or inconsistent");
+      message.append(" but holds ").append(std::to_string(image.pixels.size())).append(" texels");
       throw Error(ErrorKind::Internal, message);
     }
     sizes.emplace_back(image.width, image.height);
+    atlas.tile_limit = std::max({atlas.tile_limit, image.width, image.height});
   }
-  atlas.tiles = pack_tiles(sizes, atlas.size);
-  atlas.pixels.assign(size_t(atlas.size) * size_t(atlas.size), 0u);
+  atlas.tiles = pack_tiles(sizes);
+  int pages = 0;
+  for (const AtlasTile& tile : atlas.tiles) pages = std::max(pages, tile.page + 1);
+  atlas.pages.resize(size_t(pages));
+  for (std::vector<uint32_t>& page : atlas.pages) page.assign(size_t(atlas.size) * size_t(atlas.size), 0u);
   for (size_t i = 0; i < textures.size(); ++i) {
     AtlasTile& tile = atlas.tiles[i];
     tile.wrap_s = wrap_value(textures[i].wrap_s);
     tile.wrap_t = wrap_value(textures[i].wrap_t);
     const TextureImage& image = textures[i].image;
+    std::vector<uint32_t>& page = atlas.pages[size_t(tile.page)];
     for (int row = 0; row < image.height; ++row) {
       std::copy_n(&image.pixels[size_t(row) * size_t(image.width)], size_t(image.width),
-                  &atlas.pixels[size_t(tile.y + row) * size_t(atlas.size) + size_t(tile.x)]);
+                  &page[size_t(tile.y + row) * size_t(atlas.size) + size_t(tile.x)]);
     }
   }
   return atlas;
@@ -135,19 +168,23 @@ Atlas assemble_atlas(const std::vector<AtlasTexture>& textures) {
 Atlas build_atlas(const Scene& scene) {
   check_texture_count(scene.textures.size(), scene.source);
   std::vector<AtlasTexture> textures(scene.textures.size());
+  std::vector<glm::ivec2> sizes;
   for (size_t i = 0; i < scene.textures.size(); ++i) {
-    TextureImage image = decode_texture(scene, int(i));
-    if (image.width > MOBIRT_ATLAS_MAX_TILE || image.height > MOBIRT_ATLAS_MAX_TILE) {
-      TextureImage smaller = downscale_to_fit(image, MOBIRT_ATLAS_MAX_TILE);
-      std::string message("texture '");
-      message.append(texture_label(scene, i)).append("' ").append(size_text(image.width, image.height));
-      message.append(" downscaled to ").append(size_text(smaller.width, smaller.height)).append(" for the atlas");
-      scene_warning(scene.source, message);
-      image = std::move(smaller);
-    }
-    textures[i].image = std::move(image);
+    textures[i].image = decode_texture(scene, int(i));
     textures[i].wrap_s = scene.textures[i].wrap_s;
     textures[i].wrap_t = scene.textures[i].wrap_t;
+    sizes.emplace_back(textures[i].image.width, textures[i].image.height);
+  }
+  const int limit = atlas_tile_limit(sizes);
+  for (size_t i = 0; i < textures.size(); ++i) {
+    TextureImage& image = textures[i].image;
+    if (image.width <= limit && image.height <= limit) continue;
+    TextureImage smaller = downscale_to_fit(image, limit);
+    std::string message("texture '");
+    message.append(texture_label(scene, i)).append("' ").append(size_text(image.width, image.height));
+    message.append(" downscaled to ").append(size_text(smaller.width, smaller.height)).append(" for the atlas");
+    scene_warning(scene.source, message);
+    image = std::move(smaller);
   }
   return assemble_atlas(textures);
 }
@@ -159,7 +196,7 @@ void append_atlas_uniforms(const Atlas& atlas, int light_count, std::vector<floa
   for (size_t t = 0; t < atlas.tiles.size(); ++t) {
     const AtlasTile& tile = atlas.tiles[t];
     const AtlasTileParams params{glm::vec2(float(tile.x), float(tile.y)), glm::vec2(float(tile.width), float(tile.height)),
-                                 tile.wrap_s, tile.wrap_t, {0.0f, 0.0f}};
+                                 tile.wrap_s, tile.wrap_t, float(tile.page), 0.0f};
     std::memcpy(&uniforms[(base + size_t(MOBIRT_SP_VEC4S_PER_TEXTURE) * t) * 4], &params, sizeof(params));
   }
 }
@@ -179,12 +216,14 @@ float atlas_wrap(float texel, float size, float mode) {
 glm::vec3 sample_atlas(const Atlas& atlas, int texture, glm::vec2 uv) {
   glm::vec4 tile(0.0f, 0.0f, 1.0f, 1.0f);
   glm::vec2 wrap(0.0f);
+  int page = 0;
   if (texture >= 0 && size_t(texture) < atlas.tiles.size()) {
     const AtlasTile& t = atlas.tiles[size_t(texture)];
     tile = glm::vec4(float(t.x), float(t.y), float(t.width), float(t.height));
     wrap = glm::vec2(t.wrap_s, t.wrap_t);
+    page = t.page;
   }
-  if (atlas.pixels.empty()) return glm::vec3(0.0f);
+  if (atlas.pages.empty()) return glm::vec3(0.0f);
   const glm::vec2 p = uv * glm::vec2(tile.z, tile.w) - 0.5f;
   const glm::vec2 p0 = glm::floor(p);
   const glm::vec2 f = p - p0;
@@ -192,8 +231,8 @@ glm::vec3 sample_atlas(const Atlas& atlas, int texture, glm::vec2 uv) {
   const float x1 = tile.x + atlas_wrap(p0.x + 1.0f, tile.z, wrap.x);
   const float y0 = tile.y + atlas_wrap(p0.y, tile.w, wrap.y);
   const float y1 = tile.y + atlas_wrap(p0.y + 1.0f, tile.w, wrap.y);
-  const glm::vec3 top = mix3(texel_linear(atlas, x0, y0), texel_linear(atlas, x1, y0), f.x);
-  const glm::vec3 bottom = mix3(texel_linear(atlas, x0, y1), texel_linear(atlas, x1, y1), f.x);
+  const glm::vec3 top = mix3(texel_linear(atlas, page, x0, y0), texel_linear(atlas, page, x1, y0), f.x);
+  const glm::vec3 bottom = mix3(texel_linear(atlas, page, x0, y1), texel_linear(atlas, page, x1, y1), f.x);
   return mix3(top, bottom, f.y);
 }
 

@@ -1,16 +1,20 @@
-// The texture atlas of the MobiRT paper: every base-colour texture of a scene packed into ONE
-// 2048 x 2048 RGBA8 texture (OpenGL ES 2.0 guarantees only 8 texture units, so textures cannot each
-// have their own), at most 16 textures of at most 512 x 512 texels, non-square allowed.
+// The texture atlas of the MobiRT paper, repeated on pages: every base-colour texture of a scene
+// packed into 2048 x 2048 RGBA8 pages of up to 16 tiles each (OpenGL ES 2.0 guarantees only 8
+// texture units, so textures cannot each have their own), as many pages as the shading pass's
+// other inputs leave units for (MOBIRT_ATLAS_MAX_PAGES = 8 - 5 = 3), so at most 48 textures.
 //
 // - Decoding: scene/texture_images.h (OpenImageIO; embedded bytes through its in-memory IOProxy).
-// - Textures over 512 on a side are scaled down (aspect ratio kept, filtered in linear light) with
+// - Tile sizes: every texture keeps its own size up to one cap on the longest side, the largest cap
+//   (at most a page, 2048) at which the scene's textures pack into the pages (atlas_tile_limit).
+//   Only textures over the cap are scaled down (aspect ratio kept, filtered in linear light), with
 //   one warning per texture and build_atlas() call on stderr:
-//     "mobirt: warning: SCENE: texture 'name' 1024x1024 downscaled to 512x512 for the atlas"
-// - More than 16 textures: Error(BadInput) naming the scene, the count and the fix. mobirt refuses
-//   rather than dropping or shrinking textures silently (never a wrong image).
-// - Packing: a shelf packer, tiles sorted by height (tallest first). It cannot fail within the
-//   limits: every shelf holds at least 4 tiles (4 x 512 = 2048), so 16 tiles need at most 4
-//   shelves, each at most 512 tall. 16 tiles of 512 x 512 fill the atlas exactly (4 x 4).
+//     "mobirt: warning: SCENE: texture 'name' 4096x4096 downscaled to 2048x2048 for the atlas"
+//   A cap of 512 always packs (any 16 tiles up to 512 fill at most one page), so no scene within
+//   the count limit is refused for its sizes.
+// - More than 48 textures: Error(BadInput) naming the scene, the count, the limit and the fix.
+//   mobirt refuses rather than dropping textures silently (never a wrong image).
+// - Packing: shelves, tiles sorted by height (tallest first), filling one page after another: a
+//   tile that does not fit the page's next shelf, or a page that holds 16 tiles, opens the next.
 // - No gutter between tiles: the shader filters by hand (4 texel fetches, each texel index wrapped
 //   or clamped inside its own tile), so a lookup never reads a neighbour's texel whatever the
 //   wrap mode or coordinate. tests/atlas_test.cpp proves it on the CPU and on the GPU.
@@ -18,15 +22,16 @@
 //   texels; texels floor(p) and floor(p) + 1 on each axis, each wrapped by the glTF sampler's mode
 //   exactly as OpenGL wraps the texels of a GL_LINEAR lookup (repeat, mirrored repeat,
 //   clamp-to-edge), so a tile behaves like a texture of its own with a LINEAR sampler (no mipmaps).
-// - Colour: the atlas stores the 8-bit values as the file has them (sRGB-encoded, as glTF base
+// - Colour: the pages store the 8-bit values as the file has them (sRGB-encoded, as glTF base
 //   colour textures are); the shader converts each of the 4 fetched texels from sRGB to linear
 //   before the bilinear blend, as hardware sRGB textures do, and returns linear RGB. Alpha is kept
-//   in the atlas but not used.
+//   but not used.
 #pragma once
 
 #include <glm/glm.hpp>
 
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 #include "layout.h"
@@ -36,40 +41,57 @@
 namespace mobirt {
 
 struct AtlasTile {
-  int x, y, width, height;   // placement in atlas texels
-  float wrap_s, wrap_t;      // MOBIRT_WRAP_* values
+  int page = 0;              // which page holds it
+  int x = 0, y = 0;          // placement in the page's texels
+  int width = 0, height = 0;
+  float wrap_s = 0.0f, wrap_t = 0.0f;  // MOBIRT_WRAP_* values
 };
 
 struct Atlas {
   int size = MOBIRT_ATLAS_SIZE;
-  std::vector<uint32_t> pixels;  // size * size RGBA8 (r | g << 8 | b << 16 | a << 24), row-major,
-                                 // y = 0 the top row; empty when the scene has no textures
+  // Each page size * size RGBA8 (r | g << 8 | b << 16 | a << 24), row-major, y = 0 the top row;
+  // no page when the scene has no textures.
+  std::vector<std::vector<uint32_t>> pages;
   std::vector<AtlasTile> tiles;  // one per Scene::textures entry, same order
+  int tile_limit = 0;            // the cap on a tile's longest side that this atlas was packed with
 
   bool empty() const { return tiles.empty(); }
-  uint32_t at(int x, int y) const { return pixels[size_t(y) * size_t(size) + size_t(x)]; }
+  int page_count() const { return int(pages.size()); }
+  uint32_t at(int page, int x, int y) const { return pages[size_t(page)][size_t(y) * size_t(size) + size_t(x)]; }
 };
 
-// Decodes, downscales and packs the scene's textures. Throws Error(BadInput) for more than
-// MOBIRT_ATLAS_MAX_TEXTURES textures, a missing texture file or an undecodable image (messages in
-// scene/texture_images.h). A scene without textures gets an empty atlas. Build it once per scene:
-// textures do not change from frame to frame.
+// Decodes, downscales where the pages require it and packs the scene's textures. Throws
+// Error(BadInput) for more than MOBIRT_ATLAS_MAX_TEXTURES textures, a missing texture file or an
+// undecodable image (messages in scene/texture_images.h). A scene without textures gets an empty
+// atlas. Build it once per scene: textures do not change from frame to frame.
 Atlas build_atlas(const Scene& scene);
 
-// A texture already decoded and at most MOBIRT_ATLAS_MAX_TILE on a side, with its sampler.
+// A texture already decoded and sized for its tile, with its sampler.
 struct AtlasTexture {
   TextureImage image;
   TextureWrap wrap_s = TextureWrap::Repeat;
   TextureWrap wrap_t = TextureWrap::Repeat;
 };
-// Packs decoded textures (build_atlas() without the decoding; for tests). Throws Error(BadInput)
-// over the texture-count limit and Error(Internal) for a texture over the tile size.
+// Packs decoded textures at their sizes (build_atlas() without the decoding and downscaling; for
+// tests). Throws Error(BadInput) over the texture-count limit and Error(Internal) when they do not
+// fit the pages.
 Atlas assemble_atlas(const std::vector<AtlasTexture>& textures);
 
-// Shelf packing of tiles of the given sizes (width, height) into a square of `atlas_size`, in input
-// order; wrap fields are left 0. Throws Error(Internal) when they do not fit (impossible within
-// the atlas limits, see above).
-std::vector<AtlasTile> pack_tiles(const std::vector<glm::ivec2>& sizes, int atlas_size = MOBIRT_ATLAS_SIZE);
+// Shelf packing of tiles of the given sizes (width, height) onto at most `max_pages` square pages
+// of `page_size`, MOBIRT_ATLAS_TILES_PER_PAGE tiles a page at most, in input order; wrap fields are
+// left 0. Empty when they do not fit.
+std::optional<std::vector<AtlasTile>> try_pack_tiles(const std::vector<glm::ivec2>& sizes,
+                                                     int max_pages = MOBIRT_ATLAS_MAX_PAGES,
+                                                     int page_size = MOBIRT_ATLAS_SIZE);
+// The same; throws Error(Internal) when they do not fit.
+std::vector<AtlasTile> pack_tiles(const std::vector<glm::ivec2>& sizes, int max_pages = MOBIRT_ATLAS_MAX_PAGES,
+                                  int page_size = MOBIRT_ATLAS_SIZE);
+
+// The largest cap on the longest side (at most MOBIRT_ATLAS_SIZE, at least MOBIRT_ATLAS_SURE_TILE)
+// at which images of `sizes`, each fitted to the cap (fitted_size()), pack into the pages; the
+// longest side among them when they all fit as they are. Throws Error(Internal) for more than
+// MOBIRT_ATLAS_MAX_TEXTURES sizes.
+int atlas_tile_limit(const std::vector<glm::ivec2>& sizes);
 
 // MOBIRT_WRAP_* value of a glTF wrap mode.
 float wrap_value(TextureWrap wrap);
@@ -81,7 +103,7 @@ void append_atlas_uniforms(const Atlas& atlas, int light_count, std::vector<floa
 
 // The shader's lookup on the CPU (same arithmetic as glsl/atlas.glsl): linear RGB of `texture`
 // at texture coordinate `uv` (glTF convention, (0, 0) the top-left corner). uv must be finite.
-// An index outside the atlas reads as the shader reads it: atlas texel (0, 0).
+// An index outside the atlas reads as the shader reads it: texel (0, 0) of page 0.
 glm::vec3 sample_atlas(const Atlas& atlas, int texture, glm::vec2 uv);
 
 // The wrap of one texel index (an integer as a float) into [0, size) by mode (MOBIRT_WRAP_*),

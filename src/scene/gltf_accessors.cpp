@@ -235,11 +235,12 @@ std::vector<glm::vec3> AccessorReader::read_vec3(int index, const std::string& u
   return out;
 }
 
-std::vector<glm::vec2> AccessorReader::read_texcoords(int index, const std::string& user) const {
+std::vector<glm::vec2> AccessorReader::read_texcoords(int index, const std::string& user,
+                                                      const std::string& attribute) const {
   const tinygltf::Accessor& a = accessor(index, user);
   const std::string name = element("accessors", static_cast<size_t>(index));
   if (a.type != TINYGLTF_TYPE_VEC2) {
-    fail(name + " (" + user + " TEXCOORD_0): type " + type_name(a.type) + ", expected VEC2");
+    fail(name + " (" + user + " " + attribute + "): type " + type_name(a.type) + ", expected VEC2");
   }
   const int ct = a.componentType;
   const bool ok = ct == TINYGLTF_COMPONENT_TYPE_FLOAT ||
@@ -249,11 +250,11 @@ std::vector<glm::vec2> AccessorReader::read_texcoords(int index, const std::stri
                   ((ct == TINYGLTF_COMPONENT_TYPE_BYTE || ct == TINYGLTF_COMPONENT_TYPE_SHORT) &&
                    quantized_);
   if (!ok) {
-    fail(name + " (" + user + " TEXCOORD_0): component type " + component_name(ct) +
+    fail(name + " (" + user + " " + attribute + "): component type " + component_name(ct) +
          (a.normalized ? "" : " (not normalized)") +
          ", expected FLOAT or normalized UNSIGNED_BYTE / UNSIGNED_SHORT");
   }
-  const std::vector<double> v = read_accessor(index, user + " TEXCOORD_0");
+  const std::vector<double> v = read_accessor(index, user + " " + attribute);
   std::vector<glm::vec2> out(a.count);
   for (size_t i = 0; i < a.count; ++i) {
     out[i] = glm::vec2(static_cast<float>(v[2 * i]), static_cast<float>(v[2 * i + 1]));

@@ -49,7 +49,9 @@ class AccessorReader {
                                     bool matrix4 = false) const;
   // Vertex attributes, with the component types glTF allows (KHR_mesh_quantization widens them).
   std::vector<glm::vec3> read_vec3(int index, const std::string& user, const char* attribute) const;
-  std::vector<glm::vec2> read_texcoords(int index, const std::string& user) const;
+  // `attribute` ("TEXCOORD_1") names the set in messages.
+  std::vector<glm::vec2> read_texcoords(int index, const std::string& user,
+                                        const std::string& attribute = "TEXCOORD_0") const;
   std::vector<uint32_t> read_indices(int index, const std::string& user) const;
 
  private:

@@ -105,6 +105,7 @@ class GltfReader {
   void prepare_nodes();
   size_t mesh_targets(size_t mesh_index) const;
   void convert_materials();
+  glm::mat3 texture_transform(const tinygltf::TextureInfo& info, const std::string& name, int& texcoord_set) const;
   int texture_for(int gltf_texture, const std::string& user);
   uint32_t default_material();
 
@@ -117,6 +118,7 @@ class GltfReader {
   std::map<int, int> texture_map_;  // glTF texture -> Scene::textures
   std::map<int, int> skin_map_;     // glTF skin -> GltfRig::skins
   int default_material_ = -1;
+  std::vector<int> texcoord_sets_;  // per glTF material: the TEXCOORD_n its base-colour texture reads
 };
 
 glm::dmat4 GltfReader::local_transform(size_t node_index) const {
@@ -199,9 +201,14 @@ bool GltfReader::prepare_primitive(size_t mesh_index, size_t prim_index, PrimDat
     out.normals = accessors_.read_vec3(acc, path, "NORMAL");
     check_count(acc, out.normals.size(), "NORMAL");
   }
-  if (const int acc = attr(prim.attributes, "TEXCOORD_0"); acc >= 0) {
-    out.uvs = accessors_.read_texcoords(acc, path);
-    check_count(acc, out.uvs.size(), "TEXCOORD_0");
+  // The set that the material's base-colour texture reads (textureInfo.texCoord, or the
+  // KHR_texture_transform override); a primitive without it gets uv (0, 0), as without TEXCOORD_0.
+  const size_t material = static_cast<size_t>(prim.material);
+  const int set = prim.material >= 0 && material < texcoord_sets_.size() ? texcoord_sets_[material] : 0;
+  const std::string texcoord = "TEXCOORD_" + str(set);
+  if (const int acc = attr(prim.attributes, texcoord.c_str()); acc >= 0) {
+    out.uvs = accessors_.read_texcoords(acc, path, texcoord);
+    check_count(acc, out.uvs.size(), texcoord);
   }
 
   // Morph targets.
@@ -687,6 +694,44 @@ int GltfReader::texture_for(int gltf_texture, const std::string& user) {
   return index;
 }
 
+// KHR_texture_transform on a textureInfo as its matrix (identity without the extension); its
+// texCoord, when given, replaces `texcoord_set`.
+glm::mat3 GltfReader::texture_transform(const tinygltf::TextureInfo& info, const std::string& name,
+                                        int& texcoord_set) const {
+  const auto it = info.extensions.find("KHR_texture_transform");
+  if (it == info.extensions.end()) return glm::mat3(1.0f);
+  const std::string where = name + ".extensions.KHR_texture_transform";
+  const tinygltf::Value& ext = it->second;
+  if (!ext.IsObject()) fail(where + " is not a JSON object");
+  auto vec2_or = [&](const char* key, glm::vec2 fallback) {
+    if (!ext.Has(key)) return fallback;
+    const tinygltf::Value& v = ext.Get(key);
+    glm::vec2 value(std::numeric_limits<float>::quiet_NaN());
+    if (v.IsArray() && v.ArrayLen() == 2 && v.Get(0).IsNumber() && v.Get(1).IsNumber()) {
+      value = glm::vec2(static_cast<float>(v.Get(0).GetNumberAsDouble()), static_cast<float>(v.Get(1).GetNumberAsDouble()));
+    }
+    if (!std::isfinite(value.x) || !std::isfinite(value.y)) fail(where + "." + key + " must be an array of 2 finite numbers");
+    return value;
+  };
+  const glm::vec2 offset = vec2_or("offset", glm::vec2(0.0f));
+  const glm::vec2 scale = vec2_or("scale", glm::vec2(1.0f));
+  float rotation = 0.0f;
+  if (ext.Has("rotation")) {
+    const tinygltf::Value& v = ext.Get("rotation");
+    rotation = v.IsNumber() ? static_cast<float>(v.GetNumberAsDouble()) : std::numeric_limits<float>::quiet_NaN();
+    if (!std::isfinite(rotation)) fail(where + ".rotation must be a finite number (radians)");
+  }
+  if (ext.Has("texCoord")) {
+    const tinygltf::Value& v = ext.Get("texCoord");
+    const double set = v.IsNumber() ? v.GetNumberAsDouble() : -1.0;
+    if (!(set >= 0.0 && set <= 65535.0 && std::floor(set) == set)) {
+      fail(where + ".texCoord must be a TEXCOORD set index (an integer, at least 0)");
+    }
+    texcoord_set = static_cast<int>(set);
+  }
+  return texture_transform_matrix(offset, rotation, scale);
+}
+
 void GltfReader::convert_materials() {
   for (size_t i = 0; i < model_.materials.size(); ++i) {
     const tinygltf::Material& src = model_.materials[i];
@@ -730,14 +775,15 @@ void GltfReader::convert_materials() {
     m.specular = glm::mix(glm::vec3(0.04f), base, metallic);
     const float r4 = std::max(roughness * roughness * roughness * roughness, 1e-6f);
     m.shininess = std::clamp(2.0f / r4 - 2.0f, 1.0f, 1024.0f);
+    int set = 0;
     if (pbr.baseColorTexture.index >= 0) {
-      if (pbr.baseColorTexture.texCoord != 0) {
-        scene_warning(file_, name + ": baseColorTexture uses TEXCOORD_" +
-                                 str(pbr.baseColorTexture.texCoord) +
-                                 "; mobirt reads TEXCOORD_0 only");
-      }
+      const std::string info = name + ".pbrMetallicRoughness.baseColorTexture";
+      set = pbr.baseColorTexture.texCoord;
+      if (set < 0) fail(info + ".texCoord is " + str(set) + ": a TEXCOORD set index is at least 0");
+      m.texture_transform = texture_transform(pbr.baseColorTexture, info, set);
       m.texture = texture_for(pbr.baseColorTexture.index, name + ".baseColorTexture");
     }
+    texcoord_sets_.push_back(set);
     scene_.materials.push_back(m);
   }
 }
@@ -844,13 +890,15 @@ tinygltf::Model parse_gltf(const std::string& path) {
   if (!warn.empty()) scene_warning(path, library_message(warn));
   // A required extension changes what the file means: one mobirt does not read is an error.
   static const char* const kSupported[] = {"KHR_lights_punctual", "KHR_materials_transmission",
-                                           "KHR_materials_ior", "KHR_mesh_quantization"};
+                                           "KHR_materials_ior", "KHR_mesh_quantization",
+                                           "KHR_texture_transform"};
   for (size_t i = 0; i < model.extensionsRequired.size(); ++i) {
     const std::string& name = model.extensionsRequired[i];
     if (std::find(std::begin(kSupported), std::end(kSupported), name) == std::end(kSupported)) {
       throw input_error(path, "extensionsRequired[" + std::to_string(i) + "]: extension '" + name +
                                   "' is not supported (mobirt reads KHR_lights_punctual, "
-                                  "KHR_materials_transmission, KHR_materials_ior, KHR_mesh_quantization)");
+                                  "KHR_materials_transmission, KHR_materials_ior, KHR_mesh_quantization, "
+                                  "KHR_texture_transform)");
     }
   }
   return model;

@@ -28,7 +28,21 @@ struct Material {
   bool fresnel = true;
   float ambient = 0.1f;          // share of the diffuse colour lit by the ambient term
   int texture = -1;              // base-colour texture: index into Scene::textures, -1 = none
+  // KHR_texture_transform of the base-colour texture: uv' = (M * (u, v, 1)).xy, applied where
+  // hit decoding forms the texture coordinate (texture_transform_matrix(); identity without one).
+  glm::mat3 texture_transform{1.0f};
 };
+
+// KHR_texture_transform's M = T * R * S: scale, then rotate by `rotation` radians
+// counter-clockwise in uv space (v pointing down: u' = cos * u + sin * v, v' = -sin * u + cos * v,
+// the extension's rotation matrix as printed, which its example (offset [0, 1], rotation pi/2,
+// scale 0.5: "the lower left quadrant of the source image, rotated clockwise 90 degrees") and
+// Khronos' sample viewer follow), then offset.
+glm::mat3 texture_transform_matrix(glm::vec2 offset, float rotation, glm::vec2 scale);
+
+inline glm::vec2 transform_texcoord(const glm::mat3& transform, glm::vec2 uv) {
+  return glm::vec2(transform * glm::vec3(uv, 1.0f));
+}
 
 enum class TextureWrap { Repeat, ClampToEdge, MirroredRepeat };
 

@@ -36,7 +36,7 @@ TextureImage read_rgba8(OIIO::ImageInput& in, const std::string& what) {
                                          std::to_string(height) + ", " + std::to_string(channels) +
                                          " channels)");
   }
-  // 16384 x 16384 is far more than the atlas keeps (512 x 512): refuse absurd sizes before
+  // 16384 x 16384 is far more than the atlas keeps (2048 x 2048): refuse absurd sizes before
   // allocating for them.
   if (width > 16384 || height > 16384) {
     throw Error(ErrorKind::BadInput, what + ": " + std::to_string(width) + "x" + std::to_string(height) +

@@ -91,6 +91,16 @@ def full_scene():
                                   {"sampler": 1, "target": {"node": 1, "path": "rotation"}}]}])
     return g
 
+def texture_transform():
+    """full_scene with KHR_texture_transform on the base-colour texture reading TEXCOORD_1."""
+    g = full_scene()
+    uv1 = g.acc(f32(0, 1, 1, 1, 1, 0, 0, 0), 5126, 4, "VEC2")
+    g.j["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_1"] = uv1
+    g.j["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"] = {
+        "KHR_texture_transform": {"offset": [0, 1], "rotation": 1.5708, "scale": [0.5, 0.5], "texCoord": 1}}
+    g.j["extensionsUsed"].append("KHR_texture_transform")
+    return g
+
 def skinned_morph():
     """A skin with two joints, a morph target driven by a weights channel, a sparse accessor,
     a cubic-spline sampler."""
@@ -227,6 +237,7 @@ def main():
     write("gltf_fan_external_bin", b"0" + (lambda g: g.finish("b.bin") + b"\x00" + bytes(g.bin))(triangle(mode=6, indexed=True, uri=None)))
     write("gltf_full_scene", b"0" + full_scene().finish("data"))
     write("gltf_skin_morph_sparse", b"0" + skinned_morph().finish("data"))
+    write("gltf_texture_transform", b"0" + texture_transform().finish("data"))
     write("gltf_required_ext", b"0" + (lambda g: (g.j.update(extensionsRequired=["KHR_draco_mesh_compression"],
            extensionsUsed=["KHR_draco_mesh_compression"]), g.finish("data"))[1])(triangle()))
     write("glb_triangle", b"1" + glb(triangle(indexed=True)))

@@ -37,16 +37,16 @@ g = mc.full_scene(); g.j["images"][0] = {"uri": "missing.png"}; gltf("missing-te
 g = mc.full_scene(); v = g.view(b"RIFF\x1a\x00\x00\x00WEBPVP8 \x0e\x00\x00\x00" + bytes(14)); g.j["images"][0] = {"bufferView": v, "mimeType": "image/webp"}; gltf("webp-texture.gltf", g)
 g = mc.full_scene()
 mats = []; texs = []
-for i in range(17):
+for i in range(49):
     texs.append({"source": i}); mats.append({"pbrMetallicRoughness": {"baseColorTexture": {"index": i}}})
 png = mc.png_2x2()
-g.j["images"] = [{"bufferView": g.view(png + bytes([i])), "mimeType": "image/png"} for i in range(17)]
+g.j["images"] = [{"bufferView": g.view(png + bytes([i])), "mimeType": "image/png"} for i in range(49)]
 g.j["textures"] = texs; g.j["materials"] = mats
 prims = []
-for i in range(17):
+for i in range(49):
     p = dict(g.j["meshes"][0]["primitives"][0]); p["material"] = i; prims.append(p)
 g.j["meshes"][0]["primitives"] = prims
-gltf("17-textures.gltf", g)
+gltf("49-textures.gltf", g)
 g = mc.full_scene(); g.j["animations"][0]["samplers"][0]["input"] = g.acc(mc.f32(0, 2, 1), 5126, 3, "SCALAR", ([0], [2])); gltf("keys-not-increasing.gltf", g)
 g = mc.full_scene(); g.j["nodes"][0]["children"] = [0]; gltf("node-cycle.gltf", g)
 w("ok-triangle.gltf", mc.triangle().finish("data"))

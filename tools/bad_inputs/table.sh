@@ -43,7 +43,7 @@ row "animation key times not increasing" render $IN/keys-not-increasing.gltf -o 
 row "embedded texture that is not an image" render $IN/undecodable-texture.gltf -o $OUT/a.png
 row "embedded texture in an unsupported format (webp)" render $IN/webp-texture.gltf -o $OUT/a.png
 row "texture file missing" render $IN/missing-texture.gltf -o $OUT/a.png
-row "17 textures (more than the atlas' 16)" render $IN/17-textures.gltf -o $OUT/a.png
+row "49 textures (more than the atlas' 3 pages of 16)" render $IN/49-textures.gltf -o $OUT/a.png
 row "empty .obj" render $IN/empty.obj -o $OUT/a.png
 row ".obj with vertices but no faces" render $IN/no-faces.obj -o $OUT/a.png
 row ".obj face index out of range" render $IN/face-out-of-range.obj -o $OUT/a.png
