@@ -67,7 +67,18 @@ int data_index(float index) {
 // A textureBuffer, not a samplerBuffer: SPIR-V forbids a sampled image of a buffer (Mesa warns),
 // so the includer enables GL_EXT_samplerless_texture_functions for texelFetch on it.
 #define DATA_SAMPLER(slot, name) layout(set = 0, binding = slot) uniform textureBuffer name
-#elif !defined(MOBIRT_COMPUTE)  // prelude_compute.glsl: storage buffers
+#elif defined(MOBIRT_DATA_STORAGE_BUFFERS)
+// Data arrays as read-only storage buffers (the compute pass's default, trace_compute.comp, and
+// the fragment pass's --data storage-buffers, trace_storage_buffers.frag): element i of the array
+// is element i of its buffer, laid out (std430) byte for byte as the texel buffers are.
+#define DATA_TEXEL(data, index) data[data_index(index)]
+// Each array's element type, by the name traverse.glsl gives it.
+#define MOBIRT_ELEMENT_u_nodes vec4
+#define MOBIRT_ELEMENT_u_prim_list float
+#define MOBIRT_ELEMENT_u_triangles vec4
+#define DATA_SAMPLER(slot, name) \
+  layout(std430, set = 0, binding = slot) readonly buffer name##_data { MOBIRT_ELEMENT_##name name[]; }
+#else
 #define DATA_TEXEL(tex, index) texelFetch(tex, data_coord(index), 0)
 #endif
 #ifndef MOBIRT_COMPUTE  // a compute shader reads its ray and writes its result itself

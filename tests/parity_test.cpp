@@ -306,10 +306,10 @@ std::vector<ParityCase> parity_cases() {
 INSTANTIATE_TEST_SUITE_P(Scenes, CrossBackend, ::testing::ValuesIn(parity_cases()),
                          [](const ::testing::TestParamInfo<ParityCase>& p) { return case_name(p.param); });
 
-// ---- Vulkan: texel buffers against 2D images ---------------------------------------------------
+// ---- Vulkan: texel buffers against 2D images and storage buffers ------------------------------
 
-// --data texel-buffers and --data images run the same arithmetic on the same texels, so the
-// traversal pass must give the same packed texel ray by ray, and the frame the same image.
+// --data texel-buffers, images and storage-buffers run the same arithmetic on the same texels, so
+// the traversal pass must give the same packed texel ray by ray, and the frame the same image.
 class DataReadParity : public ::testing::TestWithParam<ParityCase> {
  protected:
   void SetUp() override { vulkan = make_backend(Api::Vulkan); }
@@ -332,16 +332,23 @@ TEST_P(DataReadParity, SameHitsAndShadowMasks) {
   const RayBatch rays = primary_rays(scene_camera(scene, c.width, c.height), c.width, c.height);
   Renderer buffers(*vulkan, with_data(settings, DataReads::TexelBuffers));
   Renderer images(*vulkan, with_data(settings, DataReads::Images));
-  ASSERT_TRUE(buffers.texel_buffers());
-  ASSERT_FALSE(images.texel_buffers());
+  Renderer storage(*vulkan, with_data(settings, DataReads::StorageBuffers));
+  ASSERT_EQ(buffers.data_kind(), TextureKind::TexelBuffer);
+  ASSERT_EQ(images.data_kind(), TextureKind::Image2D);
+  ASSERT_EQ(storage.data_kind(), TextureKind::StorageBuffer);
   const TraceResult a = buffers.trace(scene, tree, rays);
   const TraceResult b = images.trace(scene, tree, rays);
+  const TraceResult s = storage.trace(scene, tree, rays);
   ASSERT_EQ(a.packing, b.packing);
+  ASSERT_EQ(a.packing, s.packing);
   ASSERT_EQ(a.texels.size(), b.texels.size());
+  ASSERT_EQ(a.texels.size(), s.texels.size());
   size_t hits = 0, masked = 0;
   for (size_t i = 0; i < a.texels.size(); ++i) {
     ASSERT_EQ(a.texels[i], b.texels[i]) << "ray " << i << ": texel buffers " << std::hex << a.texels[i]
                                         << ", images " << b.texels[i];
+    ASSERT_EQ(a.texels[i], s.texels[i]) << "ray " << i << ": texel buffers " << std::hex << a.texels[i]
+                                        << ", storage buffers " << s.texels[i];
     const TraceTexel t = unpack_trace(a.packing, a.texels[i]);
     if (t.hit()) ++hits;
     if (t.hit() && t.mask != 0) ++masked;
@@ -360,10 +367,15 @@ TEST_P(DataReadParity, SameImage) {
   const Camera camera = scene_camera(scene, c.width, c.height);
   Renderer buffers(*vulkan, with_data(settings, DataReads::TexelBuffers));
   Renderer images(*vulkan, with_data(settings, DataReads::Images));
+  Renderer storage(*vulkan, with_data(settings, DataReads::StorageBuffers));
   const Image a = buffers.render(scene, camera);
   const Image b = images.render(scene, camera);
+  const Image s = storage.render(scene, camera);
   const ImageDiff d = compare_images(a, b, 0.0f);
-  EXPECT_EQ(d.max_error, 0.0) << "PSNR " << d.psnr << " dB, " << 100.0 * d.share_over << "% of pixels differ";
+  EXPECT_EQ(d.max_error, 0.0) << "images: PSNR " << d.psnr << " dB, " << 100.0 * d.share_over << "% of pixels differ";
+  const ImageDiff ds = compare_images(a, s, 0.0f);
+  EXPECT_EQ(ds.max_error, 0.0) << "storage buffers: PSNR " << ds.psnr << " dB, " << 100.0 * ds.share_over
+                               << "% of pixels differ";
 }
 
 INSTANTIATE_TEST_SUITE_P(Scenes, DataReadParity,

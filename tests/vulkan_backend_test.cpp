@@ -268,6 +268,41 @@ TEST_F(VulkanBackendTest, TexelBufferTraversalKeepsTheConstraints) {
   EXPECT_TRUE(es2_constraints_broken(shader_source(ShaderId::TraverseTexelBuffers).spirv).empty());
 }
 
+// --data storage-buffers: the one rule it breaks is named (reading storage buffers), it writes
+// none, and it is accepted only by a pass whose description binds storage buffers there.
+TEST_F(VulkanBackendTest, StorageBufferTraversalBreaksOnlyTheNamedRule) {
+  const std::span<const uint32_t> spirv = shader_source(ShaderId::TraverseStorageBuffers).spirv;
+  const ShaderInterface s = reflect_spirv(spirv);
+  ASSERT_TRUE(s.valid);
+  EXPECT_EQ(s.storage_resources, 3);  // nodes, primitive list, triangles
+  EXPECT_EQ(s.storage_writes, 0);
+  EXPECT_EQ(s.sampled_textures, 2);   // the two ray images
+  EXPECT_EQ(es2_constraints_broken(spirv), std::vector<std::string>{kEs2StorageReads});
+  EXPECT_NO_THROW(check_es2_constraints("trace_storage_buffers.frag", spirv, true));
+  try {
+    check_es2_constraints("trace_storage_buffers.frag", spirv);
+    ADD_FAILURE() << "storage reads accepted without the pass declaring them";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::Constraint);
+    EXPECT_NE(std::string(e.what()).find("reads storage buffers"), std::string::npos) << e.what();
+  }
+  // A pass that declares images at those bindings is refused before any Vulkan object exists.
+  PassDesc desc;
+  desc.shader = ShaderId::TraverseStorageBuffers;
+  desc.texture_bindings = {MOBIRT_BIND_NODES, MOBIRT_BIND_PRIM_LIST, MOBIRT_BIND_TRIANGLES,
+                           MOBIRT_BIND_RAY_ORIGIN, MOBIRT_BIND_RAY_DIRECTION};
+  EXPECT_THROW(backend->create_pass(desc), Error);
+  // Declared as storage buffers, the pass is made.
+  desc.uniform_vec4s = MOBIRT_TP_LIGHTS;
+  desc.texture_kinds = {TextureKind::StorageBuffer, TextureKind::StorageBuffer, TextureKind::StorageBuffer,
+                        TextureKind::Image2D, TextureKind::Image2D};
+  const PassHandle pass = backend->create_pass(desc);
+  backend->destroy(pass);
+  // Storage-buffer writes stay refused whatever the pass declares.
+  EXPECT_THROW(check_es2_constraints("texel_buffer_store.frag", test_shader(TestShader::TexelBufferStore).spirv, true),
+               Error);
+}
+
 TEST_F(VulkanBackendTest, TexelBuffersRefuseBadUse) {
   EXPECT_TRUE(backend->device_info().texel_buffers);
   try {

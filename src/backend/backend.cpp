@@ -49,8 +49,21 @@ void check_pass_desc(const PassDesc& desc) {
   }
 }
 
+const char* texture_kind_name(TextureKind kind) {
+  switch (kind) {
+    case TextureKind::Image2D: return "2D image";
+    case TextureKind::TexelBuffer: return "texel buffer";
+    case TextureKind::StorageBuffer: return "storage buffer";
+  }
+  return "texture";
+}
+
 TextureHandle Backend::create_texel_buffer(uint32_t, TexelFormat) {
   throw Error(ErrorKind::Unsupported, "this backend has no texel buffers (OpenGL ES 2.0): use --data images");
+}
+
+TextureHandle Backend::create_storage_buffer(uint32_t, TexelFormat) {
+  throw Error(ErrorKind::Unsupported, "this backend has no storage buffers (OpenGL ES 2.0): use --data images");
 }
 
 void check_run_pass_arguments(const PassDesc& desc, size_t textures, size_t uniform_floats, uint32_t width,

@@ -29,8 +29,11 @@ size_t texel_bytes(TexelFormat format);
 
 // How a pass reads a data texture: a 2D image (texelFetch / texture2D, both APIs) or a uniform
 // texel buffer (Vulkan only: samplerBuffer, no mip-level path in llvmpipe's fetch). Either one is
-// still one of the 8 sampled-texture slots of the ES 2.0 model.
-enum class TextureKind { Image2D, TexelBuffer };
+// still one of the 8 sampled-texture slots of the ES 2.0 model. Or a read-only storage buffer
+// (Vulkan only, the traversal pass's --data storage-buffers): a measurement variant that breaks the
+// model (OpenGL ES 2.0 has no storage buffers) and is allowed to only because its pass declares it.
+enum class TextureKind { Image2D, TexelBuffer, StorageBuffer };
+const char* texture_kind_name(TextureKind kind);  // "2D image", "texel buffer", "storage buffer"
 
 // A fragment shader as built into the binary: SPIR-V for Vulkan and GLSL ES 1.00 for OpenGL ES 2.0,
 // both generated from glsl/ at build time. Every shader is one line of the shader list in
@@ -95,6 +98,8 @@ struct DeviceInfo {
   bool ray_query = false;
   // Uniform texel buffers (Backend::create_texel_buffer): Vulkan, never OpenGL ES 2.0.
   bool texel_buffers = false;
+  // Read-only storage buffers (Backend::create_storage_buffer): Vulkan, never OpenGL ES 2.0.
+  bool storage_buffers = false;
   std::vector<std::string> limits;  // "name: value" lines that matter to mobirt
 };
 
@@ -110,6 +115,9 @@ class Backend {
   // (DeviceInfo::texel_buffers); upload() and destroy() take it like a texture. Error(Unsupported) by
   // default, Error(BadInput) above the device's maxTexelBufferElements.
   virtual TextureHandle create_texel_buffer(uint32_t texels, TexelFormat format);
+  // A read-only storage buffer of `texels` texels (std430 arrays of the format's element), read by a
+  // pass whose binding is TextureKind::StorageBuffer; otherwise as create_texel_buffer().
+  virtual TextureHandle create_storage_buffer(uint32_t texels, TexelFormat format);
   virtual void upload(TextureHandle texture, const void* data, size_t bytes) = 0;
   virtual void destroy(TextureHandle texture) = 0;
 

@@ -123,8 +123,10 @@ std::vector<std::string> es2_constraints_broken(std::span<const uint32_t> words)
     broken.push_back("writes " + std::to_string(s.color_outputs) +
                      " colour attachments; a pass writes exactly one RGBA8 texel");
   }
-  if (s.storage_resources > 0 || s.storage_writes > 0) {
+  if (s.storage_writes > 0) {
     broken.push_back("uses storage buffers, storage images or atomics; passes may only write their colour attachment");
+  } else if (s.storage_resources > 0) {
+    broken.push_back(kEs2StorageReads);
   }
   if (s.sampled_textures > MOBIRT_MAX_SAMPLED_TEXTURES) {
     broken.push_back("samples " + std::to_string(s.sampled_textures) + " textures; at most " +
@@ -140,11 +142,10 @@ std::vector<std::string> es2_constraints_broken(std::span<const uint32_t> words)
   return broken;
 }
 
-void check_es2_constraints(const std::string& shader, std::span<const uint32_t> words) {
-  const std::vector<std::string> broken = es2_constraints_broken(words);
-  if (!broken.empty()) {
-    throw Error(ErrorKind::Constraint, "shader " + shader + ": " + broken.front() +
-                                           " (OpenGL ES 2.0 constraint mirrored by mobirt)");
+void check_es2_constraints(const std::string& shader, std::span<const uint32_t> words, bool allow_storage_reads) {
+  for (const std::string& rule : es2_constraints_broken(words)) {
+    if (allow_storage_reads && rule == kEs2StorageReads) continue;
+    throw Error(ErrorKind::Constraint, "shader " + shader + ": " + rule + " (OpenGL ES 2.0 constraint mirrored by mobirt)");
   }
 }
 

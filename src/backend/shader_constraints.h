@@ -30,7 +30,14 @@ ShaderInterface reflect_spirv(std::span<const uint32_t> words);
 // purpose and print this list rather than skip the check.
 std::vector<std::string> es2_constraints_broken(std::span<const uint32_t> words);
 
-// Throws Error(Constraint) naming the shader and the first broken rule.
-void check_es2_constraints(const std::string& shader, std::span<const uint32_t> words);
+// The rule a pass that only reads storage buffers breaks (the --data storage-buffers measurement
+// variant of the traversal pass): OpenGL ES 2.0 has no storage buffers at all.
+inline constexpr const char* kEs2StorageReads =
+    "reads storage buffers; OpenGL ES 2.0 has none, the scene reaches a pass as textures";
+
+// Throws Error(Constraint) naming the shader and the first broken rule. allow_storage_reads: a
+// pass whose description binds storage buffers may read them (kEs2StorageReads), never write.
+void check_es2_constraints(const std::string& shader, std::span<const uint32_t> words,
+                           bool allow_storage_reads = false);
 
 }  // namespace mobirt

@@ -177,9 +177,9 @@ class Renderer::Engine final : public WhittedEngine {
 Renderer::Renderer(Backend& backend, const RenderSettings& settings)
     : backend_(backend), settings_(settings), data_(std::make_unique<Data>()),
       engine_(std::make_unique<Engine>(*this)) {
-  if (settings_.data == DataReads::TexelBuffers && backend_.device_info().texel_buffers) {
-    data_kind_ = TextureKind::TexelBuffer;
-  }
+  const DeviceInfo info = backend_.device_info();
+  if (settings_.data == DataReads::TexelBuffers && info.texel_buffers) data_kind_ = TextureKind::TexelBuffer;
+  if (settings_.data == DataReads::StorageBuffers && info.storage_buffers) data_kind_ = TextureKind::StorageBuffer;
   if (settings_.stack_depth < 0 || settings_.stack_depth > MOBIRT_MAX_STACK_DEPTH) {
     throw Error(ErrorKind::BadInput, "--stack " + std::to_string(settings_.stack_depth) +
                                          ": the short stack holds 0 to " +
@@ -210,9 +210,12 @@ TextureHandle Renderer::ensure_texture(TextureHandle& handle, uint32_t& capacity
   if (handle) backend_.destroy(handle);
   // Grow with headroom so that an animation whose tree changes size does not reallocate often.
   const uint32_t grown = std::max(rows, capacity_rows + capacity_rows / 2);
-  // A texel buffer holds the same rows end to end: DATA_TEXEL's index is the texel's.
-  handle = kind == TextureKind::TexelBuffer ? backend_.create_texel_buffer(width * grown, format)
-                                            : backend_.create_texture(width, grown, format);
+  // A buffer holds the same rows end to end: DATA_TEXEL's index is the texel's.
+  switch (kind) {
+    case TextureKind::TexelBuffer: handle = backend_.create_texel_buffer(width * grown, format); break;
+    case TextureKind::StorageBuffer: handle = backend_.create_storage_buffer(width * grown, format); break;
+    case TextureKind::Image2D: handle = backend_.create_texture(width, grown, format); break;
+  }
   capacity_rows = grown;
   return handle;
 }
@@ -222,7 +225,9 @@ PassHandle Renderer::trace_pass(int lights, Packing packing) {
   auto it = data_->trace_passes.find(key);
   if (it != data_->trace_passes.end()) return it->second;
   PassDesc desc;
-  desc.shader = texel_buffers() ? ShaderId::TraverseTexelBuffers : ShaderId::Traverse;
+  desc.shader = data_kind_ == TextureKind::TexelBuffer     ? ShaderId::TraverseTexelBuffers
+                : data_kind_ == TextureKind::StorageBuffer ? ShaderId::TraverseStorageBuffers
+                                                           : ShaderId::Traverse;
   desc.specialization = {{MOBIRT_SPEC_LIGHT_COUNT, lights},
                          {MOBIRT_SPEC_STACK_DEPTH, settings_.stack_depth},
                          {MOBIRT_SPEC_MAX_STEPS, settings_.max_steps},

@@ -25,7 +25,9 @@ namespace mobirt {
 
 // How the traversal pass reads the scene data (nodes, primitive lists, triangles): uniform texel
 // buffers where the backend has them (Vulkan), else 2D images; images always on OpenGL ES 2.0.
-enum class DataReads { TexelBuffers, Images };
+// StorageBuffers (Vulkan; else images): read-only storage buffers, a measurement variant that
+// breaks the ES 2.0 model by name (shader_constraints.h: kEs2StorageReads).
+enum class DataReads { TexelBuffers, Images, StorageBuffers };
 
 struct RenderSettings {
   int width = 400;
@@ -94,7 +96,8 @@ class Renderer {
   // For an engine that shades with this renderer: throws Error(Internal) naming `who` unless the
   // frame's colour depth and specialisation are the ones this renderer's passes were made for.
   void check_shades_like(const RenderSettings& frame, const char* who) const;
-  // Whether the traversal pass reads the scene data from texel buffers (settings.data and the backend).
+  // How the traversal pass reads the scene data (settings.data and what the backend has).
+  TextureKind data_kind() const { return data_kind_; }
   bool texel_buffers() const { return data_kind_ == TextureKind::TexelBuffer; }
 
  private:

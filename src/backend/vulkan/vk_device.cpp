@@ -312,6 +312,7 @@ DeviceInfo Device::info() const {
   info.driver_version = driver_version_;
   info.ray_query = ray_query_;
   info.texel_buffers = true;  // uniform texel buffers of RGBA32F and R32F are core Vulkan 1.0
+  info.storage_buffers = true;  // and storage buffers, read from a fragment shader
   info.is_software = properties_.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
   const VkPhysicalDeviceLimits& l = properties_.limits;
   auto add = [&](const char* name, const std::string& value) { info.limits.push_back(std::string(name) + ": " + value); };

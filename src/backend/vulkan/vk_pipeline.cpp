@@ -255,12 +255,16 @@ Pass Pipelines::create_pass(const PassDesc& desc) const {
   if (desc.uniform_vec4s > 0) {
     bindings.push_back({MOBIRT_BIND_TRACE_PARAMS, VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr});
   }
-  uint32_t images = 0, texel_buffers = 0;
+  uint32_t images = 0, texel_buffers = 0, storage_buffers = 0;
   for (size_t i = 0; i < desc.texture_bindings.size(); ++i) {
     if (desc.kind(i) == TextureKind::TexelBuffer) {
       bindings.push_back({desc.texture_bindings[i], VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, 1,
                           VK_SHADER_STAGE_FRAGMENT_BIT, nullptr});
       ++texel_buffers;
+    } else if (desc.kind(i) == TextureKind::StorageBuffer) {
+      bindings.push_back({desc.texture_bindings[i], VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1,
+                          VK_SHADER_STAGE_FRAGMENT_BIT, nullptr});
+      ++storage_buffers;
     } else {
       bindings.push_back({desc.texture_bindings[i], VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1,
                           VK_SHADER_STAGE_FRAGMENT_BIT, &immutable_sampler});
@@ -296,6 +300,7 @@ Pass Pipelines::create_pass(const PassDesc& desc) const {
     if (desc.uniform_vec4s > 0) sizes.push_back({VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1});
     if (images > 0) sizes.push_back({VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, images});
     if (texel_buffers > 0) sizes.push_back({VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, texel_buffers});
+    if (storage_buffers > 0) sizes.push_back({VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, storage_buffers});
     VkDescriptorPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
     pool_info.maxSets = 1;
     pool_info.poolSizeCount = uint32_t(sizes.size());

@@ -158,4 +158,12 @@ TexelBuffer create_texel_buffer(const Device& device, uint32_t texels, VkFormat 
   return result;
 }
 
+TexelBuffer create_storage_buffer(const Device& device, uint32_t texels, size_t texel_bytes) {
+  TexelBuffer result;
+  create_bound_buffer(device, VkDeviceSize(texels) * texel_bytes,
+                      VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT, 0,
+                      VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT, result.buffer, result.memory, nullptr);
+  return result;
+}
+
 }  // namespace mobirt::vk

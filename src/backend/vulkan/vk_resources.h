@@ -38,7 +38,8 @@ struct DeviceImage {
   void reset();
 };
 
-// A device-local buffer with a texel view of it: a uniform texel buffer (samplerBuffer).
+// A device-local buffer with a texel view of it: a uniform texel buffer (samplerBuffer); without
+// the view, a read-only storage buffer.
 struct TexelBuffer {
   Memory memory;
   Buffer buffer;
@@ -83,5 +84,6 @@ DeviceImage create_image(const Device& device, uint32_t width, uint32_t height, 
 // A device-local uniform texel buffer of `texels` texels of `format` (also a transfer destination),
 // with its view.
 TexelBuffer create_texel_buffer(const Device& device, uint32_t texels, VkFormat format, size_t texel_bytes);
+TexelBuffer create_storage_buffer(const Device& device, uint32_t texels, size_t texel_bytes);
 
 }  // namespace mobirt::vk

@@ -45,7 +45,8 @@ class Impl {
 
   DeviceInfo device_info() const { return device_.info(); }
   TextureHandle create_texture(uint32_t width, uint32_t height, TexelFormat format);
-  TextureHandle create_texel_buffer(uint32_t texels, TexelFormat format);
+  // A uniform texel buffer or a read-only storage buffer (kind).
+  TextureHandle create_buffer(uint32_t texels, TexelFormat format, TextureKind kind);
   void upload(TextureHandle texture, const void* data, size_t bytes);
   void destroy(TextureHandle texture);
   PassHandle create_pass(const PassDesc& desc);
@@ -268,24 +269,32 @@ TextureHandle Impl::keep(vk::Texture texture) {
   return TextureHandle{id};
 }
 
-TextureHandle Impl::create_texel_buffer(uint32_t texels, TexelFormat format) {
+TextureHandle Impl::create_buffer(uint32_t texels, TexelFormat format, TextureKind kind) {
   usable();
-  if (texels == 0) throw Error(ErrorKind::Internal, "create_texel_buffer: empty texel buffer");
+  const bool storage = kind == TextureKind::StorageBuffer;
+  const char* what = storage ? "storage buffer" : "texel buffer";
+  if (texels == 0) throw Error(ErrorKind::Internal, std::string("create_buffer: empty ") + what);
   // The shaders turn indices into ints with a bit trick that holds below 2^23 (prelude_vk.glsl's
   // data_index), so that is a limit too.
-  const uint32_t limit = std::min(device_.properties().limits.maxTexelBufferElements, uint32_t(1) << 23);
+  const VkPhysicalDeviceLimits& l = device_.properties().limits;
+  const uint32_t device_limit =
+      storage ? uint32_t(std::min<uint64_t>(l.maxStorageBufferRange / texel_bytes(format), UINT32_MAX))
+              : l.maxTexelBufferElements;
+  const uint32_t limit = std::min(device_limit, uint32_t(1) << 23);
   if (texels > limit) {
-    throw Error(ErrorKind::BadInput, "a texel buffer of " + std::to_string(texels) + " " + vk::format_name(format) +
-                                         " texels exceeds the limit of " + std::to_string(limit) +
-                                         " (maxTexelBufferElements, at most 2^23)"
-                                         "): render with --data images");
+    throw Error(ErrorKind::BadInput, std::string("a ") + what + " of " + std::to_string(texels) + " " +
+                                         vk::format_name(format) + " texels exceeds the limit of " +
+                                         std::to_string(limit) +
+                                         (storage ? " (maxStorageBufferRange" : " (maxTexelBufferElements") +
+                                         ", at most 2^23): render with --data images");
   }
   vk::Texture texture;
   texture.width = texels;
   texture.height = 1;
   texture.format = format;
-  texture.kind = TextureKind::TexelBuffer;
-  texture.buffer = vk::create_texel_buffer(device_, texels, vk::vk_format(format), texel_bytes(format));
+  texture.kind = kind;
+  texture.buffer = storage ? vk::create_storage_buffer(device_, texels, texel_bytes(format))
+                           : vk::create_texel_buffer(device_, texels, vk::vk_format(format), texel_bytes(format));
   return keep(std::move(texture));
 }
 
@@ -334,7 +343,7 @@ void Impl::upload(TextureHandle handle, const void* data, size_t bytes) {
   }
   if (bytes == 0) return;
   if (!data) throw Error(ErrorKind::Internal, "upload: no data");
-  if (texture.kind == TextureKind::TexelBuffer) return upload_buffer(texture, data, bytes);
+  if (texture.kind != TextureKind::Image2D) return upload_buffer(texture, data, bytes);
   const auto start = Clock::now();
 
   // Whole rows, then the partial last row, in chunks that fit the reusable staging buffer.
@@ -401,7 +410,11 @@ void Impl::destroy(TextureHandle handle) {
 PassHandle Impl::create_pass(const PassDesc& desc) {
   // The OpenGL ES 2.0 constraints come first: a pass that breaks one is refused before any
   // Vulkan object exists.
-  check_es2_constraints(desc.shader.name(), desc.shader.source().spirv);
+  // A pass whose description binds storage buffers may read them (the --data storage-buffers
+  // measurement variant), and nothing else is waived.
+  const bool storage_reads = std::any_of(desc.texture_kinds.begin(), desc.texture_kinds.end(),
+                                         [](TextureKind k) { return k == TextureKind::StorageBuffer; });
+  check_es2_constraints(desc.shader.name(), desc.shader.source().spirv, storage_reads);
   usable();
   check_pass_desc(desc);
   vk::Pass pass = pipelines_.create_pass(desc);
@@ -441,13 +454,14 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
   if (!bound.empty()) {
     std::vector<VkDescriptorImageInfo> image_infos(bound.size());
     std::vector<VkBufferView> buffer_views(bound.size());
+    std::vector<VkDescriptorBufferInfo> buffer_infos(bound.size());
     std::vector<VkWriteDescriptorSet> writes(bound.size());
     for (size_t i = 0; i < bound.size(); ++i) {
       const TextureKind kind = pass.desc.kind(i);
       if (bound[i]->kind != kind) {
         throw Error(ErrorKind::Internal, "pass " + name + ": texture " + std::to_string(i) + " is a " +
-                                             (bound[i]->kind == TextureKind::TexelBuffer ? "texel buffer" : "2D image") +
-                                             " where the pass reads the other kind");
+                                             texture_kind_name(bound[i]->kind) + " where the pass reads a " +
+                                             texture_kind_name(kind));
       }
       writes[i] = {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
       writes[i].dstSet = pass.descriptor_set;
@@ -457,6 +471,10 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
         buffer_views[i] = bound[i]->buffer.view.get();
         writes[i].descriptorType = VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER;
         writes[i].pTexelBufferView = &buffer_views[i];
+      } else if (kind == TextureKind::StorageBuffer) {
+        buffer_infos[i] = {bound[i]->buffer.buffer.get(), 0, VK_WHOLE_SIZE};
+        writes[i].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+        writes[i].pBufferInfo = &buffer_infos[i];
       } else {
         image_infos[i] = {VK_NULL_HANDLE, bound[i]->image.view.get(), VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
         writes[i].descriptorType = VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
@@ -577,7 +595,10 @@ class VulkanBackend final : public Backend {
     return impl_->create_texture(width, height, format);
   }
   TextureHandle create_texel_buffer(uint32_t texels, TexelFormat format) override {
-    return impl_->create_texel_buffer(texels, format);
+    return impl_->create_buffer(texels, format, TextureKind::TexelBuffer);
+  }
+  TextureHandle create_storage_buffer(uint32_t texels, TexelFormat format) override {
+    return impl_->create_buffer(texels, format, TextureKind::StorageBuffer);
   }
   void upload(TextureHandle texture, const void* data, size_t bytes) override { impl_->upload(texture, data, bytes); }
   void destroy(TextureHandle texture) override { impl_->destroy(texture); }

@@ -1,0 +1,9 @@
+#version 450
+#extension GL_GOOGLE_include_directive : require
+// The traversal pass (Vulkan) reading nodes, primitive lists and triangles from read-only storage
+// buffers (--data storage-buffers): trace.frag with the prelude's storage-buffer DATA_TEXEL, to
+// measure against texel buffers and images. OpenGL ES 2.0 has no storage buffers: the constraint
+// checker names what this pass breaks, and only this pass is allowed to break it.
+#define MOBIRT_DATA_STORAGE_BUFFERS
+#include "prelude_vk.glsl"
+#include "trace_main.glsl"
