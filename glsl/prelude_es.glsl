@@ -39,6 +39,9 @@ precision highp sampler2D;
 #ifndef COLOUR
 #define COLOUR MOBIRT_COLOUR_8
 #endif
+#ifndef ANALYTIC
+#define ANALYTIC 0
+#endif
 
 #define PRECISE
 #include "precision.glsl"

@@ -107,6 +107,7 @@ int cmd_accuracy(const std::vector<std::string>& args) {
 
   LoadOptions load_options;
   load_options.mtl = common.mtl;
+  load_options.analytic = common.analytic;
   const AnimatedScene animation = load_animated_scene(scene_path, load_options);
   apply_file_image_size(animation, common.size_given, settings);
   PosedScene posed(animation, common.edits, settings.width, settings.height);
@@ -130,7 +131,7 @@ int cmd_accuracy(const std::vector<std::string>& args) {
   const double frame_min_ms = times.front();
 
   // The GPU's primary hits and shadow masks: the traversal pass over the primary rays.
-  const FlatKdTree tree = build_kdtree(scene.mesh.positions, settings.kd);
+  const FlatKdTree tree = build_kdtree(scene.mesh.positions, scene.shapes, settings.kd);
   const RayBatch primary = primary_rays(view, settings.width, settings.height);
   const TraceResult traced = renderer.trace(scene, tree, primary);
   const std::span<const Light> shadow_lights =

@@ -31,6 +31,7 @@
 #include "render/whitted.h"
 #include "scene/animation.h"
 #include "scene/overrides.h"
+#include "scene/tessellate.h"
 
 namespace mobirt {
 namespace {
@@ -183,6 +184,7 @@ struct BenchOptions {
   unsigned threads = 0;
   bool baseline = true;
   bool cpu = true;
+  bool analytic = true;  // --primitives
   std::vector<std::string> backends = {"vulkan", "gles"};
   VulkanOptions backend_options;  // the pipeline cache is Vulkan's
   RenderSettings settings;  // kd, stack, max_steps
@@ -242,12 +244,20 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, RayQueryPeer* peer, con
   Samples emb, cpu, rqs;
   const double fps = animation.fps() > 0 ? animation.fps() : 24.0;
   KdBuildStats kd_stats;
+  // Embree and the driver's ray queries take triangles only: they get the analytic shapes
+  // tessellated (the triangles --primitives tessellated loads), made outside the timed frames.
+  std::optional<Scene> tessellated;
   for (int f = 0; f < o.warmup + o.frames; ++f) {
     const bool timed = f >= o.warmup;
     const double t = double(f) / fps;
     auto start = std::chrono::steady_clock::now();
     const Camera view = posed.at(t);
     const double animate_ms = elapsed_ms(start);
+    if (!scene.shapes.empty() && (ray_query || embree) && (!tessellated || animation.animated())) {
+      tessellated = scene;
+      tessellate_shapes(*tessellated);
+    }
+    const Scene& triangles_only = tessellated ? *tessellated : scene;
 
     for (size_t c = 0; c < columns.size(); ++c) {
       FrameTimings ft;
@@ -257,14 +267,14 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, RayQueryPeer* peer, con
     }
     if (ray_query) {
       FrameTimings ft;
-      render_whitted(scene, view, settings, *ray_query, &ft);
+      render_whitted(triangles_only, view, settings, *ray_query, &ft);
       check_messages(peer->rq->take_debug_messages());
       check_messages(peer->shading->take_debug_messages());
       if (timed) add_frame(rqs, animate_ms, ft);
     }
     if (embree) {
       FrameTimings ct;
-      render_whitted_cpu(scene, view, settings, *embree, o.threads, &ct);
+      render_whitted_cpu(triangles_only, view, settings, *embree, o.threads, &ct);
       if (timed) add_frame(emb, animate_ms, ct);
     }
     if (kd) {
@@ -284,6 +294,7 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, RayQueryPeer* peer, con
   cell["depth"] = level.depth;
   cell["shadows"] = level.shadows;
   cell["triangles"] = scene.mesh.triangle_count();
+  cell["shapes"] = scene.shapes.size();
   cell["lights"] = scene.lights.size();
   cell["animated"] = animation.animated();
   const double paper = bs.paper[&level - kLevels];
@@ -531,6 +542,7 @@ int cmd_bench(const std::vector<std::string>& args) {
   if (!cl.parse(args)) return 0;
   const std::vector<std::string>& paths = cl.positionals();
   o.settings = common.settings;  // each cell sets its size, depth, shadows and rebuilds
+  o.analytic = common.analytic;
   o.backend_options = common.backend;
   if (o.threads == 0) o.threads = std::max(1u, std::thread::hardware_concurrency());
   if (scenes_dir.empty()) scenes_dir = default_scenes_dir();
@@ -618,6 +630,7 @@ int cmd_bench(const std::vector<std::string>& args) {
   for (const BenchScene& bs : list) {
     LoadOptions load;
     load.mtl = bs.mtl;
+    load.analytic = o.analytic;
     const AnimatedScene animation = load_animated_scene(bs.path, load);
     for (int k : o.levels) {
       cells.push_back(run_cell(columns, peer ? &*peer : nullptr, bs, animation, kLevels[k], o));

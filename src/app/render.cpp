@@ -260,6 +260,7 @@ int cmd_render(const std::vector<std::string>& args) {
 
   LoadOptions load_options;
   load_options.mtl = common.mtl;
+  load_options.analytic = common.analytic;
   if (fps) load_options.fps = *fps;
   const AnimatedScene animation = load_animated_scene(scene_path, load_options);
   const double frame_rate = fps ? *fps : animation.fps();
