@@ -213,7 +213,7 @@ float intersect_cone(const glm::vec4* texels, const glm::vec3& o, const glm::vec
 template <class R>
 bool intersect_shape(const glm::vec4* texels, int32_t prim, const Ray& ray, Hit& hit) {
   const glm::vec3 o = R::r(ray.origin), d = R::r(ray.direction);
-  const float t = texels[0][MOBIRT_PRIM_KIND] == float(MOBIRT_PRIM_SPHERE)
+  const float t = triangle_texel::kind(texels) == float(MOBIRT_PRIM_SPHERE)
                       ? intersect_sphere<R>(texels, o, d, ray.tmin, ray.tmax)
                       : intersect_cone<R>(texels, o, d, ray.tmin, ray.tmax);
   // The shader's "t >= 0" hit test; the texture coordinates come from the surface (hits.cpp).
@@ -223,7 +223,7 @@ bool intersect_shape(const glm::vec4* texels, int32_t prim, const Ray& ray, Hit&
 }  // namespace
 
 bool is_analytic(const FlatKdTree& tree, int32_t prim) {
-  return triangle_texel::of(tree.triangles, prim)[0][MOBIRT_PRIM_KIND] != float(MOBIRT_PRIM_TRIANGLE);
+  return triangle_texel::kind(triangle_texel::of(tree.triangles, prim)) != float(MOBIRT_PRIM_TRIANGLE);
 }
 
 bool intersect_primitive(const FlatKdTree& tree, int32_t prim, const Ray& ray, Hit& hit, const RayTest& test) {
@@ -236,7 +236,7 @@ bool intersect_primitive(const FlatKdTree& tree, int32_t prim, const Ray& ray, H
 glm::vec3 analytic_normal(const FlatKdTree& tree, int32_t prim, const glm::vec3& p) {
   const glm::vec4* t = triangle_texel::of(tree.triangles, prim);
   const glm::vec3 w = p - glm::vec3(t[0]);
-  if (t[0][MOBIRT_PRIM_KIND] == float(MOBIRT_PRIM_SPHERE)) return w;
+  if (triangle_texel::kind(t) == float(MOBIRT_PRIM_SPHERE)) return w;
   const glm::vec3 k(t[1]);
   const glm::vec3 radial = w - glm::dot(w, k) * k;
   return radial - (t[2].y * glm::length(radial)) * k;

@@ -184,6 +184,7 @@ int cmd_accuracy(const std::vector<std::string>& args) {
   j["scene"] = scene_path;
   j["size"] = std::to_string(settings.width) + "x" + std::to_string(settings.height);
   j["triangles"] = scene.mesh.triangle_count();
+  j["shapes"] = scene.shapes.size();
   j["lights"] = scene.lights.size();
   j["device"] = backend->device_info().device;
   j["settings"] = {{"depth", settings.depth},
@@ -210,9 +211,9 @@ int cmd_accuracy(const std::vector<std::string>& args) {
   j["frame_min_ms"] = frame_min_ms;
   j["reference_ms"] = ref.elapsed_ms;
 
-  std::printf("%s: %zu triangles, %zu lights, %dx%d, depth %d on %s\n", scene_path.c_str(),
-              scene.mesh.triangle_count(), scene.lights.size(), settings.width, settings.height, settings.depth,
-              backend->device_info().device.c_str());
+  std::printf("%s: %zu triangles, %zu shapes, %zu lights, %dx%d, depth %d on %s\n", scene_path.c_str(),
+              scene.mesh.triangle_count(), scene.shapes.size(), scene.lights.size(), settings.width, settings.height,
+              settings.depth, backend->device_info().device.c_str());
   std::printf("psnr             %8.2f dB\n", diff.psnr);
   std::printf("max error        %8.4f   (%.1f/255)\n", diff.max_error, diff.max_error * 255.0);
   std::printf("pixels > 2/255   %8.4f %%\n", 100.0 * diff.share_over);

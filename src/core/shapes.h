@@ -52,6 +52,7 @@ ConeFrame<T> cone_frame(const Shape& s) {
 }
 
 // The shape's MOBIRT_TEXELS_PER_TRIANGLE texels in the primitive array (glsl/layout.h).
+static_assert(MOBIRT_PRIM_KIND == 3, "the kind is the w of the first texel");
 inline void shape_texels(const Shape& s, glm::vec4* out) {
   if (s.kind == ShapeKind::Sphere) {
     out[0] = glm::vec4(s.base, float(MOBIRT_PRIM_SPHERE));
