@@ -130,7 +130,7 @@ float first_root(float a, float b, float c, float disc, float tmin, float tmax, 
 }
 
 // A sphere: |o + t d - c|^2 = r^2 with the discriminant in the form of Haines et al. (Ray Tracing
-// Gems, ch. 7), r^2 - |f - (b / a) d|^2 with f = o - c, which stays exact for distant spheres.
+// Gems, ch. 7), r^2 - |f - (b / a) d|^2 with f = o - c, which stays accurate for distant spheres.
 float intersect_sphere(vec4 t0, vec4 t1, vec3 o, vec3 d, float tmin, float tmax) {
   vec3 f = mp(o - mp(t0.xyz));
   float r = mp(t1.x);
