@@ -230,6 +230,31 @@ TEST_P(ShapesOnGpu, TraversalPassHitsWhereTheAnalyticAnswerSays) {
   }
 }
 
+// Every precision and test the pass is specialised to traces the shapes as the CPU mirror does,
+// operation for operation (mediump: each intermediate rounded to fp16 on both).
+TEST_P(ShapesOnGpu, TraversalPassMatchesTheCpuMirrorUnderEveryRayTest) {
+  const Scene s = test::shapes_scene();
+  const FlatKdTree tree = build_kdtree(s.mesh.positions, s.shapes);
+  const RayBatch rays = primary_rays(*s.camera, 96, 64);
+  for (const RayTest test : {RayTest{}, RayTest{IntersectTest::Watertight, Precision::High},
+                             RayTest{IntersectTest::MollerTrumbore, Precision::Medium}}) {
+    SCOPED_TRACE(test.precision == Precision::Medium ? "mediump" : "highp");
+    RenderSettings settings;
+    settings.shadows = false;
+    settings.shadow_rays.ray_test = test;
+    Renderer renderer(*backend, settings);
+    const TraceResult traced = renderer.trace(s, tree, rays);
+    size_t same = 0, shapes = 0;
+    for (uint32_t i = 0; i < rays.count(); ++i) {
+      const int32_t cpu = traverse(tree, rays.ray(i), settings.stack_depth, test).prim;
+      same += unpack_trace(traced.packing, traced.texels[i]).prim() == cpu;
+      shapes += cpu >= 2;
+    }
+    EXPECT_GT(shapes, rays.count() / 10);
+    EXPECT_GE(same, rays.count() - rays.count() / 500) << "of " << rays.count() << " primary rays";
+  }
+}
+
 // The frame the image tests render: small, two bounces (the mirror and the glass sphere).
 RenderSettings frame_settings() {
   RenderSettings settings;
