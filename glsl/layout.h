@@ -38,6 +38,17 @@
 // Prim-list texture: one R32F texel per entry, a primitive index.
 // Triangle texture: three RGBA32F texels per primitive: v0, v1, v2 (xyz; w unused = 0).
 #define MOBIRT_TEXELS_PER_TRIANGLE 3
+// Analytic primitives (src/core/shapes.h) take the same three texels in the same array and the
+// same index space; the w of the first texel says the kind (0 for a triangle):
+//   sphere: [0] xyz = centre, w = MOBIRT_PRIM_SPHERE; [1] x = radius; [2] unused
+//   cone (open truncated cone, a cylinder when the radii are equal):
+//           [0] xyz = centre of the base circle, w = MOBIRT_PRIM_CONE; [1] xyz = unit axis
+//           towards the apex, w = height; [2] x = base radius, y = slope (radius change per unit
+//           of height), zw unused
+#define MOBIRT_PRIM_KIND 3  // component of a primitive's first texel
+#define MOBIRT_PRIM_TRIANGLE 0.0
+#define MOBIRT_PRIM_SPHERE 1.0
+#define MOBIRT_PRIM_CONE 2.0
 
 // Ray textures (one pair per ray generation, densely packed, ray i at (i mod W, i div W) with W
 // the pass width): origin texture (xyz, tmin), direction texture (xyz, tmax).
@@ -156,6 +167,8 @@
 #define MOBIRT_SPEC_OFFSET 7       // trace: MOBIRT_OFFSET_* (--offset), the shadow-ray origins
 #define MOBIRT_SPEC_COLOUR 8       // shade: MOBIRT_COLOUR_* (--colour), what the RGBA8 texel holds
 #define MOBIRT_SPEC_ATLAS_PAGES 9  // shade: atlas pages, 0..MOBIRT_ATLAS_MAX_PAGES; code for pages beyond folds away
+#define MOBIRT_SPEC_ANALYTIC 10    // trace: 1 = the scene has analytic primitives (spheres, cones),
+                                   // 0 = triangles only: no code for the others at all
 
 // Ray/triangle test: Moller-Trumbore (1997), or the watertight test of Woop, Benthin and Wald
 // (JCGT 2013), which never lets a ray slip between two triangles that share an edge.

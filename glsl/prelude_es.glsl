@@ -42,6 +42,9 @@ precision highp sampler2D;
 #ifndef ATLAS_PAGES
 #define ATLAS_PAGES 0
 #endif
+#ifndef ANALYTIC
+#define ANALYTIC 0
+#endif
 
 #define PRECISE
 #include "precision.glsl"

@@ -17,6 +17,7 @@ layout(constant_id = MOBIRT_SPEC_PRECISION) const int PRECISION = MOBIRT_PRECISI
 layout(constant_id = MOBIRT_SPEC_OFFSET) const int OFFSET_MODE = MOBIRT_OFFSET_SCALED;
 layout(constant_id = MOBIRT_SPEC_COLOUR) const int COLOUR = MOBIRT_COLOUR_8;
 layout(constant_id = MOBIRT_SPEC_ATLAS_PAGES) const int ATLAS_PAGES = 0;
+layout(constant_id = MOBIRT_SPEC_ANALYTIC) const int ANALYTIC = 0;
 
 // No contraction into fused multiply-adds where an expression must round as the CPU's does
 // (precision.glsl) or the same way in every triangle that computes it (the watertight test).

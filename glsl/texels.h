@@ -76,6 +76,9 @@ inline const glm::vec4* of(std::span<const glm::vec4> triangles, int32_t prim) {
 inline glm::vec3 vertex(std::span<const glm::vec4> triangles, int32_t prim, int k) {
   return glm::vec3(of(triangles, prim)[k]);
 }
+// The primitive's kind (MOBIRT_PRIM_*: a triangle, or an analytic shape of src/core/shapes.h,
+// which writes its texels).
+inline float kind(const glm::vec4* texels) { return texels[0][MOBIRT_PRIM_KIND]; }
 
 }  // namespace triangle_texel
 

@@ -116,6 +116,88 @@ float intersect_triangle(float prim, vec3 o, vec3 d, float tmin, float tmax) {
   return intersect_triangle_tuv(prim, o, d, tmin, tmax).x;
 }
 
+// Analytic primitives (glsl/layout.h, MOBIRT_PRIM_*; src/core/shapes.h), compiled only for scenes
+// that have them (ANALYTIC). The CPU mirror, operation for operation, is intersect_shape() in
+// src/accel/kdtree_traverse.cpp.
+
+// The first root of a t^2 + 2 b t + c = 0 in [tmin, tmax], else the second, else -1, given the
+// quarter discriminant disc = b^2 - a c >= 0. q = -(b + sign(b) sqrt(disc)) loses no digits to
+// cancellation, and its roots c / q and q / a hold for a = 0 (the linear case: q / a is infinite).
+// `z0 + t zd` in [0, h] bounds each root along an axis (spheres pass an interval that always holds).
+float first_root(float a, float b, float c, float disc, float tmin, float tmax, float z0, float zd, float h) {
+  float q = mp(-mp(b + (b >= 0.0 ? 1.0 : -1.0) * mp(sqrt(disc))));
+  float r0 = mp(c / q);
+  float r1 = mp(q / a);
+  bool swap = r1 < r0;
+  float first = swap ? r1 : r0;
+  float second = swap ? r0 : r1;
+  float z_first = mp(z0 + mp(first * zd));
+  float z_second = mp(z0 + mp(second * zd));
+  if (first >= tmin && first <= tmax && z_first >= 0.0 && z_first <= h) return first;
+  return (second >= tmin && second <= tmax && z_second >= 0.0 && z_second <= h) ? second : -1.0;
+}
+
+// A sphere: |o + t d - c|^2 = r^2 with the discriminant in the form of Haines et al. (Ray Tracing
+// Gems, ch. 7), r^2 - |f - (b / a) d|^2 with f = o - c, which stays accurate for distant spheres.
+float intersect_sphere(vec4 t0, vec4 t1, vec3 o, vec3 d, float tmin, float tmax) {
+  vec3 f = mp(o - mp(t0.xyz));
+  float r = mp(t1.x);
+  float a = mp(mp_dot(d, d));
+  float b = mp(mp_dot(f, d));
+  vec3 g = mp(f - mp(mp(b / a) * d));
+  float rr = mp(r * r);
+  float disc = mp(a * mp(rr - mp(mp_dot(g, g))));
+  if (!(disc >= 0.0)) return -1.0;
+  float c = mp(mp(mp_dot(f, f)) - rr);
+  return first_root(a, b, c, disc, tmin, tmax, 0.0, 0.0, 1.0);
+}
+
+// An open truncated cone: base b, unit axis k, height h, radius(z) = r0 + s z for z in [0, h].
+// In the axis frame the ray's height is zo + t zd and its radial offset ro + t rd; the surface is
+// |ro + t rd|^2 = (r0 + s (zo + t zd))^2.
+float intersect_cone(vec4 t0, vec4 t1, vec4 t2, vec3 o, vec3 d, float tmin, float tmax) {
+  vec3 k = mp(t1.xyz);
+  float h = mp(t1.w);
+  float r0 = mp(t2.x);
+  float s = mp(t2.y);
+  vec3 w = mp(o - mp(t0.xyz));
+  float zo = mp(mp_dot(w, k));
+  float zd = mp(mp_dot(d, k));
+  vec3 ro = mp(w - mp(zo * k));
+  vec3 rd = mp(d - mp(zd * k));
+  float ra = mp(r0 + mp(s * zo));  // the radius at the origin's height
+  float sz = mp(s * zd);
+  float a = mp(mp(mp_dot(rd, rd)) - mp(sz * sz));
+  float b = mp(mp(mp_dot(ro, rd)) - mp(ra * sz));
+  float c = mp(mp(mp_dot(ro, ro)) - mp(ra * ra));
+  float disc = mp(mp(b * b) - mp(a * c));
+  if (!(disc >= 0.0)) return -1.0;
+  return first_root(a, b, c, disc, tmin, tmax, zo, zd, h);
+}
+
+// Any primitive: a triangle, or (ANALYTIC) a sphere or a cone, by the kind in its first texel.
+float intersect_primitive(float prim, vec3 o, vec3 d, float tmin, float tmax) {
+  if (ANALYTIC != 0) {
+    float base = prim * float(MOBIRT_TEXELS_PER_TRIANGLE);
+    vec4 t0 = DATA_TEXEL(u_triangles, base);
+    if (t0.w == MOBIRT_PRIM_SPHERE) return intersect_sphere(t0, DATA_TEXEL(u_triangles, base + 1.0), o, d, tmin, tmax);
+    if (t0.w == MOBIRT_PRIM_CONE) {
+      return intersect_cone(t0, DATA_TEXEL(u_triangles, base + 1.0), DATA_TEXEL(u_triangles, base + 2.0), o, d,
+                            tmin, tmax);
+    }
+  }
+  return intersect_triangle(prim, o, d, tmin, tmax);
+}
+
+// The (unnormalised) geometric normal of an analytic primitive at p, outwards: a sphere's p - c;
+// a cone's radial offset tilted against the slope, radial - s |radial| k.
+vec3 analytic_normal(vec4 t0, vec4 t1, vec4 t2, vec3 p) {
+  vec3 w = p - t0.xyz;
+  if (t0.w == MOBIRT_PRIM_SPHERE) return w;
+  vec3 radial = w - dot(w, t1.xyz) * t1.xyz;
+  return radial - (t2.y * length(radial)) * t1.xyz;
+}
+
 // Slab test against the scene box; returns (t0, t1), empty when t0 > t1.
 vec2 intersect_scene_box(vec3 o, vec3 inv_d, float tmin, float tmax) {
   vec3 lo = PARAM(MOBIRT_TP_BOUNDS_LO).xyz;
@@ -296,7 +378,7 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
       if (steps >= MAX_STEPS) return vec3(best_prim, best_t, 1.0);
       steps = steps + 1;
       float prim = single ? leaf_first : DATA_TEXEL(u_prim_list, leaf_first + next).r;
-      float t = intersect_triangle(prim, o, d, ray_tmin, ray_tmax);
+      float t = intersect_primitive(prim, o, d, ray_tmin, ray_tmax);
       // Ties in t go to the lower primitive index, so they do not depend on the test order.
       if (t >= 0.0 && (t < best_t || (t == best_t && prim < best_prim))) {
         best_t = t;
@@ -319,11 +401,19 @@ float shadow_mask_counted(float prim, vec3 o, vec3 d, float t, out float rays_ca
   rays_cast = 0.0;
   if (LIGHT_COUNT == 0) return mask;
   float base = prim * float(MOBIRT_TEXELS_PER_TRIANGLE);
-  vec3 v0 = DATA_TEXEL(u_triangles, base).xyz;
-  vec3 e1 = DATA_TEXEL(u_triangles, base + 1.0).xyz - v0;
-  vec3 e2 = DATA_TEXEL(u_triangles, base + 2.0).xyz - v0;
+  vec4 t0 = DATA_TEXEL(u_triangles, base);
+  vec4 t1 = DATA_TEXEL(u_triangles, base + 1.0);
+  vec4 t2 = DATA_TEXEL(u_triangles, base + 2.0);
+  vec3 v0 = t0.xyz;
+  vec3 e1 = t1.xyz - v0;
+  vec3 e2 = t2.xyz - v0;
   vec3 ng = cross(e1, e2);
   vec3 p = mp(OFFSET_MODE == MOBIRT_OFFSET_NORMAL_ULP ? point_on_triangle(v0, e1, e2, o, d) : o + t * d);
+  // An analytic primitive: the point on the ray (every offset mode), the surface's normal there.
+  if (ANALYTIC != 0 && t0.w != MOBIRT_PRIM_TRIANGLE) {
+    p = mp(o + t * d);
+    ng = analytic_normal(t0, t1, t2, p);
+  }
   float view_side = dot(ng, d) < 0.0 ? 1.0 : -1.0;
   // The origin off the surface, on the viewer's side (offset.glsl); under mediump the shadow ray
   // is rounded as the primary rays are.

@@ -68,10 +68,39 @@ c
 0 6 1 0
 )";
 
+// Spheres and cones as analytic primitives (the default): one Shape each, radii as given.
+TEST(NffLoader, SpheresAndConesAreAnalyticShapesByDefault) {
+  const Scene s = load_scene(write_file("every-analytic.nff", kEveryEntity));
+  EXPECT_EQ(s.mesh.triangle_count(), 3u);  // p 4 and pp 3
+  ASSERT_EQ(s.shapes.size(), 3u);
+  EXPECT_EQ(s.primitive_count(), 6u);
+  const Shape& sphere = s.shapes[0];
+  EXPECT_EQ(sphere.kind, ShapeKind::Sphere);
+  expect_vec3(sphere.base, {3, 0, 0});
+  EXPECT_FLOAT_EQ(sphere.base_radius, 0.5f);
+  EXPECT_FALSE(sphere.inside);
+  const Shape& cylinder = s.shapes[1];
+  EXPECT_EQ(cylinder.kind, ShapeKind::Cone);
+  expect_vec3(cylinder.base, {0, 3, 0});
+  expect_vec3(cylinder.apex, {0, 3, 2});
+  EXPECT_FLOAT_EQ(cylinder.base_radius, 0.5f);
+  EXPECT_FLOAT_EQ(cylinder.apex_radius, 0.5f);
+  const Shape& cone = s.shapes[2];
+  expect_vec3(cone.apex, {0, 6, 1});
+  EXPECT_FLOAT_EQ(cone.base_radius, 1.0f);
+  EXPECT_FLOAT_EQ(cone.apex_radius, 0.0f);
+  for (const Shape& shape : s.shapes) EXPECT_EQ(shape.material, 1u);
+  // The scene's box holds the shapes: the cylinder reaches z = 2, the sphere x = 3.5.
+  EXPECT_GE(s.bounds().hi.z, 2.0f);
+  EXPECT_GE(s.bounds().hi.x, 3.5f);
+}
+
 TEST(NffLoader, EveryEntityWithKnownValues) {
   const Tessellation tess;
   const std::string path = write_file("every.nff", kEveryEntity);
-  const Scene s = load_scene(path);
+  LoadOptions tessellated;
+  tessellated.analytic = false;
+  const Scene s = load_scene(path, tessellated);
   EXPECT_EQ(s.source, path);
   ASSERT_TRUE(s.camera);
   expect_vec3(s.camera->eye, {1, -10, 2});
@@ -286,13 +315,16 @@ TEST(NffLoader, CommentsAndLayout) {
                                         "p 3 0 0 0  1 0 0\n"
                                         "  0 1 0\n"
                                         "s 0 0 5 -1\n"));
-  EXPECT_EQ(s.mesh.triangle_count(), 1 + sphere_triangle_count(Tessellation{}));
+  EXPECT_EQ(s.mesh.triangle_count(), 1u);
+  ASSERT_EQ(s.shapes.size(), 1u);
   EXPECT_FALSE(s.camera);
   EXPECT_FALSE(s.image_size);
   EXPECT_TRUE(s.lights.empty());
   expect_vec3(s.up, {0, 1, 0});
-  // The inside-out sphere's normals point at its centre.
-  expect_vec3(glm::normalize(s.mesh.normals[3]), glm::normalize(glm::vec3(0, 0, 5) - s.mesh.positions[3]), 1e-4f);
+  // The inside-out sphere faces its centre.
+  EXPECT_TRUE(s.shapes[0].inside);
+  EXPECT_FLOAT_EQ(s.shapes[0].base_radius, 1.0f);
+  expect_vec3(shape_normal(s.shapes[0], glm::vec3(0, 0, 6)), {0, 0, -1});
   // Geometry before any 'f' gets the default material.
   const Scene d = load_scene(write_file("nofill.nff", "s 0 0 0 1\n"));
   ASSERT_EQ(d.materials.size(), 1u);
@@ -302,8 +334,9 @@ TEST(NffLoader, CommentsAndLayout) {
 TEST(NffLoader, TessellationIsAParameter) {
   const std::string path = write_file("ball.nff", "s 0 0 0 1\n");
   LoadOptions coarse;
+  coarse.analytic = false;
   coarse.tessellation.segments = 8;
-  LoadOptions fine;
+  LoadOptions fine = coarse;
   fine.tessellation.segments = 64;
   EXPECT_EQ(load_scene(path, coarse).mesh.triangle_count(), 2u * 8u * 3u);
   EXPECT_EQ(load_scene(path, fine).mesh.triangle_count(), 2u * 64u * 31u);
@@ -338,9 +371,10 @@ TEST(NffLoader, BadFilesNameTheFileAndTheLine) {
   }
   // Over the 24-bit limit: refused before tessellating anything.
   LoadOptions fine;
+  fine.analytic = false;
   fine.tessellation.segments = 8192;
   const std::string path = write_file("bad.nff", "f 1 1 1 1 0 1 0 1\ns 0 0 0 1\n");
-  expect_bad_input([&] { load_scene(path, fine); }, {"bad.nff:2:", "16777215 triangles"});
+  expect_bad_input([&] { load_scene(path, fine); }, {"bad.nff:2:", "16777215 primitives"});
 }
 
 // ---- a scene without a camera or lights -----------------------------------------------------
@@ -475,8 +509,8 @@ TEST_F(SpdScenes, EveryNffLoadsWithItsCameraLightsAndMaterialsAndRenders) {
     expect_vec3(s.background, {0.078f, 0.361f, 0.753f});
     EXPECT_EQ(s.lights.size(), count_entities(file, "l"));
     EXPECT_EQ(s.materials.size(), count_entities(file, "f"));
-    EXPECT_GE(s.mesh.triangle_count(), count_entities(file, "p") + count_entities(file, "pp") +
-                                           sphere_triangle_count(Tessellation{}) * count_entities(file, "s"));
+    EXPECT_GE(s.mesh.triangle_count(), count_entities(file, "p") + count_entities(file, "pp"));
+    EXPECT_EQ(s.shapes.size(), count_entities(file, "s") + count_entities(file, "c"));
     EXPECT_LT(s.degenerate_triangles, s.mesh.triangle_count() / 100 + 1);
 
     RenderSettings settings;
@@ -511,8 +545,9 @@ TEST_F(SpdScenes, EveryNffLoadsWithItsCameraLightsAndMaterialsAndRenders) {
     EXPECT_LE(g.share_over, 0.005) << "GLES against Vulkan: pixels off by more than 1/255";
     const std::vector<std::string> messages = gles->take_debug_messages();
     EXPECT_TRUE(messages.empty()) << "GLES debug messages:\n" << test::join(messages);
-    std::printf("%s: %zu triangles, %.1f dB against the CPU frame, %.1f dB against the reference, %.1f dB GLES "
-                "against Vulkan\n", file.filename().c_str(), s.mesh.triangle_count(), d.psnr, r.psnr, g.psnr);
+    std::printf("%s: %zu triangles, %zu shapes, %.1f dB against the CPU frame, %.1f dB against the reference, "
+                "%.1f dB GLES against Vulkan\n", file.filename().c_str(), s.mesh.triangle_count(), s.shapes.size(),
+                d.psnr, r.psnr, g.psnr);
   }
 }
 

@@ -95,4 +95,54 @@ inline Scene random_soup_scene(int triangles = 20000, uint32_t seed = 7) {
   return s;
 }
 
+inline Shape sphere_shape(glm::vec3 centre, float radius, uint32_t material) {
+  Shape s;
+  s.base = centre;
+  s.base_radius = radius;
+  s.material = material;
+  return s;
+}
+
+inline Shape cone_shape(glm::vec3 base, float base_radius, glm::vec3 apex, float apex_radius, uint32_t material) {
+  Shape s;
+  s.kind = ShapeKind::Cone;
+  s.base = base;
+  s.base_radius = base_radius;
+  s.apex = apex;
+  s.apex_radius = apex_radius;
+  s.material = material;
+  return s;
+}
+
+// Analytic primitives beside triangles: a mirror sphere, a glass sphere, an open cylinder and a
+// pointed cone on a floor, under a point light (Haines' NFF shapes, issue 17).
+inline Scene shapes_scene() {
+  Scene s = base_scene("shapes");
+  add_triangle(s, {-10, -1, -10}, {-10, -1, 10}, {10, -1, 10}, 0);
+  add_triangle(s, {-10, -1, -10}, {10, -1, 10}, {10, -1, -10}, 0);
+  Material mirror;
+  mirror.name = "mirror";
+  mirror.diffuse = glm::vec3(0.2f, 0.3f, 0.8f);
+  mirror.specular = glm::vec3(0.6f);
+  mirror.reflectance = 0.5f;
+  Material glass;
+  glass.name = "glass";
+  glass.diffuse = glm::vec3(0.1f);
+  glass.transmittance = 0.8f;
+  glass.reflectance = 0.1f;
+  glass.ior = 1.5f;
+  s.materials.push_back(mirror);
+  s.materials.push_back(glass);
+  s.shapes.push_back(sphere_shape({0, 0, 0}, 1.0f, 2));
+  s.shapes.push_back(sphere_shape({1.2f, -0.4f, 2.0f}, 0.6f, 3));
+  s.shapes.push_back(cone_shape({3, -1, 0}, 0.5f, {3, 1, 0}, 0.5f, 1));
+  s.shapes.push_back(cone_shape({-3, -1, 0}, 1.0f, {-3, 1.2f, 0.3f}, 0.0f, 1));
+  Light key;
+  key.position = {2, 8, 6};
+  key.intensity = 90.0f;
+  s.lights = {key};
+  s.camera = Camera{{0, 2, 9}, {0, 0, 0}, {0, 1, 0}, 0.8f, 0.0f};
+  return s;
+}
+
 }  // namespace mobirt::test

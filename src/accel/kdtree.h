@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "core/geometry.h"
+#include "core/shapes.h"
 #include "layout.h"
 
 namespace mobirt {
@@ -88,6 +89,12 @@ struct FlatKdTree {
 };
 
 FlatKdTree build_kdtree(std::span<const glm::vec3> positions, const KdBuildOptions& options = {});
+// Triangles and analytic primitives (core/shapes.h) in one tree: shape k is primitive
+// positions.size() / 3 + k, its texels (glsl/layout.h) follow the triangles'. A shape's
+// references keep its bounding box, cut to each child's box where a split crosses it (no clipping
+// of the surface itself: conservative, and exact for a box).
+FlatKdTree build_kdtree(std::span<const glm::vec3> positions, std::span<const Shape> shapes,
+                        const KdBuildOptions& options = {});
 
 // Sets the empty-child flags of every interior node (glsl/layout.h: MOBIRT_NODE_BELOW_EMPTY,
 // MOBIRT_NODE_ABOVE_EMPTY in the node's fourth component), with which traversal closes an empty
@@ -126,6 +133,16 @@ inline bool closer_hit(float t, int32_t prim, const Hit& best) {
 // [ray.tmin, ray.tmax] that is closer_hit() than hit; then fills hit and returns true.
 // A degenerate triangle (det == 0) or NaN anywhere is never a hit.
 bool intersect_triangle(const FlatKdTree& tree, int32_t prim, const Ray& ray, Hit& hit, const RayTest& test = {});
+
+// Any primitive: the triangle test above, or the sphere and cone tests of glsl/traverse.glsl
+// (intersect_sphere, intersect_cone), operation for operation, in the same precision. A shape's
+// hit has u = v = 0 (its surface record comes from the shape: raytree/hits.cpp).
+bool intersect_primitive(const FlatKdTree& tree, int32_t prim, const Ray& ray, Hit& hit, const RayTest& test = {});
+// Whether prim is an analytic primitive (its first texel's kind, glsl/layout.h).
+bool is_analytic(const FlatKdTree& tree, int32_t prim);
+// An analytic primitive's geometric normal at p, unnormalised, outwards, as glsl/traverse.glsl's
+// analytic_normal() computes it for the shadow rays.
+glm::vec3 analytic_normal(const FlatKdTree& tree, int32_t prim, const glm::vec3& p);
 
 // Cost counters of one traversal call (reset by each call; sum them with +=).
 // steps = the GPU loop's unit: one per interior node, one per triangle test, and one for an empty

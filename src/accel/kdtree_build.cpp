@@ -448,9 +448,9 @@ struct SubtreeScratch {
 
 class Builder {
  public:
-  Builder(std::span<const glm::vec3> positions, const KdBuildOptions& options)
-      : positions_(positions), options_(options), bins_(std::max(2, options.bins)),
-        triangle_count_(positions.size() / 3) {
+  Builder(std::span<const glm::vec3> positions, std::span<const Shape> shapes, const KdBuildOptions& options)
+      : positions_(positions), shapes_(shapes), options_(options), bins_(std::max(2, options.bins)),
+        triangle_count_(positions.size() / 3 + shapes.size()) {
 #if defined(MOBIRT_KD_AVX2)
     avx2_ = __builtin_cpu_supports("avx2");
     if (avx2_) sparse_refs_ = kSparseSweepRefsAvx2;
@@ -489,6 +489,10 @@ class Builder {
   void write_triangles(FlatKdTree& tree) const {
     tree.triangles.reserve(triangle_count_ * MOBIRT_TEXELS_PER_TRIANGLE);
     for (const glm::vec3& p : positions_) tree.triangles.emplace_back(p, 0.0f);
+    for (const Shape& shape : shapes_) {
+      tree.triangles.resize(tree.triangles.size() + MOBIRT_TEXELS_PER_TRIANGLE);
+      shape_texels(shape, tree.triangles.data() + tree.triangles.size() - MOBIRT_TEXELS_PER_TRIANGLE);
+    }
   }
 
   // Root references and bounds, the root's histogram, then the tree.
@@ -501,9 +505,16 @@ class Builder {
     tbb::parallel_for(size_t(0), blocks, [&](size_t b) {
       Aabb box;
       for (size_t i = b * kBlockRefs, end = std::min(n, i + kBlockRefs); i < end; ++i) {
-        const glm::vec3* v = positions_.data() + 3 * i;
-        const glm::vec3 lo = glm::min(v[0], glm::min(v[1], v[2]));
-        const glm::vec3 hi = glm::max(v[0], glm::max(v[1], v[2]));
+        glm::vec3 lo, hi;
+        if (i < positions_.size() / 3) {
+          const glm::vec3* v = positions_.data() + 3 * i;
+          lo = glm::min(v[0], glm::min(v[1], v[2]));
+          hi = glm::max(v[0], glm::max(v[1], v[2]));
+        } else {  // an analytic primitive: its box
+          const Aabb shape = shape_bounds(shapes_[i - positions_.size() / 3]);
+          lo = shape.lo;
+          hi = shape.hi;
+        }
         refs.data()[i] = Ref{{lo.x, lo.y, lo.z}, {hi.x, hi.y, hi.z}, static_cast<uint32_t>(i), 0};
         box.lo = glm::min(box.lo, lo);
         box.hi = glm::max(box.hi, hi);
@@ -1112,7 +1123,8 @@ class Builder {
     rb.hi[a] = s;
     Ref ra = r;
     ra.lo[a] = s;
-    if (r.lo[a] < s && s < r.hi[a]) {
+    // A shape's part on each side is its box cut at the plane (rb, ra), conservative.
+    if (r.lo[a] < s && s < r.hi[a] && size_t(r.prim) < positions_.size() / 3) {
       Box cb;
       Box ca;
       const glm::vec3* v = positions_.data() + 3 * size_t(r.prim);
@@ -1201,6 +1213,7 @@ class Builder {
   }
 
   std::span<const glm::vec3> positions_;
+  std::span<const Shape> shapes_;
   const KdBuildOptions& options_;
   int bins_;
   size_t triangle_count_;
@@ -1234,11 +1247,16 @@ int kdtree_depth_limit(size_t triangle_count, int max_depth_option) {
 }
 
 FlatKdTree build_kdtree(std::span<const glm::vec3> positions, const KdBuildOptions& options) {
+  return build_kdtree(positions, {}, options);
+}
+
+FlatKdTree build_kdtree(std::span<const glm::vec3> positions, std::span<const Shape> shapes,
+                        const KdBuildOptions& options) {
   if (positions.size() % 3 != 0) {
     throw Error(ErrorKind::BadInput, "kd-tree: " + count_text(positions.size()) +
                                          " positions do not make whole triangles (3 per triangle)");
   }
-  const size_t n = positions.size() / 3;
+  const size_t n = positions.size() / 3 + shapes.size();
   if (n > kKdMaxTriangles) {
     throw Error(ErrorKind::BadInput,
                 "kd-tree: " + count_text(n) + " triangles need " + count_text(3 * n) +
@@ -1266,7 +1284,13 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, const KdBuildOptio
     throw Error(ErrorKind::BadInput, "kd-tree: threads must be 0 (all) or more (got " +
                                          std::to_string(options.threads) + ")");
   }
-  Builder builder(positions, options);
+  for (size_t k = 0; k < shapes.size(); ++k) {
+    const Aabb box = shape_bounds(shapes[k]);
+    if (!std::isfinite(box.lo.x + box.lo.y + box.lo.z + box.hi.x + box.hi.y + box.hi.z)) {
+      throw Error(ErrorKind::BadInput, "kd-tree: shape " + std::to_string(k) + " has non-finite bounds");
+    }
+  }
+  Builder builder(positions, shapes, options);
   FlatKdTree tree;
   if (options.threads == 0) {
     tree = builder.build();

@@ -157,7 +157,90 @@ bool intersect_wt(const glm::vec4* texels, int32_t prim, const Ray& ray, Hit& hi
   return accept(R::r(big_t * inv_det), R::r(uvw.y * inv_det), R::r(uvw.z * inv_det), prim, ray, hit);
 }
 
+// glsl/traverse.glsl's first_root(): the first root of a t^2 + 2 b t + c = 0 in [tmin, tmax] whose
+// height z0 + t zd lies in [0, h], else the second, else none (t < 0 returned).
+template <class R>
+float first_root(float a, float b, float c, float disc, float tmin, float tmax, float z0, float zd, float h) {
+  const float q = R::r(-R::r(b + (b >= 0.0f ? 1.0f : -1.0f) * R::r(std::sqrt(disc))));
+  const float r0 = R::r(c / q);
+  const float r1 = R::r(q / a);
+  const bool swap = r1 < r0;
+  const float first = swap ? r1 : r0;
+  const float second = swap ? r0 : r1;
+  const float z_first = R::r(z0 + R::r(first * zd));
+  const float z_second = R::r(z0 + R::r(second * zd));
+  if (first >= tmin && first <= tmax && z_first >= 0.0f && z_first <= h) return first;
+  return second >= tmin && second <= tmax && z_second >= 0.0f && z_second <= h ? second : -1.0f;
+}
+
+// glsl/traverse.glsl's intersect_sphere() and intersect_cone(), on the primitive's texels
+// (glsl/layout.h). Returns t, or a negative value for no hit in [tmin, tmax].
+template <class R>
+float intersect_sphere(const glm::vec4* texels, const glm::vec3& o, const glm::vec3& d, float tmin, float tmax) {
+  const glm::vec3 f = R::r(o - R::r(glm::vec3(texels[0])));
+  const float r = R::r(texels[1].x);
+  const float a = R::r(glm::dot(d, d));
+  const float b = R::r(glm::dot(f, d));
+  const glm::vec3 g = R::r(f - R::r(R::r(b / a) * d));
+  const float rr = R::r(r * r);
+  const float disc = R::r(a * R::r(rr - R::r(glm::dot(g, g))));
+  if (!(disc >= 0.0f)) return -1.0f;
+  const float c = R::r(R::r(glm::dot(f, f)) - rr);
+  return first_root<R>(a, b, c, disc, tmin, tmax, 0.0f, 0.0f, 1.0f);
+}
+
+template <class R>
+float intersect_cone(const glm::vec4* texels, const glm::vec3& o, const glm::vec3& d, float tmin, float tmax) {
+  const glm::vec3 k = R::r(glm::vec3(texels[1]));
+  const float h = R::r(texels[1].w);
+  const float r0 = R::r(texels[2].x);
+  const float s = R::r(texels[2].y);
+  const glm::vec3 w = R::r(o - R::r(glm::vec3(texels[0])));
+  const float zo = R::r(glm::dot(w, k));
+  const float zd = R::r(glm::dot(d, k));
+  const glm::vec3 ro = R::r(w - R::r(zo * k));
+  const glm::vec3 rd = R::r(d - R::r(zd * k));
+  const float ra = R::r(r0 + R::r(s * zo));
+  const float sz = R::r(s * zd);
+  const float a = R::r(R::r(glm::dot(rd, rd)) - R::r(sz * sz));
+  const float b = R::r(R::r(glm::dot(ro, rd)) - R::r(ra * sz));
+  const float c = R::r(R::r(glm::dot(ro, ro)) - R::r(ra * ra));
+  const float disc = R::r(R::r(b * b) - R::r(a * c));
+  if (!(disc >= 0.0f)) return -1.0f;
+  return first_root<R>(a, b, c, disc, tmin, tmax, zo, zd, h);
+}
+
+template <class R>
+bool intersect_shape(const glm::vec4* texels, int32_t prim, const Ray& ray, Hit& hit) {
+  const glm::vec3 o = R::r(ray.origin), d = R::r(ray.direction);
+  const float t = triangle_texel::kind(texels) == float(MOBIRT_PRIM_SPHERE)
+                      ? intersect_sphere<R>(texels, o, d, ray.tmin, ray.tmax)
+                      : intersect_cone<R>(texels, o, d, ray.tmin, ray.tmax);
+  // The shader's "t >= 0" hit test; the texture coordinates come from the surface (hits.cpp).
+  return t >= 0.0f && accept(t, 0.0f, 0.0f, prim, ray, hit);
+}
+
 }  // namespace
+
+bool is_analytic(const FlatKdTree& tree, int32_t prim) {
+  return triangle_texel::kind(triangle_texel::of(tree.triangles, prim)) != float(MOBIRT_PRIM_TRIANGLE);
+}
+
+bool intersect_primitive(const FlatKdTree& tree, int32_t prim, const Ray& ray, Hit& hit, const RayTest& test) {
+  if (!is_analytic(tree, prim)) return intersect_triangle(tree, prim, ray, hit, test);
+  const glm::vec4* texels = triangle_texel::of(tree.triangles, prim);
+  return test.precision == Precision::Medium ? intersect_shape<Half>(texels, prim, ray, hit)
+                                             : intersect_shape<Exact>(texels, prim, ray, hit);
+}
+
+glm::vec3 analytic_normal(const FlatKdTree& tree, int32_t prim, const glm::vec3& p) {
+  const glm::vec4* t = triangle_texel::of(tree.triangles, prim);
+  const glm::vec3 w = p - glm::vec3(t[0]);
+  if (triangle_texel::kind(t) == float(MOBIRT_PRIM_SPHERE)) return w;
+  const glm::vec3 k(t[1]);
+  const glm::vec3 radial = w - glm::dot(w, k) * k;
+  return radial - (t[2].y * glm::length(radial)) * k;
+}
 
 bool intersect_triangle(const FlatKdTree& tree, int32_t prim, const Ray& ray, Hit& hit, const RayTest& test) {
   const glm::vec4* texels = triangle_texel::of(tree.triangles, prim);
@@ -371,7 +454,7 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
       const int32_t prim = checked_index(
           count == 1 ? first : prim_list[static_cast<size_t>(checked_index(first + float(i), tree.prim_list.size(), "prim-list entry"))],
           tree.triangles.size() / MOBIRT_TEXELS_PER_TRIANGLE, "primitive");
-      if (intersect_triangle(tree, prim, ray, best, test) && kAnyHit) {
+      if (intersect_primitive(tree, prim, ray, best, test) && kAnyHit) {
         recorder.leaf(uint32_t(i + 1));
         return best;
       }
@@ -420,7 +503,7 @@ bool occluded(const FlatKdTree& tree, const Ray& ray, int stack_depth, const Ray
 Hit brute_force(const FlatKdTree& tree, const Ray& ray, const RayTest& test) {
   Hit best;
   const int32_t n = static_cast<int32_t>(tree.triangles.size() / MOBIRT_TEXELS_PER_TRIANGLE);
-  for (int32_t prim = 0; prim < n; ++prim) intersect_triangle(tree, prim, ray, best, test);
+  for (int32_t prim = 0; prim < n; ++prim) intersect_primitive(tree, prim, ray, best, test);
   return best;
 }
 

@@ -34,6 +34,7 @@
 #include "render/whitted.h"
 #include "scene/animation.h"
 #include "scene/overrides.h"
+#include "scene/tessellate.h"
 
 namespace mobirt {
 namespace {
@@ -199,6 +200,7 @@ struct BenchOptions {
   bool baseline = true;
   bool cpu = true;
   ComputeData compute_data = ComputeData::StorageBuffers;  // how the compute peer reads the scene
+  bool analytic = true;  // --primitives
   std::vector<std::string> backends = {"vulkan", "gles"};
   // mobirt's columns through the frame pipeline: frame N+1 posed and its kd-tree built on a worker
   // (in an arena of build_threads) while frame N renders; --serial: one after the other.
@@ -281,12 +283,20 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
         settings.kd, settings.always_rebuild, o.pipelined));
   }
   KdBuildStats kd_stats;
+  // Embree and the driver's ray queries take triangles only: they get the analytic shapes
+  // tessellated (the triangles --primitives tessellated loads), made outside the timed frames.
+  std::optional<Scene> tessellated;
   for (int f = 0; f < o.warmup + o.frames; ++f) {
     const bool timed = f >= o.warmup;
     const double t = double(f) / fps;
     auto start = std::chrono::steady_clock::now();
     const Camera view = posed.at(t);
     const double animate_ms = elapsed_ms(start);
+    if (!scene.shapes.empty() && (ray_query || compute || embree) && (!tessellated || animation.animated())) {
+      tessellated = scene;
+      tessellate_shapes(*tessellated);
+    }
+    const Scene& triangles_only = tessellated ? *tessellated : scene;
 
     for (size_t c = 0; c < columns.size(); ++c) {
       FrameTimings ft;
@@ -301,7 +311,7 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
     // A GPU peer's frame: mobirt's loop with the peer tracing, its validation messages checked.
     auto peer_frame = [&](WhittedEngine& engine, std::vector<std::string> messages, Samples& samples) {
       FrameTimings ft;
-      render_whitted(scene, view, settings, engine, &ft);
+      render_whitted(triangles_only, view, settings, engine, &ft);
       check_messages(std::move(messages));
       check_messages(peers.shading->take_debug_messages());
       if (timed) add_frame(samples, animate_ms, ft);
@@ -310,7 +320,7 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
     if (compute) peer_frame(*compute, peers.compute->take_debug_messages(), cps);
     if (embree) {
       FrameTimings ct;
-      render_whitted_cpu(scene, view, settings, *embree, o.threads, &ct);
+      render_whitted_cpu(triangles_only, view, settings, *embree, o.threads, &ct);
       if (timed) add_frame(emb, animate_ms, ct);
     }
     if (kd) {
@@ -330,6 +340,7 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
   cell["depth"] = level.depth;
   cell["shadows"] = level.shadows;
   cell["triangles"] = scene.mesh.triangle_count();
+  cell["shapes"] = scene.shapes.size();
   cell["lights"] = scene.lights.size();
   cell["animated"] = animation.animated();
   const double paper = bs.paper[&level - kLevels];
@@ -634,6 +645,7 @@ int cmd_bench(const std::vector<std::string>& args) {
   if (!cl.parse(args)) return 0;
   const std::vector<std::string>& paths = cl.positionals();
   o.settings = common.settings;  // each cell sets its size, depth, shadows and rebuilds
+  o.analytic = common.analytic;
   o.backend_options = common.backend;
   if (o.threads == 0) o.threads = std::max(1u, std::thread::hardware_concurrency());
   if (scenes_dir.empty()) scenes_dir = default_scenes_dir();
@@ -739,6 +751,7 @@ int cmd_bench(const std::vector<std::string>& args) {
   for (const BenchScene& bs : list) {
     LoadOptions load;
     load.mtl = bs.mtl;
+    load.analytic = o.analytic;
     const AnimatedScene animation = load_animated_scene(bs.path, load);
     for (int k : o.levels) {
       cells.push_back(run_cell(columns, peers, bs, animation, kLevels[k], o));

@@ -52,10 +52,12 @@ int cmd_info(const std::vector<std::string>& args) {
   if (!scene_path.empty()) {
     // The scene's features and every choice derived from them, under the default settings.
     LoadOptions load_options;
+    load_options.analytic = common.analytic;
     const AnimatedScene animation = load_animated_scene(scene_path, load_options);
     const SceneFeatures f = analyze_scene(animation, RenderSettings{});
     std::cout << "scene:     " << scene_path << "\n"
               << "triangles: " << f.triangles << "\n"
+              << "shapes:    " << f.shapes << " (analytic spheres and cones)\n"
               << "lights:    " << f.lights << "\n"
               << "textures:  " << f.textures << "\n"
               << "materials: " << (f.reflective ? "reflective " : "") << (f.refractive ? "refractive " : "")

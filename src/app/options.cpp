@@ -171,6 +171,14 @@ const Setting kSettings[] = {
      [](CommonOptions& o, const Value& v) { o.time = v.number(-1e6, 1e6); }},
     {"--mtl", "FILE", kViews, "an OBJ's material library instead of the one it names (mtllib)",
      [](CommonOptions& o, const Value& v) { o.mtl = v.text; }},
+    {"--primitives", "FORM", kFrames | kInfo,
+     "NFF spheres, cylinders and cones: analytic (kd-tree primitives\n"
+     "intersected exactly) or tessellated (64 facets around, 32 rings)\n"
+     "(default analytic)",
+     [](CommonOptions& o, const Value& v) {
+       static constexpr std::pair<const char*, bool> forms[] = {{"analytic", true}, {"tessellated", false}};
+       o.analytic = v.choice(forms);
+     }},
     {"--backend", "gles|vulkan", kRender | kInfo,
      "the API the GPU passes run on: Vulkan, or OpenGL ES 2.0 through EGL\n"
      "without a window (default vulkan)",

@@ -66,6 +66,7 @@ struct CommonOptions {
   SceneEdits edits;                     // --light, --camera, --background
   std::optional<double> time;           // --time
   std::string mtl;                      // --mtl
+  bool analytic = true;                 // --primitives: NFF spheres and cones analytic or tessellated
   bool size_given = false;              // --size given: it wins over the file's own image size
 };
 

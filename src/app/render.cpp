@@ -273,6 +273,7 @@ int cmd_render(const std::vector<std::string>& args) {
 
   LoadOptions load_options;
   load_options.mtl = common.mtl;
+  load_options.analytic = common.analytic;
   if (fps) load_options.fps = *fps;
   const AnimatedScene animation = load_animated_scene(scene_path, load_options);
   const double frame_rate = fps ? *fps : animation.fps();
@@ -349,9 +350,9 @@ int cmd_render(const std::vector<std::string>& args) {
   }
   if (posed.headlit()) note_headlight(scene);  // the pipeline's other slot poses the same scene
   if (timings && !measured.empty()) {
-    std::printf("%s: %zu triangles, %zu lights, %dx%d, depth %d on %s\n", scene_path.c_str(),
-                scene.mesh.triangle_count(), scene.lights.size(), settings.width, settings.height,
-                settings.depth, backend->device_info().device.c_str());
+    std::printf("%s: %zu triangles, %zu shapes, %zu lights, %dx%d, depth %d on %s\n", scene_path.c_str(),
+                scene.mesh.triangle_count(), scene.shapes.size(), scene.lights.size(), settings.width,
+                settings.height, settings.depth, backend->device_info().device.c_str());
     if (frames) {
       std::printf("median of %zu frames (the first frame, which compiles the shaders, left out)\n", measured.size());
     } else {
@@ -367,6 +368,7 @@ int cmd_render(const std::vector<std::string>& args) {
     if (!timings_json_path.empty()) {
       nlohmann::json j{{"scene", scene_path},
                        {"triangles", scene.mesh.triangle_count()},
+                       {"shapes", scene.shapes.size()},
                        {"lights", scene.lights.size()},
                        {"width", settings.width},
                        {"height", settings.height},

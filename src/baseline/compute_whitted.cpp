@@ -10,6 +10,11 @@ namespace mobirt {
 
 void ComputeWhittedEngine::begin_frame(const Scene& scene, const RenderSettings& settings, FrameTimings& frame) {
   shading_.check_shades_like(settings, "ComputeWhittedEngine");
+  // The peer traces mobirt's triangle kd-tree: analytic shapes are the caller's to tessellate
+  // (scene/tessellate.h), as for Embree and the ray queries.
+  if (!scene.shapes.empty()) {
+    throw Error(ErrorKind::Internal, "compute engine: the scene's analytic shapes must be tessellated first");
+  }
   // The record has room for any count, but the shading pass's mask and the frame's limits are
   // mobirt's: refuse a scene over them before any work, as mobirt's passes do.
   choose_packing(scene.mesh.triangle_count(), settings.shadows ? int(scene.lights.size()) : 0, scene.source);

@@ -91,7 +91,13 @@ std::string EmbreeEngine::version() {
          std::to_string(RTC_VERSION_PATCH);
 }
 
-void EmbreeEngine::build(const Scene& scene) { build(scene.mesh.positions); }
+void EmbreeEngine::build(const Scene& scene) {
+  // Embree gets triangles: analytic shapes are the caller's to tessellate (scene/tessellate.h).
+  if (!scene.shapes.empty()) {
+    throw Error(ErrorKind::Internal, "Embree engine: the scene's analytic shapes must be tessellated first");
+  }
+  build(scene.mesh.positions);
+}
 
 void EmbreeEngine::build(std::span<const glm::vec3> positions) {
   const size_t n = positions.size() / 3;

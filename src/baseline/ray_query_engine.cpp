@@ -783,6 +783,11 @@ VkDeviceAddress RayQueryEngine::Impl::scratch_address(VkDeviceSize size) {
 
 void RayQueryEngine::Impl::build(const Scene& scene, AsBuildTimings* timings) {
   const auto start = Clock::now();
+  // The driver's acceleration structure holds triangles: analytic shapes are the caller's to
+  // tessellate (scene/tessellate.h).
+  if (!scene.shapes.empty()) {
+    throw Error(ErrorKind::Internal, "ray query build: the scene's analytic shapes must be tessellated first");
+  }
   const std::vector<glm::vec3>& positions = scene.mesh.positions;
   const uint32_t n = uint32_t(positions.size() / 3);
   if (positions.size() != size_t(n) * 3 || n != scene.mesh.triangle_count()) {

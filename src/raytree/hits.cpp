@@ -73,13 +73,18 @@ void for_each_shadow_ray(const FlatKdTree& tree, std::span<const Light> lights, 
   const glm::vec3 v0 = triangle_texel::vertex(tree.triangles, prim, 0);
   const glm::vec3 e1 = triangle_texel::vertex(tree.triangles, prim, 1) - v0;
   const glm::vec3 e2 = triangle_texel::vertex(tree.triangles, prim, 2) - v0;
-  const glm::vec3 ng = glm::cross(e1, e2);
   // Under mediump the pass sees its ray rounded to fp16, and rounds the hit point and the shadow
   // ray too.
   const bool half = settings.ray_test.precision == Precision::Medium;
   const glm::vec3 o = half ? round_to_half(ray.origin) : ray.origin;
   const glm::vec3 d = half ? round_to_half(ray.direction) : ray.direction;
   glm::vec3 p = settings.offset.mode == OffsetMode::NormalUlp ? point_on_triangle(v0, e1, e2, o, d) : o + t * d;
+  glm::vec3 ng = glm::cross(e1, e2);
+  // An analytic primitive: the point on the ray (every offset mode), the surface's normal there.
+  if (is_analytic(tree, prim)) {
+    p = o + t * d;
+    ng = analytic_normal(tree, prim, half ? round_to_half(p) : p);
+  }
   if (half) p = round_to_half(p);
   const float view_side = glm::dot(ng, d) < 0.0f ? 1.0f : -1.0f;
   const glm::vec3 n = (view_side / std::max(glm::length(ng), 1e-30f)) * ng;
@@ -161,8 +166,19 @@ SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ra
   Ray open = ray;
   open.tmin = -kInfinity;
   open.tmax = kInfinity;
+  // An analytic primitive keeps tmin: its other root may lie behind the ray's origin.
+  const bool analytic = is_analytic(tree, prim);
+  if (analytic) open.tmin = ray.tmin;
   // The decoding runs in single precision whatever the pass's precision (the paper's CPU step).
-  if (!intersect_triangle(tree, prim, open, h, RayTest{test, Precision::High})) {
+  const bool found = intersect_primitive(tree, prim, open, h, RayTest{test, Precision::High});
+  if (analytic && !found) {
+    // Rounding put the GPU's grazing hit just outside the CPU's: the ray's closest approach to
+    // the shape's base point (a sphere's centre), where a grazing ray touches it.
+    const glm::vec3 c(triangle_texel::of(tree.triangles, prim)[0]);
+    const float dd = glm::dot(ray.direction, ray.direction);
+    h.t = dd > 0.0f ? std::max(ray.tmin, glm::dot(c - ray.origin, ray.direction) / dd) : ray.tmin;
+    h.u = h.v = 0.0f;
+  } else if (!found) {
     // The GPU's test accepted it and ours does not (an edge hit, rounding, mediump): use the
     // closest point the barycentric clamp gives; t from the plane.
     const glm::vec3 v0 = triangle_texel::vertex(tree.triangles, prim, 0);
@@ -199,6 +215,16 @@ SurfaceHit surface_from_hit(const Scene& scene, const Ray& ray, const Hit& h) {
   hit.position = ray.origin + h.t * ray.direction;
 
   const TriangleMesh& mesh = scene.mesh;
+  if (size_t(prim) >= mesh.triangle_count()) {  // an analytic shape: its own normal and (u, v)
+    const Shape& shape = scene.shapes.at(size_t(prim) - mesh.triangle_count());
+    const glm::vec3 n = shape_normal(shape, hit.position);
+    hit.entering = glm::dot(n, ray.direction) < 0.0f;
+    hit.geometric = hit.entering ? n : -n;
+    hit.normal = hit.geometric;
+    hit.texcoord = shape_texcoord(shape, hit.position);
+    hit.material = shape.material;
+    return hit;
+  }
   const size_t i0 = size_t(prim) * 3;
   const float w = 1.0f - h.u - h.v;
   const glm::vec3 e1 = mesh.positions[i0 + 1] - mesh.positions[i0];
@@ -231,7 +257,7 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
                                     DecodeStats* stats) {
   const uint32_t n = rays.count();
   if (texels.size() < n) throw Error(ErrorKind::Internal, "decode_hits: fewer texels than rays");
-  const uint32_t prims = uint32_t(scene.mesh.triangle_count());
+  const uint32_t prims = uint32_t(scene.primitive_count());
   std::vector<SurfaceHit> hits(n);
   std::atomic<uint32_t> hit_count{0}, capped_count{0};
   std::atomic<uint64_t> shadow_count{0};

@@ -41,7 +41,7 @@ RayBatch next_generation(const Scene& scene, const Aabb& scene_bounds, const Ray
     const glm::vec3& ns = h.normal;
     // Wachter and Binder's offset starts from the point on the triangle (point_on_triangle()).
     glm::vec3 p = h.position;
-    if (settings.offset.mode == OffsetMode::NormalUlp) {
+    if (settings.offset.mode == OffsetMode::NormalUlp && size_t(h.prim) < scene.mesh.triangle_count()) {
       const glm::vec3* v = &scene.mesh.positions[3 * size_t(h.prim)];
       p = v[0] + h.u * (v[1] - v[0]) + h.v * (v[2] - v[0]);
     }

@@ -37,6 +37,51 @@ struct DHit {
 
 double max_abs(const dvec3& p) { return std::max(std::abs(p.x), std::max(std::abs(p.y), std::abs(p.z))); }
 
+// The first root in [tmin, tmax] of a t^2 + 2 b t + c = 0 whose height z0 + t zd lies in [0, h]
+// (quarter discriminant disc >= 0), in the cancellation-free form; false when neither is.
+bool first_root_d(double a, double b, double c, double disc, double tmin, double tmax, double z0, double zd,
+                  double h, double& t) {
+  const double q = -(b + (b >= 0.0 ? 1.0 : -1.0) * std::sqrt(disc));
+  double r0 = c / q, r1 = q / a;
+  if (r1 < r0) std::swap(r0, r1);
+  for (double r : {r0, r1}) {
+    const double z = z0 + r * zd;
+    if (r >= tmin && r <= tmax && z >= 0.0 && z <= h) {
+      t = r;
+      return true;
+    }
+  }
+  return false;
+}
+
+// A sphere or an open truncated cone (core/shapes.h) in double: the same equations as the
+// renderer's (glsl/traverse.glsl), without its rounding.
+bool intersect_shape_d(const Shape& s, const dvec3& o, const dvec3& d, double tmin, double tmax, double& t) {
+  if (s.kind == ShapeKind::Sphere) {
+    const dvec3 f = o - dvec3(s.base);
+    const double r = s.base_radius;
+    const double a = glm::dot(d, d);
+    const double b = glm::dot(f, d);
+    const dvec3 g = f - (b / a) * d;
+    const double disc = a * (r * r - glm::dot(g, g));
+    if (!(disc >= 0.0)) return false;
+    return first_root_d(a, b, glm::dot(f, f) - r * r, disc, tmin, tmax, 0.0, 0.0, 1.0, t);
+  }
+  const ConeFrame<double> f = cone_frame<double>(s);
+  const dvec3 k = f.axis;
+  const double h = f.height, slope = f.slope;
+  const dvec3 w = o - dvec3(s.base);
+  const double zo = glm::dot(w, k), zd = glm::dot(d, k);
+  const dvec3 ro = w - zo * k, rd = d - zd * k;
+  const double ra = double(s.base_radius) + slope * zo;
+  const double a = glm::dot(rd, rd) - slope * slope * zd * zd;
+  const double b = glm::dot(ro, rd) - ra * slope * zd;
+  const double c = glm::dot(ro, ro) - ra * ra;
+  const double disc = b * b - a * c;
+  if (!(disc >= 0.0)) return false;
+  return first_root_d(a, b, c, disc, tmin, tmax, zo, zd, h, t);
+}
+
 // ---- BVH in double: median split on the longest axis of the centroid bounds ---------------------
 
 struct BvhNode {
@@ -47,7 +92,7 @@ struct BvhNode {
 
 class Bvh {
  public:
-  explicit Bvh(const Scene& scene) {
+  explicit Bvh(const Scene& scene) : shapes_(scene.shapes), triangles_(scene.mesh.triangle_count()) {
     const auto& pos = scene.mesh.positions;
     const size_t n = scene.mesh.triangle_count();
     verts_.resize(n * 3);
@@ -63,16 +108,36 @@ class Bvh {
       const dvec3 e = glm::cross(verts_[3 * i + 1] - verts_[3 * i], verts_[3 * i + 2] - verts_[3 * i]);
       if (e != dvec3(0.0)) order_.push_back(int32_t(i));  // zero-area triangles are never hit
     }
-    centroids_.resize(n);
+    // Analytic shapes follow the triangles (primitive n + k), each with its box.
+    for (size_t k = 0; k < shapes_.size(); ++k) order_.push_back(int32_t(n + k));
+    lo_.resize(n + shapes_.size());
+    hi_.resize(n + shapes_.size());
+    for (size_t i = 0; i < n; ++i) {
+      lo_[i] = glm::min(verts_[3 * i], glm::min(verts_[3 * i + 1], verts_[3 * i + 2]));
+      hi_[i] = glm::max(verts_[3 * i], glm::max(verts_[3 * i + 1], verts_[3 * i + 2]));
+    }
+    for (size_t k = 0; k < shapes_.size(); ++k) {
+      const Aabb box = shape_bounds(shapes_[k]);
+      lo_[n + k] = dvec3(box.lo);
+      hi_[n + k] = dvec3(box.hi);
+    }
+    centroids_.resize(n + shapes_.size());
     for (size_t i = 0; i < n; ++i) centroids_[i] = (verts_[3 * i] + verts_[3 * i + 1] + verts_[3 * i + 2]) / 3.0;
+    for (size_t i = n; i < centroids_.size(); ++i) centroids_[i] = 0.5 * (lo_[i] + hi_[i]);
     nodes_.reserve(order_.empty() ? 1 : 2 * order_.size());
     nodes_.emplace_back();
     if (!order_.empty()) build(0, 0, int32_t(order_.size()));
   }
 
   const dvec3& vertex(int32_t prim, int k) const { return verts_[size_t(prim) * 3 + size_t(k)]; }
+  // The analytic shape of primitive prim, or nullptr for a triangle.
+  const Shape* shape(int32_t prim) const {
+    return size_t(prim) >= triangles_ ? &shapes_[size_t(prim) - triangles_] : nullptr;
+  }
 
-  // Closest hit (or, with any_hit, any hit) in [tmin, tmax], never on `exclude`.
+  // Closest hit (or, with any_hit, any hit) in [tmin, tmax], never on the triangle `exclude` (a
+  // shape may be hit again: a ray leaving a sphere's inside meets its far side; the offset origin
+  // keeps it off the point it leaves).
   DHit intersect(const DRay& ray, int32_t exclude, bool any_hit) const {
     DHit best;
     best.t = ray.tmax;
@@ -89,10 +154,12 @@ class Bvh {
       if (node.count > 0) {
         for (int32_t k = node.first; k < node.first + node.count; ++k) {
           const int32_t prim = order_[size_t(k)];
-          if (prim == exclude) continue;
           double t = 0, u = 0, v = 0;
-          if (!intersect_watertight(ray.origin, ray.direction, vertex(prim, 0), vertex(prim, 1), vertex(prim, 2),
-                                    ray.tmin, best.t, t, u, v)) {
+          if (const Shape* s = shape(prim)) {
+            if (!intersect_shape_d(*s, ray.origin, ray.direction, ray.tmin, best.t, t)) continue;
+          } else if (prim == exclude ||
+                     !intersect_watertight(ray.origin, ray.direction, vertex(prim, 0), vertex(prim, 1),
+                                           vertex(prim, 2), ray.tmin, best.t, t, u, v)) {
             continue;
           }
           // The same order as the renderer's: smaller t, then the lower primitive index.
@@ -150,10 +217,8 @@ class Bvh {
     dvec3 clo(kInf), chi(-kInf);
     for (int32_t k = first; k < first + count; ++k) {
       const int32_t prim = order_[size_t(k)];
-      for (int j = 0; j < 3; ++j) {
-        node.lo = glm::min(node.lo, vertex(prim, j));
-        node.hi = glm::max(node.hi, vertex(prim, j));
-      }
+      node.lo = glm::min(node.lo, lo_[size_t(prim)]);
+      node.hi = glm::max(node.hi, hi_[size_t(prim)]);
       clo = glm::min(clo, centroids_[size_t(prim)]);
       chi = glm::max(chi, centroids_[size_t(prim)]);
     }
@@ -177,7 +242,10 @@ class Bvh {
     build(node.first + 1, mid, first + count - mid);
   }
 
+  const std::vector<Shape>& shapes_;
+  size_t triangles_;
   std::vector<dvec3> verts_;
+  std::vector<dvec3> lo_, hi_;  // each primitive's box
   std::vector<dvec3> centroids_;
   std::vector<int32_t> order_;
   std::vector<BvhNode> nodes_;
@@ -282,6 +350,17 @@ class Tracer {
   SurfaceD surface(const DRay& ray, const DHit& h) const {
     SurfaceD s;
     s.prim = h.prim;
+    if (const Shape* shape = bvh_.shape(h.prim)) {
+      s.position = ray.origin + h.t * ray.direction;
+      const dvec3 n = shape_normal(*shape, s.position);
+      s.ng_raw = n;
+      s.entering = glm::dot(n, ray.direction) < 0.0;
+      s.geometric = s.entering ? n : -n;
+      s.normal = s.geometric;
+      s.texcoord = shape_texcoord(*shape, s.position);
+      s.material = shape->material;
+      return s;
+    }
     const dvec3& a = bvh_.vertex(h.prim, 0);
     const dvec3& b = bvh_.vertex(h.prim, 1);
     const dvec3& c = bvh_.vertex(h.prim, 2);

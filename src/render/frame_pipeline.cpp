@@ -24,10 +24,14 @@ double FramePipeline::prepare(size_t index) {
   f.camera = camera;
   f.pose_ms = elapsed_ms(start);
   const auto build_start = std::chrono::steady_clock::now();
-  f.tree_built = always_rebuild_ || !built_any_ || built_positions_ != scene->mesh.positions;
-  f.tree = f.tree_built ? build_kdtree(scene->mesh.positions, kd_) : FlatKdTree{};
+  f.tree_built = always_rebuild_ || !built_any_ || built_positions_ != scene->mesh.positions ||
+                 built_shapes_ != scene->shapes;
+  f.tree = f.tree_built ? build_kdtree(scene->mesh.positions, scene->shapes, kd_) : FlatKdTree{};
   f.build_ms = f.tree_built ? elapsed_ms(build_start) : 0.0;
-  if (f.tree_built && !always_rebuild_) built_positions_ = scene->mesh.positions;
+  if (f.tree_built && !always_rebuild_) {
+    built_positions_ = scene->mesh.positions;
+    built_shapes_ = scene->shapes;
+  }
   built_any_ = true;
   return elapsed_ms(start);
 }

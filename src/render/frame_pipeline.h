@@ -88,6 +88,7 @@ class FramePipeline {
   bool pipelined_;
   PreparedFrame slots_[2];
   std::vector<glm::vec3> built_positions_;  // of the last tree built (when not always_rebuild)
+  std::vector<Shape> built_shapes_;         // and its analytic shapes
   bool built_any_ = false;
   size_t next_ = 0;                // the index the next step must have
   size_t ready_ = SIZE_MAX;        // the index the worker prepared, once it finished without error

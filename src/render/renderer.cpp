@@ -104,11 +104,12 @@ struct Renderer::Data {
   bool has_atlas = false;
   FlatKdTree tree;                         // the last tree built, and the triangles it was built on
   std::vector<glm::vec3> tree_positions;
+  std::vector<Shape> tree_shapes;
   bool tree_valid = false;
   bool tree_prebuilt = false;   // the next begin_frame uploads `tree`, built elsewhere in prebuilt_ms
   double prebuilt_ms = 0.0;
   uint32_t ray_width = 0;  // the ray textures' row width; a change recreates them
-  std::map<std::pair<int, int>, PassHandle> trace_passes;  // (lights, packing)
+  std::map<std::tuple<int, int, int>, PassHandle> trace_passes;  // (lights, packing, analytic)
   std::map<std::tuple<int, int, int, int>, PassHandle> shade_passes;  // (lights, textures, pages, colour)
 };
 
@@ -123,19 +124,20 @@ class Renderer::Engine final : public WhittedEngine {
     // A tree built elsewhere is this frame's only (taken first, so that a refused frame leaves none).
     const bool prebuilt = std::exchange(r_.data_->tree_prebuilt, false);
     // Refuse a scene over a limit before any work.
-    choose_packing(scene.mesh.triangle_count(), r_.pass_lights(int(r_.shadow_lights(scene).size())),
+    choose_packing(scene.primitive_count(), r_.pass_lights(int(r_.shadow_lights(scene).size())),
                    scene.source);
     // The tree is rebuilt from scratch whenever the geometry changed (every frame of an animation,
     // as in the paper); a static scene, or a frame whose triangles did not move, keeps it.
     const auto stage = Clock::now();
     Data& cache = *r_.data_;
     const bool reuse = !prebuilt && !r_.settings_.always_rebuild && cache.tree_valid &&
-                       cache.tree_positions == scene.mesh.positions;
+                       cache.tree_positions == scene.mesh.positions && cache.tree_shapes == scene.shapes;
     if (prebuilt) {
       t.build_ms = cache.prebuilt_ms;  // on the frame pipeline's worker, during the previous frame
     } else if (!reuse) {
-      cache.tree = build_kdtree(scene.mesh.positions, r_.settings_.kd);
+      cache.tree = build_kdtree(scene.mesh.positions, scene.shapes, r_.settings_.kd);
       cache.tree_positions = scene.mesh.positions;
+      cache.tree_shapes = scene.shapes;
       t.build_ms = elapsed_ms(stage);
     }
     if (!reuse) {
@@ -220,8 +222,8 @@ TextureHandle Renderer::ensure_texture(TextureHandle& handle, uint32_t& capacity
   return handle;
 }
 
-PassHandle Renderer::trace_pass(int lights, Packing packing) {
-  auto key = std::make_pair(lights, int(packing));
+PassHandle Renderer::trace_pass(int lights, Packing packing, bool analytic) {
+  auto key = std::make_tuple(lights, int(packing), int(analytic));
   auto it = data_->trace_passes.find(key);
   if (it != data_->trace_passes.end()) return it->second;
   PassDesc desc;
@@ -234,7 +236,8 @@ PassHandle Renderer::trace_pass(int lights, Packing packing) {
                          {MOBIRT_SPEC_PACKING, int(packing)},
                          {MOBIRT_SPEC_INTERSECT, int(settings_.shadow_rays.ray_test.test)},
                          {MOBIRT_SPEC_PRECISION, int(settings_.shadow_rays.ray_test.precision)},
-                         {MOBIRT_SPEC_OFFSET, int(settings_.shadow_rays.offset.mode)}};
+                         {MOBIRT_SPEC_OFFSET, int(settings_.shadow_rays.offset.mode)},
+                         {MOBIRT_SPEC_ANALYTIC, int(analytic)}};
   desc.uniform_vec4s = MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * uint32_t(lights);
   desc.texture_bindings = {MOBIRT_BIND_NODES, MOBIRT_BIND_PRIM_LIST, MOBIRT_BIND_TRIANGLES,
                            MOBIRT_BIND_RAY_ORIGIN, MOBIRT_BIND_RAY_DIRECTION};
@@ -340,9 +343,10 @@ TraceResult Renderer::trace_uploaded(const Scene& scene, const FlatKdTree& tree,
   TraceResult result;
   // Without shadows the pass is specialised to no lights: it casts no shadow rays at all.
   const int lights = pass_lights(int(shadow_lights(scene).size()));
-  result.packing = choose_packing(scene.mesh.triangle_count(), lights, scene.source);
+  result.packing = choose_packing(scene.primitive_count(), lights, scene.source);
   upload_rays(rays);
-  const PassHandle pass = trace_pass(lights, result.packing);
+  // A general pass carries the sphere and cone tests; a specialised one only where the scene has them.
+  const PassHandle pass = trace_pass(lights, result.packing, !settings_.specialize || !scene.shapes.empty());
   const std::vector<float> uniforms = trace_uniforms(tree, shadow_lights(scene), settings_.shadow_rays, lights);
   const Data& d = *data_;
   const TextureHandle textures[] = {d.nodes.handle, d.prim_list.handle, d.triangles.handle,
@@ -473,6 +477,7 @@ Image Renderer::render(const Scene& scene, const Camera& camera, FlatKdTree&& tr
   d.tree = std::move(tree);
   // Kept as the cache of the triangles the tree was built on, as a tree built here would be.
   d.tree_positions = scene.mesh.positions;
+  d.tree_shapes = scene.shapes;
   d.tree_valid = true;
   d.tree_prebuilt = true;
   d.prebuilt_ms = build_ms;

@@ -105,7 +105,7 @@ class Renderer {
   class Engine;  // the passes as the frame loop drives them
   TextureHandle ensure_texture(TextureHandle& handle, uint32_t& capacity_rows, uint32_t width,
                                uint32_t rows, TexelFormat format, TextureKind kind = TextureKind::Image2D);
-  PassHandle trace_pass(int lights, Packing packing);
+  PassHandle trace_pass(int lights, Packing packing, bool analytic);
   PassHandle shade_pass(int lights, int textures, int pages, int colour);
   void prepare_atlas(const Scene& scene);
   void upload_tree(const FlatKdTree& tree);

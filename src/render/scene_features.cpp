@@ -19,6 +19,7 @@ SceneFeatures analyze_scene(const AnimatedScene& animation, const RenderSettings
   const Scene& scene = animation.rest();
   SceneFeatures f;
   f.triangles = scene.mesh.triangle_count();
+  f.shapes = scene.shapes.size();
   f.lights = int(scene.lights.size());
   f.textures = int(scene.textures.size());
   for (const Material& m : scene.materials) {
@@ -28,15 +29,15 @@ SceneFeatures analyze_scene(const AnimatedScene& animation, const RenderSettings
   f.animated = animation.animated();
   f.duration = animation.duration();
   const int shadow_lights = settings.shadows ? f.lights : 0;
-  f.packing = choose_packing(f.triangles, shadow_lights, scene.source);
+  f.packing = choose_packing(scene.primitive_count(), shadow_lights, scene.source);
   auto add = [&](std::string what, const std::string& why) { f.choices.push_back(what.append(": ").append(why)); };
 
   if (f.packing == Packing::Bits24_8) {
-    add("packing 24/8", std::to_string(f.triangles) + " triangles fit 24 bits and " + std::to_string(shadow_lights) +
+    add("packing 24/8", std::to_string(scene.primitive_count()) + " primitives fit 24 bits and " + std::to_string(shadow_lights) +
                             " lights fit 8 shadow bits");
   } else {
     add("packing 16/16", std::to_string(shadow_lights) + " lights need more than 8 shadow bits and " +
-                             std::to_string(f.triangles) + " triangles fit 16 bits");
+                             std::to_string(scene.primitive_count()) + " primitives fit 16 bits");
   }
   if (shadow_lights == 0) {
     add("traversal pass: LIGHT_COUNT 0", f.lights == 0 ? "no lights: no shadow rays at all"
@@ -55,6 +56,12 @@ SceneFeatures analyze_scene(const AnimatedScene& animation, const RenderSettings
           (test.precision == Precision::Medium ? "mediump" : "highp") + ", OFFSET_MODE " +
           (offset == OffsetMode::Fixed ? "fixed" : offset == OffsetMode::Scaled ? "scaled" : "normal-ulp"),
       "the settings (--intersect, --precision, --offset): only the chosen code is compiled");
+  if (f.shapes == 0) {
+    add("traversal pass: ANALYTIC 0", "triangles only: no sphere or cone code");
+  } else {
+    add("traversal pass: ANALYTIC 1", std::to_string(f.shapes) + " analytic spheres and cones beside " +
+                                          std::to_string(f.triangles) + " triangles (--primitives analytic)");
+  }
   if (settings.colour == ColourDepth::Bits16) {
     add("two shading passes per generation (COLOUR 16 high, low)", "--colour 16: 16 bits per channel");
   } else {

@@ -13,6 +13,7 @@ namespace mobirt {
 
 struct SceneFeatures {
   size_t triangles = 0;
+  size_t shapes = 0;          // analytic spheres and cones
   int lights = 0;
   int textures = 0;
   bool reflective = false;

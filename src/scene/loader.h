@@ -16,7 +16,10 @@ struct LoadOptions {
   std::string mtl;    // OBJ: a .mtl file used instead of the one(s) the OBJ names (mtllib);
                       // its map_Kd paths are relative to its own folder. Empty: the OBJ's own.
   int animation = -1; // glTF: -1 plays all animations together; k plays animations[k] only
-  Tessellation tessellation;  // NFF spheres, cylinders and cones (scene/tessellate.h)
+  // NFF spheres, cylinders and cones: analytic kd-tree primitives (Scene::shapes), or triangles
+  // (--primitives tessellated) cut as `tessellation` says (scene/tessellate.h).
+  bool analytic = true;
+  Tessellation tessellation;
 };
 
 // Picks the loader by extension (case-insensitive): .gltf and .glb -> load_gltf, .obj -> load_obj,
@@ -62,9 +65,10 @@ Scene load_obj(const std::string& path, const LoadOptions& options);
 // - f R G B Kd Ks Shine T ior: a material (README's materials table), used by what follows;
 // - p and pp: polygons (flat normal) and patches (normals given), triangulated by ear clipping,
 //   concave ones included;
-// - s and c: spheres, cylinders and cones, tessellated (LoadOptions::tessellation; cones without
-//   end caps, as the spec says; negative radii: inside visible).
-// Errors are "FILE:LINE: problem" (BadInput). Limits: 16,384 vertices a polygon, 2^24 - 1 triangles.
+// - s and c: spheres, cylinders and cones as analytic primitives (Scene::shapes), or tessellated
+//   with LoadOptions::analytic false (LoadOptions::tessellation); cones without end caps, as the
+//   spec says; negative radii: inside visible.
+// Errors are "FILE:LINE: problem" (BadInput). Limits: 16,384 vertices a polygon, 2^24 - 1 primitives.
 Scene load_nff(const std::string& path, const LoadOptions& options = {});
 
 // PLY (Stanford polygon file), ASCII and binary of either byte order: vertex x, y, z; nx, ny, nz;

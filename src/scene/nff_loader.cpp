@@ -38,7 +38,7 @@ std::string printable(const std::string& field) {
 class NffReader {
  public:
   NffReader(const std::string& path, std::string text, const LoadOptions& options)
-      : path_(path), text_(std::move(text)), tess_{options.tessellation} {}
+      : path_(path), text_(std::move(text)), tess_{options.tessellation}, analytic_(options.analytic) {}
 
   Scene read() {
     scene_.source = path_;
@@ -247,9 +247,9 @@ class NffReader {
   }
 
   void reserve(size_t triangles, const char* what) {
-    if (triangles > kMaxTriangles - scene_.mesh.triangle_count()) {
+    if (triangles > kMaxTriangles - scene_.primitive_count()) {
       fail(entity_line_, std::string(what) + " would take the scene past " + std::to_string(kMaxTriangles) +
-                             " triangles, the most the 24-bit hit index holds");
+                             " primitives, the most the 24-bit hit index holds");
     }
   }
 
@@ -257,8 +257,17 @@ class NffReader {
     const glm::vec3 c = vec3("the sphere's centre X Y Z");
     const float r = number("the sphere's radius");
     if (r == 0.0f) fail(entity_line_, "a sphere of radius 0");
-    reserve(sphere_triangle_count(tess_), "this sphere");
-    tessellate_sphere(scene_.mesh, c, r, material(), tess_);
+    reserve(analytic_ ? 1 : sphere_triangle_count(tess_), "this sphere");
+    if (!analytic_) {
+      tessellate_sphere(scene_.mesh, c, r, material(), tess_);
+      return;
+    }
+    Shape sphere;
+    sphere.base = c;
+    sphere.base_radius = std::abs(r);
+    sphere.inside = r < 0.0f;
+    sphere.material = material();
+    scene_.shapes.push_back(sphere);
   }
 
   void cone() {
@@ -271,8 +280,20 @@ class NffReader {
       fail(entity_line_, "the cone's radii differ in sign (both negative: only the inside is visible)");
     }
     if (rb == 0.0f && ra == 0.0f) fail(entity_line_, "the cone's radii are both 0");
-    reserve(cone_triangle_count(tess_), "this cone");
-    tessellate_cone(scene_.mesh, base, rb, apex, ra, material(), tess_);
+    reserve(analytic_ ? 1 : cone_triangle_count(tess_), "this cone");
+    if (!analytic_) {
+      tessellate_cone(scene_.mesh, base, rb, apex, ra, material(), tess_);
+      return;
+    }
+    Shape cone;
+    cone.kind = ShapeKind::Cone;
+    cone.base = base;
+    cone.base_radius = std::abs(rb);
+    cone.apex = apex;
+    cone.apex_radius = std::abs(ra);
+    cone.inside = rb < 0.0f || ra < 0.0f;
+    cone.material = material();
+    scene_.shapes.push_back(cone);
   }
 
   void polygon(bool patch) {
@@ -325,6 +346,7 @@ class NffReader {
   std::string path_;
   std::string text_;
   Tessellation tess_;
+  bool analytic_ = true;
   Scene scene_;
   size_t pos_ = 0;
   int line_ = 1;

@@ -22,6 +22,7 @@ glm::mat3 texture_transform_matrix(glm::vec2 offset, float rotation, glm::vec2 s
 Aabb Scene::bounds() const {
   Aabb box;
   for (const glm::vec3& p : mesh.positions) box.extend(p);
+  for (const Shape& s : shapes) box.extend(shape_bounds(s));
   return box;
 }
 

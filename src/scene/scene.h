@@ -11,6 +11,7 @@
 
 #include "core/camera.h"
 #include "core/geometry.h"
+#include "core/shapes.h"
 
 namespace mobirt {
 
@@ -87,6 +88,9 @@ struct TriangleMesh {
 struct Scene {
   std::string source;                 // the file it came from, for messages
   TriangleMesh mesh;
+  // Analytic spheres and cones (NFF s and c unless tessellated): primitive mesh.triangle_count() + k
+  // in the kd-tree and in every hit record.
+  std::vector<Shape> shapes;
   std::vector<Material> materials;    // at least one: the default material
   std::vector<TextureRef> textures;   // referenced by Material::texture
   std::vector<Light> lights;
@@ -99,6 +103,7 @@ struct Scene {
   glm::vec3 up{0.0f, 1.0f, 0.0f};
   size_t degenerate_triangles = 0;    // zero-area triangles, kept (the tracer skips them), counted
 
+  size_t primitive_count() const { return mesh.triangle_count() + shapes.size(); }
   Aabb bounds() const;
 };
 

@@ -101,6 +101,18 @@ void tessellate_cone(TriangleMesh& mesh, const glm::vec3& base, float base_radiu
   }
 }
 
+void tessellate_shapes(Scene& scene, const Tessellation& t) {
+  for (const Shape& s : scene.shapes) {
+    const float sign = s.inside ? -1.0f : 1.0f;
+    if (s.kind == ShapeKind::Sphere) {
+      tessellate_sphere(scene.mesh, s.base, sign * s.base_radius, s.material, t);
+    } else {
+      tessellate_cone(scene.mesh, s.base, sign * s.base_radius, s.apex, sign * s.apex_radius, s.material, t);
+    }
+  }
+  scene.shapes.clear();
+}
+
 glm::vec3 polygon_normal(const std::vector<glm::vec3>& polygon) {
   glm::dvec3 n(0.0);
   for (size_t i = 0; i < polygon.size(); ++i) {

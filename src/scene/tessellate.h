@@ -1,9 +1,10 @@
 // Triangles for the shapes scene files describe by parameters: NFF spheres, cylinders and cones,
 // and planar polygons (NFF p/pp, PLY faces), appended to a TriangleMesh.
 //
-// Spheres, cylinders and cones are tessellated here for now; analytic kd-tree primitives with
-// shader intersection (issue 17, item 2) are the planned replacement, after which the NFF reader
-// hands them over whole and these functions remain for formats that want triangles.
+// The NFF reader hands spheres, cylinders and cones over whole, as analytic primitives
+// (Scene::shapes), unless asked for triangles (--primitives tessellated); tessellate_shapes turns
+// a scene's shapes into triangles for the engines that only take triangles (Embree, the driver's
+// ray queries).
 #pragma once
 
 #include <cstdint>
@@ -43,6 +44,10 @@ void tessellate_sphere(TriangleMesh& mesh, const glm::vec3& center, float radius
 // Normals are the cone's analytic normals, tilted by the slope.
 void tessellate_cone(TriangleMesh& mesh, const glm::vec3& base, float base_radius, const glm::vec3& apex,
                      float apex_radius, uint32_t material, const Tessellation& t);
+
+// The scene's analytic shapes (Scene::shapes) as triangles appended to its mesh, `shapes` emptied:
+// shape k's triangles follow the mesh's own, in order. A scene without shapes is left as it is.
+void tessellate_shapes(Scene& scene, const Tessellation& t = {});
 
 // Triangulates a planar polygon (the vertices in order, either winding, convex or concave, no
 // holes) by ear clipping in the polygon's plane: the Newell normal picks the plane, the two axes

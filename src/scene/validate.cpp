@@ -65,7 +65,7 @@ void validate_scene(Scene& scene) {
                     std::to_string(mesh.normals.size()) + " normals, " +
                     std::to_string(mesh.texcoords.size()) + " texture coordinates)");
   }
-  if (tris == 0) {
+  if (tris == 0 && scene.shapes.empty()) {
     throw input_error(scene.source,
                       "no triangles: the file has no triangle mesh in its scene (points and "
                       "lines are not rendered)");
@@ -81,6 +81,18 @@ void validate_scene(Scene& scene) {
                                            " has material " +
                                            std::to_string(mesh.material_ids[t]) + " of " +
                                            std::to_string(scene.materials.size()));
+    }
+  }
+  for (size_t k = 0; k < scene.shapes.size(); ++k) {
+    const Shape& s = scene.shapes[k];
+    const bool finite = finite3(s.base) && finite3(s.apex) && std::isfinite(s.base_radius) &&
+                        std::isfinite(s.apex_radius);
+    const bool sphere_ok = s.kind == ShapeKind::Sphere && s.base_radius > 0.0f;
+    const bool cone_ok = s.kind == ShapeKind::Cone && s.base != s.apex && s.base_radius >= 0.0f &&
+                         s.apex_radius >= 0.0f && (s.base_radius > 0.0f || s.apex_radius > 0.0f);
+    if (!finite || !(sphere_ok || cone_ok) || s.material >= scene.materials.size()) {
+      throw Error(ErrorKind::Internal, scene.source + ": shape " + std::to_string(k) +
+                                           " is malformed (radii, axis or material out of range)");
     }
   }
   for (const Material& m : scene.materials) {

@@ -18,6 +18,7 @@
 #include "accel/kdtree.h"
 #include "core/error.h"
 #include "scene/animation.h"
+#include "scene/tessellate.h"
 #include "scene/texture_images.h"
 
 namespace mobirt::fuzz {
@@ -72,6 +73,11 @@ inline void run_one(const uint8_t* data, size_t size) {
     const double d = animation.duration();
     for (double t : {0.37, std::isfinite(d) ? d * 0.71 + 0.01 : 1.0}) {
       animation.evaluate(t, frame);
+      (void)build_kdtree(frame.mesh.positions, frame.shapes, KdBuildOptions{});
+    }
+    // NFF spheres and cones arrive analytic: their tessellation (--primitives tessellated) too.
+    if (!frame.shapes.empty()) {
+      tessellate_shapes(frame, options.tessellation);
       (void)build_kdtree(frame.mesh.positions, KdBuildOptions{});
     }
     // Embedded textures only: decoding exercises the image checks on the fuzzed bytes.

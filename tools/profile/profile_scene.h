@@ -42,6 +42,9 @@ inline ProfileScene load_profile_scene(int argc, char** argv, const char* usage)
   ProfileScene p;
   p.path = argv[1];
   LoadOptions load;
+  // The tools compare triangle engines (Embree, the driver's ray queries) with mobirt's walk on the
+  // same triangles: NFF shapes come tessellated.
+  load.analytic = false;
   std::vector<Light> lights;
   std::optional<Camera> camera;
   KdBuildOptions kd;
