@@ -43,9 +43,12 @@ vec3 intersect_mt(float prim, vec3 o, vec3 d, float tmin, float tmax) {
   vec3 s = mp(o - v0);
   float u = mp(mp(mp_dot(s, p)) * inv_det);
   if (!(u >= 0.0 && u <= 1.0)) return vec3(-1.0);
-  vec3 q = mp(mp_cross(s, e1));
-  float v = mp(mp(mp_dot(d, q)) * inv_det);
+  // v's numerator as -(s.(d x e1)), u's products: exact negations across a fan's shared edge
+  // v0-v2, so no ray slips between the two triangles (src/accel/kdtree_traverse.cpp).
+  vec3 r = mp(mp_cross(d, e1));
+  float v = mp(-mp(mp_dot(s, r)) * inv_det);
   if (!(v >= 0.0 && mp(u + v) <= 1.0)) return vec3(-1.0);
+  vec3 q = mp(mp_cross(s, e1));
   float t = mp(mp(mp_dot(e2, q)) * inv_det);
   return (t >= tmin && t <= tmax) ? vec3(t, u, v) : vec3(-1.0);
 }
