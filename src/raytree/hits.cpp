@@ -184,10 +184,28 @@ SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ra
     const glm::vec3 v0 = triangle_texel::vertex(tree.triangles, prim, 0);
     const glm::vec3 v1 = triangle_texel::vertex(tree.triangles, prim, 1);
     const glm::vec3 v2 = triangle_texel::vertex(tree.triangles, prim, 2);
-    const glm::vec3 n = glm::cross(v1 - v0, v2 - v0);
+    const glm::vec3 e1 = v1 - v0, e2 = v2 - v0;
+    const glm::vec3 n = glm::cross(e1, e2);
     const float denom = glm::dot(n, ray.direction);
     h.t = denom != 0.0f ? glm::dot(n, v0 - ray.origin) / denom : ray.tmin;
-    h.u = h.v = 1.0f / 3.0f;
+    // The ray's barycentrics on the triangle's plane, clamped into the triangle: a ray on an edge
+    // shared with the triangle our test chose keeps its texture coordinates (the centroid, used
+    // before, put pinholes of the wrong texel on quads' diagonals under GLES).
+    const glm::vec3 p = glm::cross(ray.direction, e2);
+    const float det = glm::dot(e1, p);
+    const glm::vec3 s = ray.origin - v0;
+    float u = det != 0.0f ? glm::dot(s, p) / det : 1.0f / 3.0f;
+    float v = det != 0.0f ? glm::dot(ray.direction, glm::cross(s, e1)) / det : 1.0f / 3.0f;
+    if (!(std::isfinite(u) && std::isfinite(v))) u = v = 1.0f / 3.0f;
+    u = std::max(u, 0.0f);
+    v = std::max(v, 0.0f);
+    if (u + v > 1.0f) {
+      const float sum = u + v;
+      u /= sum;
+      v /= sum;
+    }
+    h.u = u;
+    h.v = v;
     h.prim = prim;
   }
   h.prim = prim;
