@@ -40,14 +40,24 @@ glm::vec3 offset_normal_ulp(const glm::vec3& p, const glm::vec3& n) {
   return out;
 }
 
-glm::vec3 point_on_triangle(const glm::vec3& v0, const glm::vec3& e1, const glm::vec3& e2, const glm::vec3& o,
-                            const glm::vec3& d) {
+namespace {
+
+// The barycentric weights (u, v) of v0 + e1 and v0 + e2 where the ray (o, d) meets the triangle's
+// plane, unbounded (Möller-Trumbore's formulas without its tests).
+glm::vec2 plane_barycentrics(const glm::vec3& v0, const glm::vec3& e1, const glm::vec3& e2, const glm::vec3& o,
+                             const glm::vec3& d) {
   const glm::vec3 p = glm::cross(d, e2);
   const float inv_det = 1.0f / glm::dot(e1, p);
   const glm::vec3 s = o - v0;
-  const float u = glm::dot(s, p) * inv_det;
-  const float v = glm::dot(d, glm::cross(s, e1)) * inv_det;
-  return v0 + u * e1 + v * e2;
+  return {glm::dot(s, p) * inv_det, glm::dot(d, glm::cross(s, e1)) * inv_det};
+}
+
+}  // namespace
+
+glm::vec3 point_on_triangle(const glm::vec3& v0, const glm::vec3& e1, const glm::vec3& e2, const glm::vec3& o,
+                            const glm::vec3& d) {
+  const glm::vec2 uv = plane_barycentrics(v0, e1, e2, o, d);
+  return v0 + uv.x * e1 + uv.y * e2;
 }
 
 glm::vec3 offset_origin(const glm::vec3& p, const glm::vec3& n, OffsetMode mode, float absolute,
@@ -191,12 +201,9 @@ SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ra
     // The ray's barycentrics on the triangle's plane, clamped into the triangle: a ray on an edge
     // shared with the triangle our test chose keeps its texture coordinates (the centroid, used
     // before, put pinholes of the wrong texel on quads' diagonals under GLES).
-    const glm::vec3 p = glm::cross(ray.direction, e2);
-    const float det = glm::dot(e1, p);
-    const glm::vec3 s = ray.origin - v0;
-    float u = det != 0.0f ? glm::dot(s, p) / det : 1.0f / 3.0f;
-    float v = det != 0.0f ? glm::dot(ray.direction, glm::cross(s, e1)) / det : 1.0f / 3.0f;
-    if (!(std::isfinite(u) && std::isfinite(v))) u = v = 1.0f / 3.0f;
+    const glm::vec2 uv = plane_barycentrics(v0, e1, e2, ray.origin, ray.direction);
+    float u = uv.x, v = uv.y;
+    if (!(std::isfinite(u) && std::isfinite(v))) u = v = 1.0f / 3.0f;  // the ray in the plane
     u = std::max(u, 0.0f);
     v = std::max(v, 0.0f);
     if (u + v > 1.0f) {
