@@ -812,6 +812,13 @@ TEST(KdTree, NonFiniteAndMalformedInputIsBadInput) {
   }
   p[7].y = kInfinity;
   EXPECT_THROW(build_kdtree(p), Error);
+  // The build checks blocks of triangles in parallel: the first bad vertex is named all the same.
+  Positions large = random_soup(20000, 4);
+  large[3 * 17000].x = kInfinity;
+  large[3 * 9000 + 1].z = std::numeric_limits<float>::quiet_NaN();
+  KdBuildOptions two;
+  two.threads = 2;
+  test::expect_bad_input([&] { build_kdtree(large, two); }, {"triangle 9000 vertex 1", "non-finite"});
   p[7].y = 0.0f;
   p.pop_back();
   EXPECT_THROW(build_kdtree(p), Error);  // not whole triangles

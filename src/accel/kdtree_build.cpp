@@ -503,12 +503,17 @@ class Builder {
     refs.set_size(n);
     const size_t blocks = (n + kBlockRefs - 1) / kBlockRefs;
     std::vector<Aabb> block_bounds(blocks);
+    // 1 where a block has a non-finite vertex: checked here, in parallel, rather than by a serial
+    // pass before the build (1 % of a 1M-triangle build's instructions).
+    std::vector<uint8_t> block_non_finite(blocks, 0);
     tbb::parallel_for(size_t(0), blocks, [&](size_t b) {
       Aabb box;
+      bool finite = true;
       for (size_t i = b * kBlockRefs, end = std::min(n, i + kBlockRefs); i < end; ++i) {
         glm::vec3 lo, hi;
         if (i < positions_.size() / 3) {
           const glm::vec3* v = positions_.data() + 3 * i;
+          finite &= is_finite(v[0]) & is_finite(v[1]) & is_finite(v[2]);
           lo = glm::min(v[0], glm::min(v[1], v[2]));
           hi = glm::max(v[0], glm::max(v[1], v[2]));
         } else {  // an analytic primitive: its box
@@ -521,7 +526,11 @@ class Builder {
         box.hi = glm::max(box.hi, hi);
       }
       block_bounds[b] = box;
+      block_non_finite[b] = !finite;
     });
+    for (size_t b = 0; b < blocks; ++b) {
+      if (block_non_finite[b]) throw non_finite_vertex(b * kBlockRefs);
+    }
     for (const Aabb& box : block_bounds) bounds.extend(box);
     const Box root = to_box(bounds);
     if (n > 0) {
@@ -1184,7 +1193,7 @@ class Builder {
   // Depth first: a top node, its below child's part next, then its above child's part. The
   // empty-child flags are set here, the parts in parallel and each one's nodes still in cache,
   // the very flags of mark_empty_children (a serial pass over the whole tree after it, with a
-  // cache miss per above child: 1.5 % of a 1M-triangle build's time on 2 threads).
+  // cache miss per above child: 0.4 % of a 1M-triangle build's instructions, all on one thread).
   static void lay_out(const Part& part, size_t node_base, size_t prim_base, FlatKdTree& tree) {
     if (part.axis >= 0) {
       const size_t above = node_base + 1 + part.below->node_total;
@@ -1213,6 +1222,16 @@ class Builder {
       out[i] = node;
     }
     std::copy(part.prims.begin(), part.prims.end(), tree.prim_list.begin() + static_cast<std::ptrdiff_t>(prim_base));
+  }
+
+  static bool is_finite(const glm::vec3& p) { return std::isfinite(p.x) & std::isfinite(p.y) & std::isfinite(p.z); }
+
+  // The first non-finite vertex from triangle `first` on.
+  Error non_finite_vertex(size_t first) const {
+    size_t i = 3 * first;
+    while (is_finite(positions_[i])) ++i;
+    return Error(ErrorKind::BadInput, "kd-tree: triangle " + std::to_string(i / 3) + " vertex " +
+                                          std::to_string(i % 3) + " has a non-finite position (NaN or infinity)");
   }
 
   Error too_many_nodes() const {
@@ -1283,14 +1302,7 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, std::span<const Sh
                     " that exact float indices (2^24) address; at most " +
                     count_text(kKdMaxTriangles) + " triangles");
   }
-  for (size_t i = 0; i < positions.size(); ++i) {
-    const glm::vec3& p = positions[i];
-    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) {
-      throw Error(ErrorKind::BadInput, "kd-tree: triangle " + std::to_string(i / 3) + " vertex " +
-                                           std::to_string(i % 3) +
-                                           " has a non-finite position (NaN or infinity)");
-    }
-  }
+  // Non-finite positions are found by the build's parallel bounds pass (Builder::build_root).
   if (options.bins < 2) {
     throw Error(ErrorKind::BadInput,
                 "kd-tree: bins must be at least 2 (got " + std::to_string(options.bins) + ")");
