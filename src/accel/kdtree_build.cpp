@@ -59,8 +59,8 @@
 //   child's references in place and the below child's after the node's, the below child is built
 //   next), into nodes and prim lists of its own with indices local to it.
 // - A last pass lays the parts out depth first (a node's below child is the next node, its above
-//   child follows the below child's subtree) and relocates each part's local indices while
-//   copying it, the parts in parallel.
+//   child follows the below child's subtree), relocates each part's local indices and sets the
+//   empty-child flags while copying it, the parts in parallel.
 // Every decision (split, which nodes are top nodes, the order of references in a partition,
 // where each part lands) depends on the references alone, never on the threads or the order in
 // which tasks run, so the arrays are the same, byte for byte, for any thread count, and the same
