@@ -675,13 +675,15 @@ class Builder {
     // Two slots per depth (children of depth max_depth_ are leaves), made before any is used: the
     // vector never moves while a subtree holds pointers into it.
     while (s.hists.size() < 2 * size_t(max_depth_ + 1)) s.hists.emplace_back(bins_);
-    copy_refs(s.arena.data(), refs, n);
     s.tasks.clear();
     if (!hist && can_split(n, depth, area(box))) {  // the root of a small tree: nobody binned it
       hist = &histogram_slot(s, depth, 0);
       bin_into(*hist, refs, n, box);
     }
-    s.tasks.push_back(Task{0, n, box, depth, -1, hist});
+    // The subtree's root reads the node's buffer itself and writes its children into the arena
+    // where they would be had its references been copied there first (that copy was 0.9 % of a
+    // 1M-triangle build's instructions).
+    process(Task{0, n, box, depth, -1, hist}, out, s, refs);
     while (!s.tasks.empty()) {
       const Task task = s.tasks.back();
       s.tasks.pop_back();
@@ -713,14 +715,16 @@ class Builder {
 
   Histogram& histogram_slot(SubtreeScratch& s, int depth, int side) const { return s.hists[2 * size_t(depth) + size_t(side)]; }
 
-  void process(const Task& task, Part& out, SubtreeScratch& s) {
+  // The task's references are in the arena at task.offset, or at `source` (the subtree's root):
+  // either way its children are written into the arena.
+  void process(const Task& task, Part& out, SubtreeScratch& s, const Ref* source = nullptr) {
     const Box& box = task.box;
     const size_t n = task.count;
     const double box_area = area(box);
     const Split split =
         task.hist && can_split(n, task.depth, box_area) ? choose_split(*task.hist, box, n, box_area, n) : Split{};
     if (split.axis < 0) {
-      make_leaf(s.arena.data() + task.offset, n, task.depth, box_area, out, task.parent);
+      make_leaf(source ? source : s.arena.data() + task.offset, n, task.depth, box_area, out, task.parent);
       return;
     }
     const auto [below_box, above_box] = child_boxes(box, split);
@@ -736,7 +740,7 @@ class Builder {
     Ref* refs = s.arena.data() + task.offset;
     ChildSink b{s.arena.data() + below_offset, 0, nullptr, {}};
     ChildSink a{refs, 0, nullptr, {}};
-    partition(refs, n, box, split, b, a);
+    partition(source ? source : refs, n, box, split, b, a);
     // The children are binned after the partition, their references still in cache, and only those
     // that can split (many are leaves of one reference).
     Histogram* below_hist = bin_child(s, b.out, b.count, below_box, child_depth, 0);
