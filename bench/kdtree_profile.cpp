@@ -4,7 +4,7 @@
 // statistics and a hash of its arrays (to tell whether two builders made the same tree), then the
 // tree's cost on 20,000 fixed rays (steps per ray, CPU traversal Mrays/s), to compare builds. A
 // driver for profilers, which need one process per mesh rather than Google Benchmark's loop over
-// all of them: valgrind --tool=callgrind --toggle-collect='mobirt::build_kdtree*' with THREADS 1
+// all of them: valgrind --tool=callgrind --toggle-collect='mobirt::build_kdtree(*Shape*' with THREADS 1
 // (callgrind counts only the threads that enter build_kdtree). Environment knobs for experiments
 // are read below (MOBIRT_KD_ISECT, _LEAF, _DEPTH, _FRAMES, _COLD, _PAUSE_MS).
 #include <algorithm>

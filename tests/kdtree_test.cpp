@@ -813,6 +813,13 @@ TEST(KdTree, NonFiniteAndMalformedInputIsBadInput) {
   }
   p[7].y = kInfinity;
   EXPECT_THROW(build_kdtree(p), Error);
+  // The build checks blocks of triangles in parallel: the first bad vertex is named all the same.
+  Positions large = random_soup(20000, 4);
+  large[3 * 17000].x = kInfinity;
+  large[3 * 9000 + 1].z = std::numeric_limits<float>::quiet_NaN();
+  KdBuildOptions two;
+  two.threads = 2;
+  test::expect_bad_input([&] { build_kdtree(large, two); }, {"triangle 9000 vertex 1", "non-finite"});
   p[7].y = 0.0f;
   p.pop_back();
   EXPECT_THROW(build_kdtree(p), Error);  // not whole triangles
@@ -893,6 +900,12 @@ TEST(KdTree, EmptyChildFlagsSkipEmptyLeavesWithTheSameHits) {
     if (n.z != float(MOBIRT_NODE_LEAF)) n.w = 0.0f;
   }
   ASSERT_GT(flagged, 0u);
+  // The build sets the flags while laying the tree out, top nodes (the soup's first levels) and
+  // subtrees alike: the very flags of mark_empty_children.
+  FlatKdTree marked = unflagged;
+  mark_empty_children(marked);
+  ASSERT_EQ(marked.nodes.size(), tree.nodes.size());
+  EXPECT_EQ(std::memcmp(marked.nodes.data(), tree.nodes.data(), tree.nodes.size() * sizeof(glm::vec4)), 0);
   const std::vector<Ray> rays = make_rays(tree, soup, 1000, 42);
   for (int depth : {-1, 0, 1, 4}) {
     TraversalStats with, without;

@@ -98,8 +98,8 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, std::span<const Sh
 
 // Sets the empty-child flags of every interior node (glsl/layout.h: MOBIRT_NODE_BELOW_EMPTY,
 // MOBIRT_NODE_ABOVE_EMPTY in the node's fourth component), with which traversal closes an empty
-// leaf without visiting it. build_kdtree calls it; a tree without flags (all 0) traverses the same,
-// only visiting its empty leaves.
+// leaf without visiting it. build_kdtree sets the same flags as it lays the tree out; a tree
+// without flags (all 0) traverses the same, only visiting its empty leaves.
 void mark_empty_children(FlatKdTree& tree);
 
 struct Hit {

@@ -59,8 +59,8 @@
 //   child's references in place and the below child's after the node's, the below child is built
 //   next), into nodes and prim lists of its own with indices local to it.
 // - A last pass lays the parts out depth first (a node's below child is the next node, its above
-//   child follows the below child's subtree) and relocates each part's local indices while
-//   copying it, the parts in parallel.
+//   child follows the below child's subtree), relocates each part's local indices and sets the
+//   empty-child flags while copying it, the parts in parallel.
 // Every decision (split, which nodes are top nodes, the order of references in a partition,
 // where each part lands) depends on the references alone, never on the threads or the order in
 // which tasks run, so the arrays are the same, byte for byte, for any thread count, and the same
@@ -101,6 +101,7 @@
 #include "accel/kdtree_clip.h"
 #include "core/error.h"
 #include "layout.h"
+#include "texels.h"
 
 namespace mobirt {
 
@@ -502,12 +503,17 @@ class Builder {
     refs.set_size(n);
     const size_t blocks = (n + kBlockRefs - 1) / kBlockRefs;
     std::vector<Aabb> block_bounds(blocks);
+    // 1 where a block has a non-finite vertex: checked here, in parallel, rather than by a serial
+    // pass before the build (1 % of a 1M-triangle build's instructions).
+    std::vector<uint8_t> block_non_finite(blocks, 0);
     tbb::parallel_for(size_t(0), blocks, [&](size_t b) {
       Aabb box;
+      bool finite = true;
       for (size_t i = b * kBlockRefs, end = std::min(n, i + kBlockRefs); i < end; ++i) {
         glm::vec3 lo, hi;
         if (i < positions_.size() / 3) {
           const glm::vec3* v = positions_.data() + 3 * i;
+          finite &= is_finite(v[0]) & is_finite(v[1]) & is_finite(v[2]);
           lo = glm::min(v[0], glm::min(v[1], v[2]));
           hi = glm::max(v[0], glm::max(v[1], v[2]));
         } else {  // an analytic primitive: its box
@@ -520,7 +526,11 @@ class Builder {
         box.hi = glm::max(box.hi, hi);
       }
       block_bounds[b] = box;
+      block_non_finite[b] = !finite;
     });
+    for (size_t b = 0; b < blocks; ++b) {
+      if (block_non_finite[b]) throw non_finite_vertex(b * kBlockRefs);
+    }
     for (const Aabb& box : block_bounds) bounds.extend(box);
     const Box root = to_box(bounds);
     if (n > 0) {
@@ -665,13 +675,15 @@ class Builder {
     // Two slots per depth (children of depth max_depth_ are leaves), made before any is used: the
     // vector never moves while a subtree holds pointers into it.
     while (s.hists.size() < 2 * size_t(max_depth_ + 1)) s.hists.emplace_back(bins_);
-    copy_refs(s.arena.data(), refs, n);
     s.tasks.clear();
     if (!hist && can_split(n, depth, area(box))) {  // the root of a small tree: nobody binned it
       hist = &histogram_slot(s, depth, 0);
       bin_into(*hist, refs, n, box);
     }
-    s.tasks.push_back(Task{0, n, box, depth, -1, hist});
+    // The subtree's root reads the node's buffer itself and writes its children into the arena
+    // where they would be had its references been copied there first (that copy was 0.9 % of a
+    // 1M-triangle build's instructions).
+    process(Task{0, n, box, depth, -1, hist}, out, s, refs);
     while (!s.tasks.empty()) {
       const Task task = s.tasks.back();
       s.tasks.pop_back();
@@ -703,14 +715,16 @@ class Builder {
 
   Histogram& histogram_slot(SubtreeScratch& s, int depth, int side) const { return s.hists[2 * size_t(depth) + size_t(side)]; }
 
-  void process(const Task& task, Part& out, SubtreeScratch& s) {
+  // The task's references are in the arena at task.offset, or at `source` (the subtree's root):
+  // either way its children are written into the arena.
+  void process(const Task& task, Part& out, SubtreeScratch& s, const Ref* source = nullptr) {
     const Box& box = task.box;
     const size_t n = task.count;
     const double box_area = area(box);
     const Split split =
         task.hist && can_split(n, task.depth, box_area) ? choose_split(*task.hist, box, n, box_area, n) : Split{};
     if (split.axis < 0) {
-      make_leaf(s.arena.data() + task.offset, n, task.depth, box_area, out, task.parent);
+      make_leaf(source ? source : s.arena.data() + task.offset, n, task.depth, box_area, out, task.parent);
       return;
     }
     const auto [below_box, above_box] = child_boxes(box, split);
@@ -726,7 +740,7 @@ class Builder {
     Ref* refs = s.arena.data() + task.offset;
     ChildSink b{s.arena.data() + below_offset, 0, nullptr, {}};
     ChildSink a{refs, 0, nullptr, {}};
-    partition(refs, n, box, split, b, a);
+    partition(source ? source : refs, n, box, split, b, a);
     // The children are binned after the partition, their references still in cache, and only those
     // that can split (many are leaves of one reference).
     Histogram* below_hist = bin_child(s, b.out, b.count, below_box, child_depth, 0);
@@ -1171,11 +1185,25 @@ class Builder {
     part.tally = whole;
   }
 
-  // Depth first: a top node, its below child's part next, then its above child's part.
+  static bool is_empty_leaf(const glm::vec4& node) {
+    return node_texel::is_leaf(node) && node_texel::leaf_count(node) == 0.0f;
+  }
+
+  // Whether a part's first node (its root) is an empty leaf.
+  static bool empty_root(const Part& part) {
+    return part.axis < 0 && !part.nodes.empty() && is_empty_leaf(part.nodes.front());
+  }
+
+  // Depth first: a top node, its below child's part next, then its above child's part. The
+  // empty-child flags are set here, the parts in parallel and each one's nodes still in cache,
+  // the very flags of mark_empty_children (a serial pass over the whole tree after it, with a
+  // cache miss per above child: 0.4 % of a 1M-triangle build's instructions, all on one thread).
   static void lay_out(const Part& part, size_t node_base, size_t prim_base, FlatKdTree& tree) {
     if (part.axis >= 0) {
       const size_t above = node_base + 1 + part.below->node_total;
-      tree.nodes[node_base] = glm::vec4(part.split, static_cast<float>(above), static_cast<float>(part.axis), 0.0f);
+      glm::vec4& node = tree.nodes[node_base];
+      node = node_texel::interior(part.split, static_cast<float>(above), static_cast<float>(part.axis));
+      node_texel::set_empty_flags(node, empty_root(*part.below), empty_root(*part.above));
       tbb::parallel_invoke([&] { lay_out(*part.below, node_base + 1, prim_base, tree); },
                            [&] { lay_out(*part.above, above, prim_base + part.below->prim_total, tree); });
       return;
@@ -1183,17 +1211,31 @@ class Builder {
     const float node_offset = static_cast<float>(node_base);
     const float prim_offset = static_cast<float>(prim_base);
     glm::vec4* out = tree.nodes.data() + node_base;
-    for (size_t i = 0; i < part.nodes.size(); ++i) {
-      glm::vec4 node = part.nodes[i];
+    const std::vector<glm::vec4>& nodes = part.nodes;
+    for (size_t i = 0; i < nodes.size(); ++i) {
+      glm::vec4 node = nodes[i];
       // Exact: every index and every sum stays below 2^24 (checked before the layout).
-      if (node.z != static_cast<float>(MOBIRT_NODE_LEAF)) {
-        node.y += node_offset;
-      } else if (node.y > 1.0f) {
-        node.x += prim_offset;
+      if (!node_texel::is_leaf(node)) {
+        // Both children are in this part: the below one next, the above one at its local index.
+        node_texel::set_empty_flags(node, is_empty_leaf(nodes[i + 1]),
+                                    is_empty_leaf(nodes[static_cast<size_t>(node_texel::above_child(node))]));
+        node_texel::above_child(node) += node_offset;
+      } else if (node_texel::leaf_count(node) > 1.0f) {
+        node_texel::leaf_first(node) += prim_offset;
       }
       out[i] = node;
     }
     std::copy(part.prims.begin(), part.prims.end(), tree.prim_list.begin() + static_cast<std::ptrdiff_t>(prim_base));
+  }
+
+  static bool is_finite(const glm::vec3& p) { return std::isfinite(p.x) & std::isfinite(p.y) & std::isfinite(p.z); }
+
+  // The first non-finite vertex from triangle `first` on.
+  Error non_finite_vertex(size_t first) const {
+    size_t i = 3 * first;
+    while (is_finite(positions_[i])) ++i;
+    return Error(ErrorKind::BadInput, "kd-tree: triangle " + std::to_string(i / 3) + " vertex " +
+                                          std::to_string(i % 3) + " has a non-finite position (NaN or infinity)");
   }
 
   Error too_many_nodes() const {
@@ -1264,14 +1306,7 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, std::span<const Sh
                     " that exact float indices (2^24) address; at most " +
                     count_text(kKdMaxTriangles) + " triangles");
   }
-  for (size_t i = 0; i < positions.size(); ++i) {
-    const glm::vec3& p = positions[i];
-    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) {
-      throw Error(ErrorKind::BadInput, "kd-tree: triangle " + std::to_string(i / 3) + " vertex " +
-                                           std::to_string(i % 3) +
-                                           " has a non-finite position (NaN or infinity)");
-    }
-  }
+  // Non-finite positions are found by the build's parallel bounds pass (Builder::build_root).
   if (options.bins < 2) {
     throw Error(ErrorKind::BadInput,
                 "kd-tree: bins must be at least 2 (got " + std::to_string(options.bins) + ")");
@@ -1299,7 +1334,6 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, std::span<const Sh
     tbb::task_arena arena(std::min(options.threads, tbb::info::default_concurrency()));
     tree = arena.execute([&] { return builder.build(); });
   }
-  mark_empty_children(tree);
   return tree;
 }
 
