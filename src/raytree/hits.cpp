@@ -184,7 +184,10 @@ SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ra
   const bool analytic = is_analytic(tree, prim);
   if (analytic) open.tmin = ray.tmin;
   // The decoding runs in single precision whatever the pass's precision (the paper's CPU step).
-  const bool found = intersect_primitive(tree, prim, open, h, RayTest{test, Precision::High});
+  // A triangle goes straight to its test: intersect_primitive would ask is_analytic again.
+  const RayTest single{test, Precision::High};
+  const bool found = analytic ? intersect_primitive(tree, prim, open, h, single)
+                              : intersect_triangle(tree, prim, open, h, single);
   if (analytic && !found) {
     // Rounding put the GPU's grazing hit just outside the CPU's: the ray's closest approach to
     // the shape's base point (a sphere's centre), where a grazing ray touches it.
