@@ -76,10 +76,13 @@ namespace {
 
 // Calls f(light index, shadow ray) for every light that can light the hit, exactly as
 // glsl/traverse.glsl's shadow_mask() casts them: lights behind the surface (as seen from the ray)
-// and points outside a spot's outer cone get no ray.
+// and points outside a spot's outer cone get no ray. Lights whose bit is set in `skip` are not
+// looked at, and when that leaves none the hit's geometry is not computed either.
 template <class F>
 void for_each_shadow_ray(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
-                         const Ray& ray, float t, const ShadowSettings& settings, F&& f) {
+                         const Ray& ray, float t, const ShadowSettings& settings, F&& f, uint32_t skip = 0) {
+  const uint32_t all = lights.empty() ? 0u : (2u << (lights.size() - 1)) - 1u;
+  if ((skip & all) == all) return;
   const glm::vec3 v0 = triangle_texel::vertex(tree.triangles, prim, 0);
   const glm::vec3 e1 = triangle_texel::vertex(tree.triangles, prim, 1) - v0;
   const glm::vec3 e2 = triangle_texel::vertex(tree.triangles, prim, 2) - v0;
@@ -102,6 +105,7 @@ void for_each_shadow_ray(const FlatKdTree& tree, std::span<const Light> lights, 
                                    settings.ray_test.precision);
   if (half) origin = round_to_half(origin);
   for (size_t l = 0; l < lights.size(); ++l) {
+    if ((skip >> l) & 1u) continue;
     const Light& light = lights[l];
     const bool directional = light.type == LightType::Directional;
     const glm::vec3 to_light = directional ? -light.direction : light.position - origin;
@@ -167,6 +171,16 @@ uint32_t shadow_ray_count(const FlatKdTree& tree, std::span<const Light> lights,
   return count;
 }
 
+uint32_t shadow_rays_cast(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim, const Ray& ray,
+                          float t, const ShadowSettings& settings, uint32_t mask) {
+  if (prim < 0 || lights.empty()) return 0;
+  const uint32_t all = (2u << (lights.size() - 1)) - 1u;
+  // A visible light's ray was cast: only the lights the mask calls hidden need the facing test.
+  uint32_t count = uint32_t(std::popcount(mask & all));
+  for_each_shadow_ray(tree, lights, prim, ray, t, settings, [&](size_t, const Ray&) { ++count; }, mask);
+  return count;
+}
+
 SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ray, int32_t prim,
                        IntersectTest test) {
   Hit h;
@@ -180,7 +194,10 @@ SurfaceHit surface_hit(const Scene& scene, const FlatKdTree& tree, const Ray& ra
   const bool analytic = is_analytic(tree, prim);
   if (analytic) open.tmin = ray.tmin;
   // The decoding runs in single precision whatever the pass's precision (the paper's CPU step).
-  const bool found = intersect_primitive(tree, prim, open, h, RayTest{test, Precision::High});
+  // A triangle goes straight to its test: intersect_primitive would ask is_analytic again.
+  const RayTest single{test, Precision::High};
+  const bool found = analytic ? intersect_primitive(tree, prim, open, h, single)
+                              : intersect_triangle(tree, prim, open, h, single);
   if (analytic && !found) {
     // Rounding put the GPU's grazing hit just outside the CPU's: the ray's closest approach to
     // the shape's base point (a sphere's centre), where a grazing ray touches it.
@@ -286,27 +303,39 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
   std::vector<SurfaceHit> hits(n);
   std::atomic<uint32_t> hit_count{0}, capped_count{0};
   std::atomic<uint64_t> shadow_count{0};
-  // Rays are independent: decoded on all cores (a capped ray's CPU retrace is the slow case).
-  parallel_for(n, 0, [&](uint32_t i) {
-    const TraceTexel texel = unpack_trace(packing, texels[i]);
-    const Ray ray = rays.ray(i);
-    if (texel.capped) {
-      capped_count.fetch_add(1, std::memory_order_relaxed);
-      hits[i] = retrace_capped(scene, tree, ray, lights, shadows);
-      if (hits[i].valid()) hit_count.fetch_add(1, std::memory_order_relaxed);
-      return;
+  // Rays are independent: decoded on all cores in chunks (a capped ray's CPU retrace is the slow
+  // case). Each chunk counts for itself and adds once: three atomic adds per hit on one cache line
+  // shared by both cores cost more than the counting.
+  constexpr uint32_t kChunk = 256;
+  parallel_for((n + kChunk - 1) / kChunk, 0, [&](uint32_t c) {
+    uint32_t chunk_hits = 0, chunk_capped = 0;
+    uint64_t chunk_shadow = 0;
+    const uint32_t end = std::min(n, (c + 1) * kChunk);
+    for (uint32_t i = c * kChunk; i < end; ++i) {
+      const TraceTexel texel = unpack_trace(packing, texels[i]);
+      if (texel.capped) {
+        ++chunk_capped;
+        hits[i] = retrace_capped(scene, tree, rays.ray(i), lights, shadows);
+        if (hits[i].valid()) ++chunk_hits;
+        continue;
+      }
+      if (!texel.hit()) continue;
+      const int32_t prim = texel.prim();
+      if (uint32_t(prim) >= prims) {
+        throw Error(ErrorKind::Internal, "traversal pass returned primitive " + std::to_string(prim) +
+                                             " of a scene with " + std::to_string(prims));
+      }
+      ++chunk_hits;
+      const Ray ray = rays.ray(i);
+      SurfaceHit& hit = hits[i];
+      hit = surface_hit(scene, tree, ray, prim, shadows.ray_test.test);
+      hit.mask = texel.mask;
+      chunk_shadow += shadow_rays_cast(tree, lights, prim, ray, hit.t, shadows, texel.mask);
     }
-    if (!texel.hit()) return;
-    const int32_t prim = texel.prim();
-    if (uint32_t(prim) >= prims) {
-      throw Error(ErrorKind::Internal, "traversal pass returned primitive " + std::to_string(prim) +
-                                           " of a scene with " + std::to_string(prims));
-    }
-    hit_count.fetch_add(1, std::memory_order_relaxed);
-    hits[i] = surface_hit(scene, tree, ray, prim, shadows.ray_test.test);
-    hits[i].mask = texel.mask;
-    shadow_count.fetch_add(shadow_ray_count(tree, lights, prim, ray, hits[i].t, shadows), std::memory_order_relaxed);
-  }, 256);
+    hit_count.fetch_add(chunk_hits, std::memory_order_relaxed);
+    capped_count.fetch_add(chunk_capped, std::memory_order_relaxed);
+    shadow_count.fetch_add(chunk_shadow, std::memory_order_relaxed);
+  }, 1);
   DecodeStats local;
   local.hits = hit_count.load();
   local.capped = capped_count.load();

@@ -95,6 +95,13 @@ std::vector<std::optional<Ray>> shadow_rays(const FlatKdTree& tree, std::span<co
 uint32_t shadow_ray_count(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
                           const Ray& ray, float t, const ShadowSettings& settings);
 
+// The same count for a hit whose shadow mask the pass returned: every light whose bit is set got a
+// ray, the others are tested as above. Equals shadow_ray_count() when the pass and the CPU agree
+// on which lights face the hit (they may differ on a grazing light, where this one follows the
+// pass). decode_hits() counts with it.
+uint32_t shadow_rays_cast(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim, const Ray& ray,
+                          float t, const ShadowSettings& settings, uint32_t mask);
+
 struct DecodeStats {
   uint32_t hits = 0;
   uint64_t shadow_rays = 0;  // shadow rays the GPU cast for the hits it decided

@@ -51,21 +51,4 @@ uint32_t pack_capped(Packing packing) {
   return packing == Packing::Bits24_8 ? 0xFF000000u : 0xFFFF0000u;
 }
 
-TraceTexel unpack_trace(Packing packing, uint32_t texel) {
-  TraceTexel result;
-  if (packing == Packing::Bits24_8) {
-    result.prim_plus_one = texel & 0xFFFFFFu;
-    result.mask = texel >> 24;
-  } else {
-    result.prim_plus_one = texel & 0xFFFFu;
-    result.mask = texel >> 16;
-  }
-  // A miss never carries shadow bits: index 0 with a mask is the "capped" signal.
-  if (result.prim_plus_one == 0 && result.mask != 0) {
-    result.capped = true;
-    result.mask = 0;
-  }
-  return result;
-}
-
 }  // namespace mobirt

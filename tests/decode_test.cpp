@@ -1,0 +1,151 @@
+// decode_hits() (the per-chunk counting, the shadow-ray count that trusts the mask) against the
+// per-ray composition it replaces: surface_hit() + the pass's mask, shadow_ray_count() (and
+// shadow_rays() for the lights the mask calls visible), and retrace_capped() for capped rays. Every SurfaceHit must match bit for bit, on triangle scenes
+// with textures and glass and on analytic shapes, primary and secondary rays, under each ray test
+// and offset mode.
+#include <gtest/gtest.h>
+
+#include <bit>
+#include <string>
+#include <vector>
+
+#include "accel/kdtree.h"
+#include "core/camera.h"
+#include "raytree/hits.h"
+#include "raytree/packing.h"
+#include "raytree/rays.h"
+#include "raytree/secondary.h"
+#include "scene/loader.h"
+#include "test_scenes.h"
+
+namespace mobirt {
+namespace {
+
+bool same(float a, float b) { return std::bit_cast<uint32_t>(a) == std::bit_cast<uint32_t>(b); }
+bool same(const glm::vec3& a, const glm::vec3& b) { return same(a.x, b.x) && same(a.y, b.y) && same(a.z, b.z); }
+
+bool same(const SurfaceHit& a, const SurfaceHit& b) {
+  return a.prim == b.prim && same(a.t, b.t) && same(a.u, b.u) && same(a.v, b.v) && same(a.position, b.position) &&
+         same(a.normal, b.normal) && same(a.geometric, b.geometric) && a.entering == b.entering &&
+         same(a.texcoord.x, b.texcoord.x) && same(a.texcoord.y, b.texcoord.y) && a.material == b.material &&
+         a.mask == b.mask;
+}
+
+struct Case {
+  std::string name;
+  Scene scene;
+};
+
+std::vector<Case> cases() {
+  std::vector<Case> c;
+  c.push_back({"toaster", load_scene(std::string(MOBIRT_SOURCE_DIR) + "/scenes/toaster.gltf")});
+  c.push_back({"fish", load_scene(std::string(MOBIRT_SOURCE_DIR) + "/scenes/fish.gltf")});
+  c.push_back({"shapes", test::shapes_scene()});
+  c.push_back({"box-grid", test::box_grid_scene()});
+  return c;
+}
+
+// The texels the traversal pass would return for `rays` (the CPU walk, full stack), every 61st
+// ray marked capped so that the CPU retrace is part of the comparison.
+std::vector<uint32_t> pass_texels(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays, Packing packing,
+                                  const ShadowSettings& shadows) {
+  std::vector<uint32_t> texels(rays.count());
+  for (uint32_t i = 0; i < rays.count(); ++i) {
+    if (i % 61 == 7) {
+      texels[i] = pack_capped(packing);
+      continue;
+    }
+    const Ray ray = rays.ray(i);
+    const Hit h = traverse(tree, ray, -1, shadows.ray_test);
+    const uint32_t mask = h.valid() ? shadow_mask(tree, scene.lights, h.prim, ray, h.t, shadows, -1) : 0u;
+    texels[i] = pack_trace(packing, uint32_t(h.prim + 1), mask);
+  }
+  return texels;
+}
+
+void expect_decode_matches_reference(const Case& c, const ShadowSettings& shadows) {
+  const Scene& scene = c.scene;
+  const FlatKdTree tree = build_kdtree(scene.mesh.positions, scene.shapes);
+  const Packing packing = choose_packing(scene.primitive_count(), int(scene.lights.size()), scene.source);
+  const int w = 120, h = 72;
+  const Camera camera = scene.camera ? *scene.camera : frame_box(scene.bounds(), 0.7854f, float(w) / float(h));
+  RayBatch rays = primary_rays(camera, w, h);
+  for (int generation = 0; generation < 2 && rays.count() > 0; ++generation) {
+    SCOPED_TRACE(c.name + " generation " + std::to_string(generation));
+    std::vector<uint32_t> texels = pass_texels(scene, tree, rays, packing, shadows);
+    DecodeStats stats;
+    const std::vector<SurfaceHit> hits = decode_hits(scene, tree, rays, texels, packing, scene.lights, shadows, &stats);
+    ASSERT_EQ(hits.size(), rays.count());
+    uint32_t ref_hits = 0, ref_capped = 0, mismatches = 0;
+    uint64_t ref_shadow = 0;  // shadow_ray_count(): the CPU's facing test for every light
+    uint64_t ref_cast = 0;    // lights the mask calls visible, or that test passes
+    for (uint32_t i = 0; i < rays.count(); ++i) {
+      const TraceTexel texel = unpack_trace(packing, texels[i]);
+      const Ray ray = rays.ray(i);
+      SurfaceHit ref;
+      if (texel.capped) {
+        ++ref_capped;
+        ref = retrace_capped(scene, tree, ray, scene.lights, shadows);
+      } else if (texel.hit()) {
+        ref = surface_hit(scene, tree, ray, texel.prim(), shadows.ray_test.test);
+        ref.mask = texel.mask;
+        ref_shadow += shadow_ray_count(tree, scene.lights, texel.prim(), ray, ref.t, shadows);
+        const auto cast = shadow_rays(tree, scene.lights, texel.prim(), ray, ref.t, shadows);
+        for (size_t l = 0; l < cast.size(); ++l) ref_cast += ((texel.mask >> l) & 1u) || cast[l].has_value();
+      }
+      if (ref.valid()) ++ref_hits;
+      if (!same(hits[i], ref) && ++mismatches <= 3) {
+        ADD_FAILURE() << "ray " << i << " decoded differently";
+      }
+    }
+    EXPECT_EQ(mismatches, 0u);
+    EXPECT_GT(ref_hits, 0u);
+    EXPECT_EQ(stats.hits, ref_hits);
+    EXPECT_EQ(stats.capped, ref_capped);
+    EXPECT_EQ(stats.shadow_rays, ref_cast);
+    // The pass and the decoding test the same t unless the pass runs in mediump: then a grazing
+    // light may be cast to by the pass and not by the CPU's test.
+    if (shadows.ray_test.precision == Precision::High) {
+      EXPECT_EQ(ref_cast, ref_shadow);
+    }
+
+    // With every shadow bit cleared the count falls back to the facing test for every light and
+    // must still give the reference count (it never sees a set bit to trust).
+    for (uint32_t& t : texels) {
+      const TraceTexel texel = unpack_trace(packing, t);
+      if (!texel.capped) {
+        t = pack_trace(packing, texel.prim_plus_one, 0);
+      }
+    }
+    DecodeStats dark;
+    (void)decode_hits(scene, tree, rays, texels, packing, scene.lights, shadows, &dark);
+    EXPECT_EQ(dark.shadow_rays, ref_shadow);
+    if (!scene.lights.empty()) {
+      EXPECT_GT(ref_shadow, 0u);
+    }
+
+    rays = next_generation(scene, tree.bounds, rays, hits, SecondarySettings{shadows.offset});
+  }
+}
+
+TEST(DecodeHits, MatchesPerRayReferenceBitForBit) {
+  for (const Case& c : cases()) expect_decode_matches_reference(c, ShadowSettings{});
+}
+
+TEST(DecodeHits, MatchesUnderWatertightAndNormalUlp) {
+  ShadowSettings s;
+  s.ray_test.test = IntersectTest::Watertight;
+  s.offset.mode = OffsetMode::NormalUlp;
+  for (const Case& c : cases()) expect_decode_matches_reference(c, s);
+}
+
+TEST(DecodeHits, MatchesUnderMediumpAndFixedOffset) {
+  ShadowSettings s;
+  s.ray_test.precision = Precision::Medium;
+  s.offset.mode = OffsetMode::Fixed;
+  s.offset.epsilon = 1e-4f;
+  for (const Case& c : cases()) expect_decode_matches_reference(c, s);
+}
+
+}  // namespace
+}  // namespace mobirt
