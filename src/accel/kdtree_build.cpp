@@ -513,7 +513,7 @@ class Builder {
         glm::vec3 lo, hi;
         if (i < positions_.size() / 3) {
           const glm::vec3* v = positions_.data() + 3 * i;
-          finite &= is_finite(v[0]) & is_finite(v[1]) & is_finite(v[2]);
+          finite &= bool(int(is_finite(v[0])) & int(is_finite(v[1])) & int(is_finite(v[2])));  // no branches
           lo = glm::min(v[0], glm::min(v[1], v[2]));
           hi = glm::max(v[0], glm::max(v[1], v[2]));
         } else {  // an analytic primitive: its box
@@ -1228,7 +1228,7 @@ class Builder {
     std::copy(part.prims.begin(), part.prims.end(), tree.prim_list.begin() + static_cast<std::ptrdiff_t>(prim_base));
   }
 
-  static bool is_finite(const glm::vec3& p) { return std::isfinite(p.x) & std::isfinite(p.y) & std::isfinite(p.z); }
+  static bool is_finite(const glm::vec3& p) { return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z); }
 
   // The first non-finite vertex from triangle `first` on.
   Error non_finite_vertex(size_t first) const {
