@@ -1,5 +1,6 @@
 #include "backend/vulkan/vk_pipeline.h"
 
+#include <algorithm>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -19,6 +20,15 @@
 #include "fullscreen.vert.h"
 
 namespace mobirt::vk {
+
+VkDescriptorType descriptor_type(TextureKind kind) {
+  switch (kind) {
+    case TextureKind::TexelBuffer: return VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER;
+    case TextureKind::StorageBuffer: return VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+    case TextureKind::Image2D: break;
+  }
+  return VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
+}
 
 namespace {
 
@@ -248,28 +258,17 @@ Pass Pipelines::create_pass(const PassDesc& desc) const {
   Pass pass;
   pass.desc = desc;
 
-  // Descriptor set layout: the uniform block, then per texture a combined image sampler or a
-  // uniform texel buffer.
+  // Descriptor set layout: the uniform block, then per texture its kind's descriptor (images with
+  // the immutable texelFetch sampler).
   const VkSampler immutable_sampler = sampler_.get();
   std::vector<VkDescriptorSetLayoutBinding> bindings;
   if (desc.uniform_vec4s > 0) {
     bindings.push_back({MOBIRT_BIND_TRACE_PARAMS, VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr});
   }
-  uint32_t images = 0, texel_buffers = 0, storage_buffers = 0;
   for (size_t i = 0; i < desc.texture_bindings.size(); ++i) {
-    if (desc.kind(i) == TextureKind::TexelBuffer) {
-      bindings.push_back({desc.texture_bindings[i], VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, 1,
-                          VK_SHADER_STAGE_FRAGMENT_BIT, nullptr});
-      ++texel_buffers;
-    } else if (desc.kind(i) == TextureKind::StorageBuffer) {
-      bindings.push_back({desc.texture_bindings[i], VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1,
-                          VK_SHADER_STAGE_FRAGMENT_BIT, nullptr});
-      ++storage_buffers;
-    } else {
-      bindings.push_back({desc.texture_bindings[i], VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1,
-                          VK_SHADER_STAGE_FRAGMENT_BIT, &immutable_sampler});
-      ++images;
-    }
+    const TextureKind kind = desc.kind(i);
+    bindings.push_back({desc.texture_bindings[i], descriptor_type(kind), 1, VK_SHADER_STAGE_FRAGMENT_BIT,
+                        kind == TextureKind::Image2D ? &immutable_sampler : nullptr});
   }
   VkDescriptorSetLayoutCreateInfo set_info{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO};
   set_info.bindingCount = uint32_t(bindings.size());
@@ -296,11 +295,13 @@ Pass Pipelines::create_pass(const PassDesc& desc) const {
   }
 
   if (!bindings.empty()) {
+    // One pool size per descriptor type the layout uses, counted from the bindings themselves.
     std::vector<VkDescriptorPoolSize> sizes;
-    if (desc.uniform_vec4s > 0) sizes.push_back({VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1});
-    if (images > 0) sizes.push_back({VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, images});
-    if (texel_buffers > 0) sizes.push_back({VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, texel_buffers});
-    if (storage_buffers > 0) sizes.push_back({VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, storage_buffers});
+    for (const VkDescriptorSetLayoutBinding& b : bindings) {
+      auto it = std::find_if(sizes.begin(), sizes.end(), [&](const VkDescriptorPoolSize& s) { return s.type == b.descriptorType; });
+      if (it == sizes.end()) sizes.push_back({b.descriptorType, b.descriptorCount});
+      else it->descriptorCount += b.descriptorCount;
+    }
     VkDescriptorPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
     pool_info.maxSets = 1;
     pool_info.poolSizeCount = uint32_t(sizes.size());

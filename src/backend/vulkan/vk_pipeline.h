@@ -16,6 +16,10 @@
 
 namespace mobirt::vk {
 
+// The descriptor a pass binds for a texture of this kind: a combined image sampler, a uniform texel
+// buffer or a storage buffer. The set layout, its pool and the writes all take it from here.
+VkDescriptorType descriptor_type(TextureKind kind);
+
 // The immutable sampler of every texelFetch (NEAREST, CLAMP_TO_EDGE: its filtering never applies).
 Sampler create_fetch_sampler(VkDevice device);
 // The render pass of every fragment pass: one kTargetFormat attachment, not loaded, stored and left

@@ -467,17 +467,15 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
       writes[i].dstSet = pass.descriptor_set;
       writes[i].dstBinding = pass.desc.texture_bindings[i];
       writes[i].descriptorCount = 1;
+      writes[i].descriptorType = vk::descriptor_type(kind);
       if (kind == TextureKind::TexelBuffer) {
         buffer_views[i] = bound[i]->buffer.view.get();
-        writes[i].descriptorType = VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER;
         writes[i].pTexelBufferView = &buffer_views[i];
       } else if (kind == TextureKind::StorageBuffer) {
         buffer_infos[i] = {bound[i]->buffer.buffer.get(), 0, VK_WHOLE_SIZE};
-        writes[i].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
         writes[i].pBufferInfo = &buffer_infos[i];
       } else {
         image_infos[i] = {VK_NULL_HANDLE, bound[i]->image.view.get(), VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
-        writes[i].descriptorType = VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
         writes[i].pImageInfo = &image_infos[i];
       }
     }
