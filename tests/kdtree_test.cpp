@@ -463,7 +463,7 @@ TEST(KdTree, EveryBuildOptionTraversesCorrectly) {
   unsigned seed = 200;
   for (const NamedScene& scene : scenes) {
     const FlatKdTree reference = build_kdtree(scene.positions);
-    const std::vector<Ray> rays = make_rays(reference, scene.positions, 600, seed++);
+    const std::vector<Ray> rays = make_rays(reference, scene.positions, 600 / test::sanitizer_stride(4), seed++);
     for (int bins : {4, 8, 32, 128}) {
       for (int leaf : {1, 4, 16}) {
         for (int depth : {0, 3, -1}) {
@@ -723,7 +723,7 @@ TEST(KdTree, EveryBuildModeTraversesCorrectly) {
     const FlatKdTree fast_tree = build_kdtree(scene.positions, fast);
     EXPECT_LE(fast_tree.stats.sah_cost, 1.10 * quality_tree.stats.sah_cost + 1e-6);
     EXPECT_LE(quality_tree.stats.sah_cost, 1.10 * fast_tree.stats.sah_cost + 1e-6);
-    const std::vector<Ray> rays = make_rays(quality_tree, scene.positions, 3000, seed++);
+    const std::vector<Ray> rays = make_rays(quality_tree, scene.positions, 3000 / test::sanitizer_stride(4), seed++);
     for (KdBuildMode mode : {KdBuildMode::Quality, KdBuildMode::Fast}) {
       for (bool clip : {true, false}) {
         for (int leaf : {1, 4}) {
