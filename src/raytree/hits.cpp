@@ -11,6 +11,13 @@
 #include "core/parallel.h"
 #include "texels.h"
 
+// Hit decoding has an AVX2 path for triangles, chosen at run time (the build targets baseline
+// x86-64), as the kd-tree build's sweep does.
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define MOBIRT_DECODE_AVX2 1
+#include <immintrin.h>
+#endif
+
 namespace mobirt {
 
 float scene_offset(const Aabb& bounds, float epsilon) {
@@ -176,7 +183,10 @@ uint32_t shadow_rays_cast(const FlatKdTree& tree, std::span<const Light> lights,
   if (prim < 0 || lights.empty()) return 0;
   const uint32_t all = (2u << (lights.size() - 1)) - 1u;
   // A visible light's ray was cast: only the lights the mask calls hidden need the facing test.
-  uint32_t count = uint32_t(std::popcount(mask & all));
+  // Counted a bit at a time: std::popcount is a libgcc call on baseline x86-64 (no POPCNT), and
+  // the mask has one or two bits set.
+  uint32_t count = 0;
+  for (uint32_t visible = mask & all; visible != 0; visible &= visible - 1) ++count;
   for_each_shadow_ray(tree, lights, prim, ray, t, settings, [&](size_t, const Ray&) { ++count; }, mask);
   return count;
 }
@@ -293,6 +303,158 @@ SurfaceHit surface_from_hit(const Scene& scene, const Ray& ray, const Hit& h) {
   return hit;
 }
 
+namespace {
+
+#if defined(MOBIRT_DECODE_AVX2)
+// Eight triangle hits at once: surface_hit()'s Möller-Trumbore re-test (intersect_mt<Exact> of
+// src/accel/kdtree_traverse.cpp) and surface_from_hit()'s triangle branch, operation for
+// operation in the same order, so every lane is bit for bit the scalar result (target avx2 alone,
+// no FMA: nothing is contracted; sqrt and division round correctly in both). Lanes whose test
+// fails or whose triangle is degenerate are left to the scalar path, which handles them (the
+// clamped barycentrics, the ray's own direction as normal). The slow parts are divisions and
+// square roots (7 per hit) and scattered loads of triangle data, which eight lanes share.
+struct V3 {
+  __m256 x, y, z;
+};
+
+__attribute__((target("avx2"))) inline V3 gather3(const float* base, __m256i index) {
+  return {_mm256_i32gather_ps(base, index, 4), _mm256_i32gather_ps(base + 1, index, 4),
+          _mm256_i32gather_ps(base + 2, index, 4)};
+}
+__attribute__((target("avx2"))) inline V3 sub(const V3& a, const V3& b) {
+  return {_mm256_sub_ps(a.x, b.x), _mm256_sub_ps(a.y, b.y), _mm256_sub_ps(a.z, b.z)};
+}
+__attribute__((target("avx2"))) inline V3 add(const V3& a, const V3& b) {
+  return {_mm256_add_ps(a.x, b.x), _mm256_add_ps(a.y, b.y), _mm256_add_ps(a.z, b.z)};
+}
+__attribute__((target("avx2"))) inline V3 scale(__m256 s, const V3& a) {
+  return {_mm256_mul_ps(s, a.x), _mm256_mul_ps(s, a.y), _mm256_mul_ps(s, a.z)};
+}
+__attribute__((target("avx2"))) inline V3 divide(const V3& a, __m256 s) {
+  return {_mm256_div_ps(a.x, s), _mm256_div_ps(a.y, s), _mm256_div_ps(a.z, s)};
+}
+// glm::dot: (x + y) + z of the products.
+__attribute__((target("avx2"))) inline __m256 dot(const V3& a, const V3& b) {
+  return _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(a.x, b.x), _mm256_mul_ps(a.y, b.y)), _mm256_mul_ps(a.z, b.z));
+}
+// glm::cross, its products in glm's order.
+__attribute__((target("avx2"))) inline V3 cross(const V3& a, const V3& b) {
+  return {_mm256_sub_ps(_mm256_mul_ps(a.y, b.z), _mm256_mul_ps(b.y, a.z)),
+          _mm256_sub_ps(_mm256_mul_ps(a.z, b.x), _mm256_mul_ps(b.z, a.x)),
+          _mm256_sub_ps(_mm256_mul_ps(a.x, b.y), _mm256_mul_ps(b.x, a.y))};
+}
+__attribute__((target("avx2"))) inline __m256 negate(__m256 a) { return _mm256_xor_ps(a, _mm256_set1_ps(-0.0f)); }
+__attribute__((target("avx2"))) inline V3 negate_where(const V3& a, __m256 where) {
+  const __m256 sign = _mm256_and_ps(where, _mm256_set1_ps(-0.0f));
+  return {_mm256_xor_ps(a.x, sign), _mm256_xor_ps(a.y, sign), _mm256_xor_ps(a.z, sign)};
+}
+__attribute__((target("avx2"))) inline V3 select(__m256 where, const V3& a, const V3& b) {
+  return {_mm256_blendv_ps(b.x, a.x, where), _mm256_blendv_ps(b.y, a.y, where), _mm256_blendv_ps(b.z, a.z, where)};
+}
+
+constexpr int kLanes = 8;
+
+// Decodes the triangle hits of rays ray[0..count) on triangles prim[0..count) (count <= 8) into
+// hits[ray[k]], the shadow mask aside. Returns the lanes done; the others need surface_hit().
+__attribute__((target("avx2"))) uint32_t decode_triangles_avx2(const Scene& scene, const FlatKdTree& tree,
+                                                               const RayBatch& rays, const uint32_t* ray,
+                                                               const int32_t* prim, int count, SurfaceHit* hits) {
+  // A short batch repeats its first lane, so that every gather reads a real triangle.
+  alignas(32) int32_t ray_lane[kLanes], prim_lane[kLanes];
+  for (int k = 0; k < kLanes; ++k) {
+    ray_lane[k] = int32_t(ray[k < count ? k : 0]);
+    prim_lane[k] = prim[k < count ? k : 0];
+  }
+  const __m256i ri = _mm256_slli_epi32(_mm256_load_si256(reinterpret_cast<const __m256i*>(ray_lane)), 2);
+  const __m256i pi = _mm256_load_si256(reinterpret_cast<const __m256i*>(prim_lane));
+  const V3 o = gather3(&rays.origin[0].x, ri);
+  const V3 d = gather3(&rays.direction[0].x, ri);
+
+  // intersect_mt<Exact> on the open ray: [tmin, tmax] = [-inf, inf] leaves t < inf (closer_hit
+  // against no hit) and not NaN.
+  const __m256i ti = _mm256_mullo_epi32(pi, _mm256_set1_epi32(4 * MOBIRT_TEXELS_PER_TRIANGLE));
+  const float* texels = &tree.triangles[0].x;
+  const V3 v0 = gather3(texels, ti);
+  const V3 e1 = sub(gather3(texels + 4, ti), v0);
+  const V3 e2 = sub(gather3(texels + 8, ti), v0);
+  const V3 p = cross(d, e2);
+  const __m256 det = dot(e1, p);
+  const __m256 inv_det = _mm256_div_ps(_mm256_set1_ps(1.0f), det);
+  const V3 s = sub(o, v0);
+  const __m256 u = _mm256_mul_ps(dot(s, p), inv_det);
+  const __m256 v = _mm256_mul_ps(negate(dot(s, cross(d, e1))), inv_det);
+  const __m256 t = _mm256_mul_ps(dot(e2, cross(s, e1)), inv_det);
+  const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.0f), inf = _mm256_set1_ps(kInfinity);
+  __m256 ok = _mm256_cmp_ps(det, zero, _CMP_NEQ_OQ);
+  ok = _mm256_and_ps(ok, _mm256_and_ps(_mm256_cmp_ps(u, zero, _CMP_GE_OQ), _mm256_cmp_ps(u, one, _CMP_LE_OQ)));
+  ok = _mm256_and_ps(ok, _mm256_cmp_ps(v, zero, _CMP_GE_OQ));
+  ok = _mm256_and_ps(ok, _mm256_cmp_ps(_mm256_add_ps(u, v), one, _CMP_LE_OQ));
+  ok = _mm256_and_ps(ok, _mm256_cmp_ps(t, inf, _CMP_LT_OQ));
+
+  // surface_from_hit()'s triangle branch, on the scene's positions as it reads them.
+  const V3 position = add(o, scale(t, d));
+  const __m256 w = _mm256_sub_ps(_mm256_sub_ps(one, u), v);
+  const TriangleMesh& mesh = scene.mesh;
+  const __m256i mi = _mm256_mullo_epi32(pi, _mm256_set1_epi32(9));  // three vec3 corners a triangle
+  const float* corners = &mesh.positions[0].x;
+  const V3 m0 = gather3(corners, mi);
+  V3 ng = cross(sub(gather3(corners + 3, mi), m0), sub(gather3(corners + 6, mi), m0));
+  const __m256 len = _mm256_sqrt_ps(dot(ng, ng));
+  ok = _mm256_and_ps(ok, _mm256_cmp_ps(len, zero, _CMP_GT_OQ));  // else the ray's direction: scalar
+  ng = divide(ng, len);
+  const __m256 entering = _mm256_cmp_ps(dot(ng, d), zero, _CMP_LT_OQ);
+  const V3 geometric = negate_where(ng, _mm256_xor_ps(entering, _mm256_castsi256_ps(_mm256_set1_epi32(-1))));
+  V3 n = ng;
+  if (!mesh.normals.empty()) {
+    const float* normals = &mesh.normals[0].x;
+    const V3 interpolated = add(add(scale(w, gather3(normals, mi)), scale(u, gather3(normals + 3, mi))),
+                                scale(v, gather3(normals + 6, mi)));
+    const __m256 nl = _mm256_sqrt_ps(dot(interpolated, interpolated));
+    const __m256 usable = _mm256_and_ps(_mm256_cmp_ps(nl, _mm256_set1_ps(1e-20f), _CMP_GT_OQ),
+                                        _mm256_cmp_ps(nl, inf, _CMP_LT_OQ));
+    n = select(usable, divide(interpolated, nl), ng);
+  }
+  const V3 normal = negate_where(n, _mm256_cmp_ps(dot(n, geometric), zero, _CMP_LT_OQ));
+  __m256 tu = zero, tv = zero;
+  const bool textured = !mesh.texcoords.empty();
+  if (textured) {
+    const __m256i ci = _mm256_mullo_epi32(pi, _mm256_set1_epi32(6));  // three vec2 corners
+    const float* uvs = &mesh.texcoords[0].x;
+    const __m256 c0u = _mm256_i32gather_ps(uvs, ci, 4), c0v = _mm256_i32gather_ps(uvs + 1, ci, 4);
+    const __m256 c1u = _mm256_i32gather_ps(uvs + 2, ci, 4), c1v = _mm256_i32gather_ps(uvs + 3, ci, 4);
+    const __m256 c2u = _mm256_i32gather_ps(uvs + 4, ci, 4), c2v = _mm256_i32gather_ps(uvs + 5, ci, 4);
+    tu = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(w, c0u), _mm256_mul_ps(u, c1u)), _mm256_mul_ps(v, c2u));
+    tv = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(w, c0v), _mm256_mul_ps(u, c1v)), _mm256_mul_ps(v, c2v));
+  }
+
+  constexpr int kFields = 15;
+  alignas(32) float lane[kFields][kLanes];
+  const __m256 out[kFields] = {t,        u,        v,        position.x,  position.y,  position.z, normal.x, normal.y,
+                               normal.z, geometric.x, geometric.y, geometric.z, entering, tu, tv};
+  for (int f = 0; f < kFields; ++f) _mm256_store_ps(lane[f], out[f]);
+  const uint32_t done = uint32_t(_mm256_movemask_ps(ok)) & ((1u << count) - 1u);
+  for (int k = 0; k < count; ++k) {
+    if (!((done >> k) & 1u)) continue;
+    SurfaceHit& h = hits[ray[k]];
+    h.prim = prim[k];
+    h.t = lane[0][k];
+    h.u = lane[1][k];
+    h.v = lane[2][k];
+    h.position = glm::vec3(lane[3][k], lane[4][k], lane[5][k]);
+    h.normal = glm::vec3(lane[6][k], lane[7][k], lane[8][k]);
+    h.geometric = glm::vec3(lane[9][k], lane[10][k], lane[11][k]);
+    h.entering = std::bit_cast<uint32_t>(lane[12][k]) != 0;
+    h.material = mesh.material_ids[size_t(prim[k])];
+    if (textured) {
+      h.texcoord = transform_texcoord(scene.materials[h.material].texture_transform, glm::vec2(lane[13][k], lane[14][k]));
+    }
+  }
+  return done;
+}
+#endif
+
+}  // namespace
+
 std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays,
                                     std::span<const uint32_t> texels, Packing packing,
                                     std::span<const Light> lights, const ShadowSettings& shadows,
@@ -307,9 +469,48 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
   // case). Each chunk counts for itself and adds once: three atomic adds per hit on one cache line
   // shared by both cores cost more than the counting.
   constexpr uint32_t kChunk = 256;
+#if defined(MOBIRT_DECODE_AVX2)
+  // The AVX2 path re-tests with Möller-Trumbore; the watertight test stays scalar.
+  static const bool avx2 = __builtin_cpu_supports("avx2");
+  const bool batched = avx2 && shadows.ray_test.test == IntersectTest::MollerTrumbore;
+#endif
+  const uint32_t triangles = uint32_t(scene.mesh.triangle_count());
+  const uint32_t all_lights = lights.empty() ? 0u : (2u << (lights.size() - 1)) - 1u;
   parallel_for((n + kChunk - 1) / kChunk, 0, [&](uint32_t c) {
     uint32_t chunk_hits = 0, chunk_capped = 0;
     uint64_t chunk_shadow = 0;
+    // The last steps of a hit whose surface record is made: its mask and shadow-ray count.
+    const auto finish = [&](uint32_t i, uint32_t mask) {
+      SurfaceHit& hit = hits[i];
+      hit.mask = mask;
+      // Every light visible (the common case): one ray each, what shadow_rays_cast() returns
+      // without its call.
+      if ((mask & all_lights) == all_lights) {
+        chunk_shadow += lights.size();
+      } else {
+        chunk_shadow += shadow_rays_cast(tree, lights, hit.prim, rays.ray(i), hit.t, shadows, mask);
+      }
+    };
+    const auto decode_scalar = [&](uint32_t i, int32_t prim, uint32_t mask) {
+      hits[i] = surface_hit(scene, tree, rays.ray(i), prim, shadows.ray_test.test);
+      finish(i, mask);
+    };
+#if defined(MOBIRT_DECODE_AVX2)
+    uint32_t batch_ray[kLanes], batch_mask[kLanes];
+    int32_t batch_prim[kLanes];
+    int batch_size = 0;
+    const auto flush = [&] {
+      const uint32_t done = decode_triangles_avx2(scene, tree, rays, batch_ray, batch_prim, batch_size, hits.data());
+      for (int k = 0; k < batch_size; ++k) {
+        if ((done >> k) & 1u) {
+          finish(batch_ray[k], batch_mask[k]);
+        } else {
+          decode_scalar(batch_ray[k], batch_prim[k], batch_mask[k]);
+        }
+      }
+      batch_size = 0;
+    };
+#endif
     const uint32_t end = std::min(n, (c + 1) * kChunk);
     for (uint32_t i = c * kChunk; i < end; ++i) {
       const TraceTexel texel = unpack_trace(packing, texels[i]);
@@ -326,12 +527,20 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
                                              " of a scene with " + std::to_string(prims));
       }
       ++chunk_hits;
-      const Ray ray = rays.ray(i);
-      SurfaceHit& hit = hits[i];
-      hit = surface_hit(scene, tree, ray, prim, shadows.ray_test.test);
-      hit.mask = texel.mask;
-      chunk_shadow += shadow_rays_cast(tree, lights, prim, ray, hit.t, shadows, texel.mask);
+#if defined(MOBIRT_DECODE_AVX2)
+      if (batched && uint32_t(prim) < triangles) {
+        batch_ray[batch_size] = i;
+        batch_prim[batch_size] = prim;
+        batch_mask[batch_size] = texel.mask;
+        if (++batch_size == kLanes) flush();
+        continue;
+      }
+#endif
+      decode_scalar(i, prim, texel.mask);
     }
+#if defined(MOBIRT_DECODE_AVX2)
+    if (batch_size > 0) flush();
+#endif
     hit_count.fetch_add(chunk_hits, std::memory_order_relaxed);
     capped_count.fetch_add(chunk_capped, std::memory_order_relaxed);
     shadow_count.fetch_add(chunk_shadow, std::memory_order_relaxed);
