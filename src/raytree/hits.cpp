@@ -317,10 +317,31 @@ struct V3 {
   __m256 x, y, z;
 };
 
-__attribute__((target("avx2"))) inline V3 gather3(const float* base, __m256i index) {
-  return {_mm256_i32gather_ps(base, index, 4), _mm256_i32gather_ps(base + 1, index, 4),
-          _mm256_i32gather_ps(base + 2, index, 4)};
+// Four consecutive floats from base + offset[k] for each lane k, transposed: row r holds float r
+// of every lane. Loads and shuffles, not vgatherdps: AMD's gathers cost more than the arithmetic.
+struct Rows {
+  __m256 r[4];
+  V3 xyz(int first) const { return {r[first], r[first + 1], r[first + 2]}; }
+};
+__attribute__((target("avx2"))) inline __m256 lane_pair(const float* base, const uint32_t* offset, int k) {
+  return _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(base + offset[k])), _mm_loadu_ps(base + offset[k + 4]),
+                              1);
 }
+__attribute__((target("avx2"))) inline Rows load_rows(const float* base, const uint32_t* offset) {
+  const __m256 t0 = lane_pair(base, offset, 0), t1 = lane_pair(base, offset, 1);
+  const __m256 t2 = lane_pair(base, offset, 2), t3 = lane_pair(base, offset, 3);
+  const __m256 u0 = _mm256_unpacklo_ps(t0, t1), u1 = _mm256_unpackhi_ps(t0, t1);
+  const __m256 u2 = _mm256_unpacklo_ps(t2, t3), u3 = _mm256_unpackhi_ps(t2, t3);
+  return {{_mm256_shuffle_ps(u0, u2, 0x44), _mm256_shuffle_ps(u0, u2, 0xEE), _mm256_shuffle_ps(u1, u3, 0x44),
+           _mm256_shuffle_ps(u1, u3, 0xEE)}};
+}
+// The lanes' offsets of one field: scale x index[k] + add, in floats.
+struct Offsets {
+  uint32_t at[8];
+  Offsets(const uint32_t* index, uint32_t scale, uint32_t add) {
+    for (int k = 0; k < 8; ++k) at[k] = index[k] * scale + add;
+  }
+};
 __attribute__((target("avx2"))) inline V3 sub(const V3& a, const V3& b) {
   return {_mm256_sub_ps(a.x, b.x), _mm256_sub_ps(a.y, b.y), _mm256_sub_ps(a.z, b.z)};
 }
@@ -359,24 +380,23 @@ constexpr int kLanes = 8;
 __attribute__((target("avx2"))) uint32_t decode_triangles_avx2(const Scene& scene, const FlatKdTree& tree,
                                                                const RayBatch& rays, const uint32_t* ray,
                                                                const int32_t* prim, int count, SurfaceHit* hits) {
-  // A short batch repeats its first lane, so that every gather reads a real triangle.
-  alignas(32) int32_t ray_lane[kLanes], prim_lane[kLanes];
+  // A short batch repeats its first lane, so that every load reads a real triangle.
+  uint32_t ray_lane[kLanes], prim_lane[kLanes];
   for (int k = 0; k < kLanes; ++k) {
-    ray_lane[k] = int32_t(ray[k < count ? k : 0]);
-    prim_lane[k] = prim[k < count ? k : 0];
+    ray_lane[k] = ray[k < count ? k : 0];
+    prim_lane[k] = uint32_t(prim[k < count ? k : 0]);
   }
-  const __m256i ri = _mm256_slli_epi32(_mm256_load_si256(reinterpret_cast<const __m256i*>(ray_lane)), 2);
-  const __m256i pi = _mm256_load_si256(reinterpret_cast<const __m256i*>(prim_lane));
-  const V3 o = gather3(&rays.origin[0].x, ri);
-  const V3 d = gather3(&rays.direction[0].x, ri);
+  const Offsets ray_at(ray_lane, 4, 0);
+  const V3 o = load_rows(&rays.origin[0].x, ray_at.at).xyz(0);
+  const V3 d = load_rows(&rays.direction[0].x, ray_at.at).xyz(0);
 
   // intersect_mt<Exact> on the open ray: [tmin, tmax] = [-inf, inf] leaves t < inf (closer_hit
   // against no hit) and not NaN.
-  const __m256i ti = _mm256_mullo_epi32(pi, _mm256_set1_epi32(4 * MOBIRT_TEXELS_PER_TRIANGLE));
+  constexpr uint32_t kTriangleFloats = 4 * MOBIRT_TEXELS_PER_TRIANGLE;
   const float* texels = &tree.triangles[0].x;
-  const V3 v0 = gather3(texels, ti);
-  const V3 e1 = sub(gather3(texels + 4, ti), v0);
-  const V3 e2 = sub(gather3(texels + 8, ti), v0);
+  const V3 v0 = load_rows(texels, Offsets(prim_lane, kTriangleFloats, 0).at).xyz(0);
+  const V3 e1 = sub(load_rows(texels, Offsets(prim_lane, kTriangleFloats, 4).at).xyz(0), v0);
+  const V3 e2 = sub(load_rows(texels, Offsets(prim_lane, kTriangleFloats, 8).at).xyz(0), v0);
   const V3 p = cross(d, e2);
   const __m256 det = dot(e1, p);
   const __m256 inv_det = _mm256_div_ps(_mm256_set1_ps(1.0f), det);
@@ -391,14 +411,16 @@ __attribute__((target("avx2"))) uint32_t decode_triangles_avx2(const Scene& scen
   ok = _mm256_and_ps(ok, _mm256_cmp_ps(_mm256_add_ps(u, v), one, _CMP_LE_OQ));
   ok = _mm256_and_ps(ok, _mm256_cmp_ps(t, inf, _CMP_LT_OQ));
 
-  // surface_from_hit()'s triangle branch, on the scene's positions as it reads them.
+  // surface_from_hit()'s triangle branch, on the scene's positions as it reads them. Its three
+  // vec3 corners are 9 floats; the last corner is read from one float before it (rows 1 to 3),
+  // so that no load reads past the array's end.
   const V3 position = add(o, scale(t, d));
   const __m256 w = _mm256_sub_ps(_mm256_sub_ps(one, u), v);
   const TriangleMesh& mesh = scene.mesh;
-  const __m256i mi = _mm256_mullo_epi32(pi, _mm256_set1_epi32(9));  // three vec3 corners a triangle
+  const Offsets corner0(prim_lane, 9, 0), corner1(prim_lane, 9, 3), corner2(prim_lane, 9, 5);
   const float* corners = &mesh.positions[0].x;
-  const V3 m0 = gather3(corners, mi);
-  V3 ng = cross(sub(gather3(corners + 3, mi), m0), sub(gather3(corners + 6, mi), m0));
+  const V3 m0 = load_rows(corners, corner0.at).xyz(0);
+  V3 ng = cross(sub(load_rows(corners, corner1.at).xyz(0), m0), sub(load_rows(corners, corner2.at).xyz(1), m0));
   const __m256 len = _mm256_sqrt_ps(dot(ng, ng));
   ok = _mm256_and_ps(ok, _mm256_cmp_ps(len, zero, _CMP_GT_OQ));  // else the ray's direction: scalar
   ng = divide(ng, len);
@@ -407,8 +429,9 @@ __attribute__((target("avx2"))) uint32_t decode_triangles_avx2(const Scene& scen
   V3 n = ng;
   if (!mesh.normals.empty()) {
     const float* normals = &mesh.normals[0].x;
-    const V3 interpolated = add(add(scale(w, gather3(normals, mi)), scale(u, gather3(normals + 3, mi))),
-                                scale(v, gather3(normals + 6, mi)));
+    const V3 interpolated = add(add(scale(w, load_rows(normals, corner0.at).xyz(0)),
+                                    scale(u, load_rows(normals, corner1.at).xyz(0))),
+                                scale(v, load_rows(normals, corner2.at).xyz(1)));
     const __m256 nl = _mm256_sqrt_ps(dot(interpolated, interpolated));
     const __m256 usable = _mm256_and_ps(_mm256_cmp_ps(nl, _mm256_set1_ps(1e-20f), _CMP_GT_OQ),
                                         _mm256_cmp_ps(nl, inf, _CMP_LT_OQ));
@@ -418,13 +441,15 @@ __attribute__((target("avx2"))) uint32_t decode_triangles_avx2(const Scene& scen
   __m256 tu = zero, tv = zero;
   const bool textured = !mesh.texcoords.empty();
   if (textured) {
-    const __m256i ci = _mm256_mullo_epi32(pi, _mm256_set1_epi32(6));  // three vec2 corners
+    // Three vec2 corners, 6 floats: corners 0 and 1 in one load, corner 2 in rows 2 and 3 of
+    // the load from float 2.
     const float* uvs = &mesh.texcoords[0].x;
-    const __m256 c0u = _mm256_i32gather_ps(uvs, ci, 4), c0v = _mm256_i32gather_ps(uvs + 1, ci, 4);
-    const __m256 c1u = _mm256_i32gather_ps(uvs + 2, ci, 4), c1v = _mm256_i32gather_ps(uvs + 3, ci, 4);
-    const __m256 c2u = _mm256_i32gather_ps(uvs + 4, ci, 4), c2v = _mm256_i32gather_ps(uvs + 5, ci, 4);
-    tu = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(w, c0u), _mm256_mul_ps(u, c1u)), _mm256_mul_ps(v, c2u));
-    tv = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(w, c0v), _mm256_mul_ps(u, c1v)), _mm256_mul_ps(v, c2v));
+    const Rows c01 = load_rows(uvs, Offsets(prim_lane, 6, 0).at);
+    const Rows c2 = load_rows(uvs, Offsets(prim_lane, 6, 2).at);
+    tu = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(w, c01.r[0]), _mm256_mul_ps(u, c01.r[2])),
+                       _mm256_mul_ps(v, c2.r[2]));
+    tv = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(w, c01.r[1]), _mm256_mul_ps(u, c01.r[3])),
+                       _mm256_mul_ps(v, c2.r[3]));
   }
 
   constexpr int kFields = 15;
