@@ -375,11 +375,34 @@ __attribute__((target("avx2"))) inline V3 select(__m256 where, const V3& a, cons
 
 constexpr int kLanes = 8;
 
+// The shadow rays the traversal pass cast for a batch's hits, counted as shadow_rays_cast() does
+// (for_each_shadow_ray's facing test for each light the mask calls hidden), where that test has a
+// vector twin: single precision, offset fixed or scaled, no spot light (its cone needs a
+// normalize). Elsewhere the caller counts with shadow_rays_cast().
+struct ShadowCount {
+  std::span<const Light> lights;
+  OffsetMode mode = OffsetMode::Scaled;
+  float absolute = 0.0f;  // absolute_offset()
+  const uint32_t* mask = nullptr;  // the lanes' shadow masks
+  uint64_t rays = 0;  // the sum over the lanes decoded
+};
+
+bool vector_shadow_count(std::span<const Light> lights, const ShadowSettings& settings) {
+  if (settings.ray_test.precision != Precision::High || settings.offset.mode == OffsetMode::NormalUlp) return false;
+  return std::none_of(lights.begin(), lights.end(), [](const Light& l) { return l.type == LightType::Spot; });
+}
+
+// std::max(a, b) lane by lane: b where a < b, else a (NaN keeps a, as std::max does).
+__attribute__((target("avx2"))) inline __m256 std_max(__m256 a, __m256 b) {
+  return _mm256_blendv_ps(a, b, _mm256_cmp_ps(a, b, _CMP_LT_OQ));
+}
+
 // Decodes the triangle hits of rays ray[0..count) on triangles prim[0..count) (count <= 8) into
 // hits[ray[k]], the shadow mask aside. Returns the lanes done; the others need surface_hit().
 __attribute__((target("avx2"))) uint32_t decode_triangles_avx2(const Scene& scene, const FlatKdTree& tree,
                                                                const RayBatch& rays, const uint32_t* ray,
-                                                               const int32_t* prim, int count, SurfaceHit* hits) {
+                                                               const int32_t* prim, int count, SurfaceHit* hits,
+                                                               ShadowCount* shadow) {
   // A short batch repeats its first lane, so that every load reads a real triangle.
   uint32_t ray_lane[kLanes], prim_lane[kLanes];
   for (int k = 0; k < kLanes; ++k) {
@@ -452,12 +475,45 @@ __attribute__((target("avx2"))) uint32_t decode_triangles_avx2(const Scene& scen
                        _mm256_mul_ps(v, c2.r[3]));
   }
 
+  const uint32_t done = uint32_t(_mm256_movemask_ps(ok)) & ((1u << count) - 1u);
+
+  if (shadow && !shadow->lights.empty()) {
+    // for_each_shadow_ray(): the point o + t d, the tree triangle's normal ng turned to the
+    // viewer and offset_origin() along it, then each light's facing test.
+    const V3 ngt = cross(e1, e2);
+    const __m256 facing = _mm256_cmp_ps(dot(ngt, d), zero, _CMP_LT_OQ);
+    const __m256 view_side = _mm256_blendv_ps(_mm256_set1_ps(-1.0f), one, facing);
+    const __m256 tiny = _mm256_set1_ps(1e-30f);
+    const __m256 turned = _mm256_div_ps(view_side, std_max(_mm256_sqrt_ps(dot(ngt, ngt)), tiny));
+    const V3 toward = scale(turned, ngt);
+    __m256 offset = _mm256_set1_ps(shadow->absolute);
+    if (shadow->mode == OffsetMode::Scaled) {
+      const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
+      const __m256 largest = std_max(_mm256_and_ps(position.x, abs_mask),
+                                     std_max(_mm256_and_ps(position.y, abs_mask), _mm256_and_ps(position.z, abs_mask)));
+      offset = std_max(offset, _mm256_mul_ps(largest, _mm256_set1_ps(float(MOBIRT_OFFSET_ULPS))));
+    }
+    const V3 origin = add(position, scale(offset, toward));
+    for (size_t l = 0; l < shadow->lights.size(); ++l) {
+      const Light& light = shadow->lights[l];
+      const V3 to_light = light.type == LightType::Directional
+                              ? V3{_mm256_set1_ps(-light.direction.x), _mm256_set1_ps(-light.direction.y),
+                                   _mm256_set1_ps(-light.direction.z)}
+                              : sub(V3{_mm256_set1_ps(light.position.x), _mm256_set1_ps(light.position.y),
+                                       _mm256_set1_ps(light.position.z)},
+                                    origin);
+      const __m256 lit = _mm256_cmp_ps(_mm256_mul_ps(dot(ngt, to_light), view_side), zero, _CMP_GT_OQ);
+      uint32_t cast = uint32_t(_mm256_movemask_ps(lit));
+      for (int k = 0; k < count; ++k) cast |= ((shadow->mask[k] >> l) & 1u) << k;  // visible: cast
+      for (cast &= done; cast != 0; cast &= cast - 1) ++shadow->rays;
+    }
+  }
+
   constexpr int kFields = 15;
   alignas(32) float lane[kFields][kLanes];
   const __m256 out[kFields] = {t,        u,        v,        position.x,  position.y,  position.z, normal.x, normal.y,
                                normal.z, geometric.x, geometric.y, geometric.z, entering, tu, tv};
   for (int f = 0; f < kFields; ++f) _mm256_store_ps(lane[f], out[f]);
-  const uint32_t done = uint32_t(_mm256_movemask_ps(ok)) & ((1u << count) - 1u);
   for (int k = 0; k < count; ++k) {
     if (!((done >> k) & 1u)) continue;
     SurfaceHit& h = hits[ray[k]];
@@ -498,6 +554,8 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
   // The AVX2 path re-tests with Möller-Trumbore; the watertight test stays scalar.
   static const bool avx2 = __builtin_cpu_supports("avx2");
   const bool batched = avx2 && shadows.ray_test.test == IntersectTest::MollerTrumbore;
+  const bool batch_counts = vector_shadow_count(lights, shadows);
+  const float absolute = absolute_offset(tree.bounds, shadows.offset);
 #endif
   const uint32_t triangles = uint32_t(scene.mesh.triangle_count());
   const uint32_t all_lights = lights.empty() ? 0u : (2u << (lights.size() - 1)) - 1u;
@@ -525,10 +583,17 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
     int32_t batch_prim[kLanes];
     int batch_size = 0;
     const auto flush = [&] {
-      const uint32_t done = decode_triangles_avx2(scene, tree, rays, batch_ray, batch_prim, batch_size, hits.data());
+      ShadowCount count{lights, shadows.offset.mode, absolute, batch_mask};
+      const uint32_t done = decode_triangles_avx2(scene, tree, rays, batch_ray, batch_prim, batch_size, hits.data(),
+                                                  batch_counts ? &count : nullptr);
+      chunk_shadow += count.rays;
       for (int k = 0; k < batch_size; ++k) {
         if ((done >> k) & 1u) {
-          finish(batch_ray[k], batch_mask[k]);
+          if (batch_counts) {
+            hits[batch_ray[k]].mask = batch_mask[k];
+          } else {
+            finish(batch_ray[k], batch_mask[k]);
+          }
         } else {
           decode_scalar(batch_ray[k], batch_prim[k], batch_mask[k]);
         }
