@@ -321,7 +321,7 @@ struct V3 {
 // of every lane. Loads and shuffles, not vgatherdps: AMD's gathers cost more than the arithmetic.
 struct Rows {
   __m256 r[4];
-  V3 xyz(int first) const { return {r[first], r[first + 1], r[first + 2]}; }
+  __attribute__((target("avx2"))) V3 xyz(int first) const { return {r[first], r[first + 1], r[first + 2]}; }
 };
 __attribute__((target("avx2"))) inline __m256 lane_pair(const float* base, const uint32_t* offset, int k) {
   return _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(base + offset[k])), _mm_loadu_ps(base + offset[k + 4]),
