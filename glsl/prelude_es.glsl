@@ -87,8 +87,14 @@ struct MobirtSampler {
 #define SAMPLER(slot, name) uniform MobirtSampler name
 
 // Data textures: element i at texel (i mod W, i div W). Indices arrive as exact floats below
-// 2^24; W is a power of two, so the division, floor and mod are exact in float arithmetic.
-#define DATA_TEXEL(s, index) texture2D((s).tex, vec2((mod((index), float(MOBIRT_DATA_WIDTH)) + 0.5) / float(MOBIRT_DATA_WIDTH), (floor((index) / float(MOBIRT_DATA_WIDTH)) + 0.5) * (s).inv_size.y))
+// 2^24 and W is a power of two, so i / W is exact, its floor is the row and its fraction the
+// column / W, and adding 0.5 / W gives the column's centre exactly: one multiply and one floor a
+// fetch (mod, a second floor and a division before: same coordinates, more JIT code).
+#define DATA_TEXEL(s, index) mobirt_data_texel((s).tex, (index) * (1.0 / float(MOBIRT_DATA_WIDTH)), (s).inv_size.y)
+vec4 mobirt_data_texel(sampler2D tex, float row_and_fraction, float inv_rows) {
+  float row = floor(row_and_fraction);
+  return texture2D(tex, vec2((row_and_fraction - row) + 0.5 / float(MOBIRT_DATA_WIDTH), (row + 0.5) * inv_rows));
+}
 // Per-ray textures share the pass's layout: this fragment's own ray. gl_FragCoord.xy is already
 // the texel centre (x + 0.5, y + 0.5); window row 0 is texture row 0 and glReadPixels' first row.
 #define RAY_TEXEL(s) texture2D((s).tex, gl_FragCoord.xy * (s).inv_size)

@@ -2,7 +2,9 @@
 // per-ray composition it replaces: surface_hit() + the pass's mask, shadow_ray_count() (and
 // shadow_rays() for the lights the mask calls visible), and retrace_capped() for capped rays. Every SurfaceHit must match bit for bit, on triangle scenes
 // with textures and glass and on analytic shapes, primary and secondary rays, under each ray test
-// and offset mode.
+// and offset mode: where the CPU has AVX2 this compares its eight-lane path (Möller-Trumbore,
+// and its shadow-ray count: single precision, offset fixed or scaled, no spot light) with the
+// scalar one.
 #include <gtest/gtest.h>
 
 #include <bit>
@@ -41,7 +43,8 @@ std::vector<Case> cases() {
   c.push_back({"toaster", load_scene(std::string(MOBIRT_SOURCE_DIR) + "/scenes/toaster.gltf")});
   c.push_back({"fish", load_scene(std::string(MOBIRT_SOURCE_DIR) + "/scenes/fish.gltf")});
   c.push_back({"shapes", test::shapes_scene()});
-  c.push_back({"box-grid", test::box_grid_scene()});
+  c.push_back({"box-grid", test::box_grid_scene()});  // a directional light beside a point light
+  c.push_back({"soup-spot", test::random_soup_scene(2000)});  // a spot light: the scalar shadow count
   return c;
 }
 
@@ -136,6 +139,14 @@ TEST(DecodeHits, MatchesUnderWatertightAndNormalUlp) {
   ShadowSettings s;
   s.ray_test.test = IntersectTest::Watertight;
   s.offset.mode = OffsetMode::NormalUlp;
+  for (const Case& c : cases()) expect_decode_matches_reference(c, s);
+}
+
+// The vectorised decoding's shadow-ray count under both offsets it handles (scaled is the default).
+TEST(DecodeHits, MatchesUnderFixedOffset) {
+  ShadowSettings s;
+  s.offset.mode = OffsetMode::Fixed;
+  s.offset.epsilon = 1e-3f;
   for (const Case& c : cases()) expect_decode_matches_reference(c, s);
 }
 

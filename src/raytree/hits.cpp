@@ -11,6 +11,13 @@
 #include "core/parallel.h"
 #include "texels.h"
 
+// Hit decoding has an AVX2 path for triangles, chosen at run time (the build targets baseline
+// x86-64), as the kd-tree build's sweep does.
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define MOBIRT_DECODE_AVX2 1
+#include <immintrin.h>
+#endif
+
 namespace mobirt {
 
 float scene_offset(const Aabb& bounds, float epsilon) {
@@ -176,7 +183,10 @@ uint32_t shadow_rays_cast(const FlatKdTree& tree, std::span<const Light> lights,
   if (prim < 0 || lights.empty()) return 0;
   const uint32_t all = (2u << (lights.size() - 1)) - 1u;
   // A visible light's ray was cast: only the lights the mask calls hidden need the facing test.
-  uint32_t count = uint32_t(std::popcount(mask & all));
+  // Counted a bit at a time: std::popcount is a libgcc call on baseline x86-64 (no POPCNT), and
+  // the mask has one or two bits set.
+  uint32_t count = 0;
+  for (uint32_t visible = mask & all; visible != 0; visible &= visible - 1) ++count;
   for_each_shadow_ray(tree, lights, prim, ray, t, settings, [&](size_t, const Ray&) { ++count; }, mask);
   return count;
 }
@@ -293,6 +303,239 @@ SurfaceHit surface_from_hit(const Scene& scene, const Ray& ray, const Hit& h) {
   return hit;
 }
 
+namespace {
+
+#if defined(MOBIRT_DECODE_AVX2)
+// Eight triangle hits at once: surface_hit()'s Möller-Trumbore re-test (intersect_mt<Exact> of
+// src/accel/kdtree_traverse.cpp) and surface_from_hit()'s triangle branch, operation for
+// operation in the same order, so every lane is bit for bit the scalar result (target avx2 alone,
+// no FMA: nothing is contracted; sqrt and division round correctly in both). Lanes whose test
+// fails or whose triangle is degenerate are left to the scalar path, which handles them (the
+// clamped barycentrics, the ray's own direction as normal). The slow parts are divisions and
+// square roots (7 per hit) and scattered loads of triangle data, which eight lanes share.
+struct V3 {
+  __m256 x, y, z;
+};
+
+// Four consecutive floats from base + offset[k] for each lane k, transposed: row r holds float r
+// of every lane. Loads and shuffles, not vgatherdps: AMD's gathers cost more than the arithmetic.
+struct Rows {
+  __m256 r[4];
+  __attribute__((target("avx2"))) V3 xyz(int first) const { return {r[first], r[first + 1], r[first + 2]}; }
+};
+__attribute__((target("avx2"))) inline __m256 lane_pair(const float* base, const uint32_t* offset, int k) {
+  return _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(base + offset[k])), _mm_loadu_ps(base + offset[k + 4]),
+                              1);
+}
+__attribute__((target("avx2"))) inline Rows load_rows(const float* base, const uint32_t* offset) {
+  const __m256 t0 = lane_pair(base, offset, 0), t1 = lane_pair(base, offset, 1);
+  const __m256 t2 = lane_pair(base, offset, 2), t3 = lane_pair(base, offset, 3);
+  const __m256 u0 = _mm256_unpacklo_ps(t0, t1), u1 = _mm256_unpackhi_ps(t0, t1);
+  const __m256 u2 = _mm256_unpacklo_ps(t2, t3), u3 = _mm256_unpackhi_ps(t2, t3);
+  return {{_mm256_shuffle_ps(u0, u2, 0x44), _mm256_shuffle_ps(u0, u2, 0xEE), _mm256_shuffle_ps(u1, u3, 0x44),
+           _mm256_shuffle_ps(u1, u3, 0xEE)}};
+}
+// The lanes' offsets of one field: scale x index[k] + add, in floats.
+struct Offsets {
+  uint32_t at[8];
+  Offsets(const uint32_t* index, uint32_t scale, uint32_t add) {
+    for (int k = 0; k < 8; ++k) at[k] = index[k] * scale + add;
+  }
+};
+__attribute__((target("avx2"))) inline V3 sub(const V3& a, const V3& b) {
+  return {_mm256_sub_ps(a.x, b.x), _mm256_sub_ps(a.y, b.y), _mm256_sub_ps(a.z, b.z)};
+}
+__attribute__((target("avx2"))) inline V3 add(const V3& a, const V3& b) {
+  return {_mm256_add_ps(a.x, b.x), _mm256_add_ps(a.y, b.y), _mm256_add_ps(a.z, b.z)};
+}
+__attribute__((target("avx2"))) inline V3 scale(__m256 s, const V3& a) {
+  return {_mm256_mul_ps(s, a.x), _mm256_mul_ps(s, a.y), _mm256_mul_ps(s, a.z)};
+}
+__attribute__((target("avx2"))) inline V3 divide(const V3& a, __m256 s) {
+  return {_mm256_div_ps(a.x, s), _mm256_div_ps(a.y, s), _mm256_div_ps(a.z, s)};
+}
+// glm::dot: (x + y) + z of the products.
+__attribute__((target("avx2"))) inline __m256 dot(const V3& a, const V3& b) {
+  return _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(a.x, b.x), _mm256_mul_ps(a.y, b.y)), _mm256_mul_ps(a.z, b.z));
+}
+// glm::cross, its products in glm's order.
+__attribute__((target("avx2"))) inline V3 cross(const V3& a, const V3& b) {
+  return {_mm256_sub_ps(_mm256_mul_ps(a.y, b.z), _mm256_mul_ps(b.y, a.z)),
+          _mm256_sub_ps(_mm256_mul_ps(a.z, b.x), _mm256_mul_ps(b.z, a.x)),
+          _mm256_sub_ps(_mm256_mul_ps(a.x, b.y), _mm256_mul_ps(b.x, a.y))};
+}
+__attribute__((target("avx2"))) inline __m256 negate(__m256 a) { return _mm256_xor_ps(a, _mm256_set1_ps(-0.0f)); }
+__attribute__((target("avx2"))) inline V3 negate_where(const V3& a, __m256 where) {
+  const __m256 sign = _mm256_and_ps(where, _mm256_set1_ps(-0.0f));
+  return {_mm256_xor_ps(a.x, sign), _mm256_xor_ps(a.y, sign), _mm256_xor_ps(a.z, sign)};
+}
+__attribute__((target("avx2"))) inline V3 select(__m256 where, const V3& a, const V3& b) {
+  return {_mm256_blendv_ps(b.x, a.x, where), _mm256_blendv_ps(b.y, a.y, where), _mm256_blendv_ps(b.z, a.z, where)};
+}
+
+constexpr int kLanes = 8;
+
+// The shadow rays the traversal pass cast for a batch's hits, counted as shadow_rays_cast() does
+// (for_each_shadow_ray's facing test for each light the mask calls hidden), where that test has a
+// vector twin: single precision, offset fixed or scaled, no spot light (its cone needs a
+// normalize). Elsewhere the caller counts with shadow_rays_cast().
+struct ShadowCount {
+  std::span<const Light> lights;
+  OffsetMode mode = OffsetMode::Scaled;
+  float absolute = 0.0f;  // absolute_offset()
+  const uint32_t* mask = nullptr;  // the lanes' shadow masks
+  uint64_t rays = 0;  // the sum over the lanes decoded
+};
+
+bool vector_shadow_count(std::span<const Light> lights, const ShadowSettings& settings) {
+  if (settings.ray_test.precision != Precision::High || settings.offset.mode == OffsetMode::NormalUlp) return false;
+  return std::none_of(lights.begin(), lights.end(), [](const Light& l) { return l.type == LightType::Spot; });
+}
+
+// std::max(a, b) lane by lane: b where a < b, else a (NaN keeps a, as std::max does).
+__attribute__((target("avx2"))) inline __m256 std_max(__m256 a, __m256 b) {
+  return _mm256_blendv_ps(a, b, _mm256_cmp_ps(a, b, _CMP_LT_OQ));
+}
+
+// Decodes the triangle hits of rays ray[0..count) on triangles prim[0..count) (count <= 8) into
+// hits[ray[k]], the shadow mask aside. Returns the lanes done; the others need surface_hit().
+__attribute__((target("avx2"))) uint32_t decode_triangles_avx2(const Scene& scene, const FlatKdTree& tree,
+                                                               const RayBatch& rays, const uint32_t* ray,
+                                                               const int32_t* prim, int count, SurfaceHit* hits,
+                                                               ShadowCount* shadow) {
+  // A short batch repeats its first lane, so that every load reads a real triangle.
+  uint32_t ray_lane[kLanes], prim_lane[kLanes];
+  for (int k = 0; k < kLanes; ++k) {
+    ray_lane[k] = ray[k < count ? k : 0];
+    prim_lane[k] = uint32_t(prim[k < count ? k : 0]);
+  }
+  const Offsets ray_at(ray_lane, 4, 0);
+  const V3 o = load_rows(&rays.origin[0].x, ray_at.at).xyz(0);
+  const V3 d = load_rows(&rays.direction[0].x, ray_at.at).xyz(0);
+
+  // intersect_mt<Exact> on the open ray: [tmin, tmax] = [-inf, inf] leaves t < inf (closer_hit
+  // against no hit) and not NaN.
+  constexpr uint32_t kTriangleFloats = 4 * MOBIRT_TEXELS_PER_TRIANGLE;
+  const float* texels = &tree.triangles[0].x;
+  const V3 v0 = load_rows(texels, Offsets(prim_lane, kTriangleFloats, 0).at).xyz(0);
+  const V3 e1 = sub(load_rows(texels, Offsets(prim_lane, kTriangleFloats, 4).at).xyz(0), v0);
+  const V3 e2 = sub(load_rows(texels, Offsets(prim_lane, kTriangleFloats, 8).at).xyz(0), v0);
+  const V3 p = cross(d, e2);
+  const __m256 det = dot(e1, p);
+  const __m256 inv_det = _mm256_div_ps(_mm256_set1_ps(1.0f), det);
+  const V3 s = sub(o, v0);
+  const __m256 u = _mm256_mul_ps(dot(s, p), inv_det);
+  const __m256 v = _mm256_mul_ps(negate(dot(s, cross(d, e1))), inv_det);
+  const __m256 t = _mm256_mul_ps(dot(e2, cross(s, e1)), inv_det);
+  const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.0f), inf = _mm256_set1_ps(kInfinity);
+  __m256 ok = _mm256_cmp_ps(det, zero, _CMP_NEQ_OQ);
+  ok = _mm256_and_ps(ok, _mm256_and_ps(_mm256_cmp_ps(u, zero, _CMP_GE_OQ), _mm256_cmp_ps(u, one, _CMP_LE_OQ)));
+  ok = _mm256_and_ps(ok, _mm256_cmp_ps(v, zero, _CMP_GE_OQ));
+  ok = _mm256_and_ps(ok, _mm256_cmp_ps(_mm256_add_ps(u, v), one, _CMP_LE_OQ));
+  ok = _mm256_and_ps(ok, _mm256_cmp_ps(t, inf, _CMP_LT_OQ));
+
+  // surface_from_hit()'s triangle branch, on the scene's positions as it reads them. Its three
+  // vec3 corners are 9 floats; the last corner is read from one float before it (rows 1 to 3),
+  // so that no load reads past the array's end.
+  const V3 position = add(o, scale(t, d));
+  const __m256 w = _mm256_sub_ps(_mm256_sub_ps(one, u), v);
+  const TriangleMesh& mesh = scene.mesh;
+  const Offsets corner0(prim_lane, 9, 0), corner1(prim_lane, 9, 3), corner2(prim_lane, 9, 5);
+  const float* corners = &mesh.positions[0].x;
+  const V3 m0 = load_rows(corners, corner0.at).xyz(0);
+  V3 ng = cross(sub(load_rows(corners, corner1.at).xyz(0), m0), sub(load_rows(corners, corner2.at).xyz(1), m0));
+  const __m256 len = _mm256_sqrt_ps(dot(ng, ng));
+  ok = _mm256_and_ps(ok, _mm256_cmp_ps(len, zero, _CMP_GT_OQ));  // else the ray's direction: scalar
+  ng = divide(ng, len);
+  const __m256 entering = _mm256_cmp_ps(dot(ng, d), zero, _CMP_LT_OQ);
+  const V3 geometric = negate_where(ng, _mm256_xor_ps(entering, _mm256_castsi256_ps(_mm256_set1_epi32(-1))));
+  V3 n = ng;
+  if (!mesh.normals.empty()) {
+    const float* normals = &mesh.normals[0].x;
+    const V3 interpolated = add(add(scale(w, load_rows(normals, corner0.at).xyz(0)),
+                                    scale(u, load_rows(normals, corner1.at).xyz(0))),
+                                scale(v, load_rows(normals, corner2.at).xyz(1)));
+    const __m256 nl = _mm256_sqrt_ps(dot(interpolated, interpolated));
+    const __m256 usable = _mm256_and_ps(_mm256_cmp_ps(nl, _mm256_set1_ps(1e-20f), _CMP_GT_OQ),
+                                        _mm256_cmp_ps(nl, inf, _CMP_LT_OQ));
+    n = select(usable, divide(interpolated, nl), ng);
+  }
+  const V3 normal = negate_where(n, _mm256_cmp_ps(dot(n, geometric), zero, _CMP_LT_OQ));
+  __m256 tu = zero, tv = zero;
+  const bool textured = !mesh.texcoords.empty();
+  if (textured) {
+    // Three vec2 corners, 6 floats: corners 0 and 1 in one load, corner 2 in rows 2 and 3 of
+    // the load from float 2.
+    const float* uvs = &mesh.texcoords[0].x;
+    const Rows c01 = load_rows(uvs, Offsets(prim_lane, 6, 0).at);
+    const Rows c2 = load_rows(uvs, Offsets(prim_lane, 6, 2).at);
+    tu = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(w, c01.r[0]), _mm256_mul_ps(u, c01.r[2])),
+                       _mm256_mul_ps(v, c2.r[2]));
+    tv = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(w, c01.r[1]), _mm256_mul_ps(u, c01.r[3])),
+                       _mm256_mul_ps(v, c2.r[3]));
+  }
+
+  const uint32_t done = uint32_t(_mm256_movemask_ps(ok)) & ((1u << count) - 1u);
+
+  if (shadow && !shadow->lights.empty()) {
+    // for_each_shadow_ray(): the point o + t d, the tree triangle's normal ng turned to the
+    // viewer and offset_origin() along it, then each light's facing test.
+    const V3 ngt = cross(e1, e2);
+    const __m256 facing = _mm256_cmp_ps(dot(ngt, d), zero, _CMP_LT_OQ);
+    const __m256 view_side = _mm256_blendv_ps(_mm256_set1_ps(-1.0f), one, facing);
+    const __m256 tiny = _mm256_set1_ps(1e-30f);
+    const __m256 turned = _mm256_div_ps(view_side, std_max(_mm256_sqrt_ps(dot(ngt, ngt)), tiny));
+    const V3 toward = scale(turned, ngt);
+    __m256 offset = _mm256_set1_ps(shadow->absolute);
+    if (shadow->mode == OffsetMode::Scaled) {
+      const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
+      const __m256 largest = std_max(_mm256_and_ps(position.x, abs_mask),
+                                     std_max(_mm256_and_ps(position.y, abs_mask), _mm256_and_ps(position.z, abs_mask)));
+      offset = std_max(offset, _mm256_mul_ps(largest, _mm256_set1_ps(float(MOBIRT_OFFSET_ULPS))));
+    }
+    const V3 origin = add(position, scale(offset, toward));
+    for (size_t l = 0; l < shadow->lights.size(); ++l) {
+      const Light& light = shadow->lights[l];
+      const V3 to_light = light.type == LightType::Directional
+                              ? V3{_mm256_set1_ps(-light.direction.x), _mm256_set1_ps(-light.direction.y),
+                                   _mm256_set1_ps(-light.direction.z)}
+                              : sub(V3{_mm256_set1_ps(light.position.x), _mm256_set1_ps(light.position.y),
+                                       _mm256_set1_ps(light.position.z)},
+                                    origin);
+      const __m256 lit = _mm256_cmp_ps(_mm256_mul_ps(dot(ngt, to_light), view_side), zero, _CMP_GT_OQ);
+      uint32_t cast = uint32_t(_mm256_movemask_ps(lit));
+      for (int k = 0; k < count; ++k) cast |= ((shadow->mask[k] >> l) & 1u) << k;  // visible: cast
+      for (cast &= done; cast != 0; cast &= cast - 1) ++shadow->rays;
+    }
+  }
+
+  constexpr int kFields = 15;
+  alignas(32) float lane[kFields][kLanes];
+  const __m256 out[kFields] = {t,        u,        v,        position.x,  position.y,  position.z, normal.x, normal.y,
+                               normal.z, geometric.x, geometric.y, geometric.z, entering, tu, tv};
+  for (int f = 0; f < kFields; ++f) _mm256_store_ps(lane[f], out[f]);
+  for (int k = 0; k < count; ++k) {
+    if (!((done >> k) & 1u)) continue;
+    SurfaceHit& h = hits[ray[k]];
+    h.prim = prim[k];
+    h.t = lane[0][k];
+    h.u = lane[1][k];
+    h.v = lane[2][k];
+    h.position = glm::vec3(lane[3][k], lane[4][k], lane[5][k]);
+    h.normal = glm::vec3(lane[6][k], lane[7][k], lane[8][k]);
+    h.geometric = glm::vec3(lane[9][k], lane[10][k], lane[11][k]);
+    h.entering = std::bit_cast<uint32_t>(lane[12][k]) != 0;
+    h.material = mesh.material_ids[size_t(prim[k])];
+    if (textured) {
+      h.texcoord = transform_texcoord(scene.materials[h.material].texture_transform, glm::vec2(lane[13][k], lane[14][k]));
+    }
+  }
+  return done;
+}
+#endif
+
+}  // namespace
+
 std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays,
                                     std::span<const uint32_t> texels, Packing packing,
                                     std::span<const Light> lights, const ShadowSettings& shadows,
@@ -307,9 +550,57 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
   // case). Each chunk counts for itself and adds once: three atomic adds per hit on one cache line
   // shared by both cores cost more than the counting.
   constexpr uint32_t kChunk = 256;
+#if defined(MOBIRT_DECODE_AVX2)
+  // The AVX2 path re-tests with Möller-Trumbore; the watertight test stays scalar.
+  static const bool avx2 = __builtin_cpu_supports("avx2");
+  const bool batched = avx2 && shadows.ray_test.test == IntersectTest::MollerTrumbore;
+  const bool batch_counts = vector_shadow_count(lights, shadows);
+  const float absolute = absolute_offset(tree.bounds, shadows.offset);
+#endif
+  const uint32_t triangles = uint32_t(scene.mesh.triangle_count());
+  const uint32_t all_lights = lights.empty() ? 0u : (2u << (lights.size() - 1)) - 1u;
   parallel_for((n + kChunk - 1) / kChunk, 0, [&](uint32_t c) {
     uint32_t chunk_hits = 0, chunk_capped = 0;
     uint64_t chunk_shadow = 0;
+    // The last steps of a hit whose surface record is made: its mask and shadow-ray count.
+    const auto finish = [&](uint32_t i, uint32_t mask) {
+      SurfaceHit& hit = hits[i];
+      hit.mask = mask;
+      // Every light visible (the common case): one ray each, what shadow_rays_cast() returns
+      // without its call.
+      if ((mask & all_lights) == all_lights) {
+        chunk_shadow += lights.size();
+      } else {
+        chunk_shadow += shadow_rays_cast(tree, lights, hit.prim, rays.ray(i), hit.t, shadows, mask);
+      }
+    };
+    const auto decode_scalar = [&](uint32_t i, int32_t prim, uint32_t mask) {
+      hits[i] = surface_hit(scene, tree, rays.ray(i), prim, shadows.ray_test.test);
+      finish(i, mask);
+    };
+#if defined(MOBIRT_DECODE_AVX2)
+    uint32_t batch_ray[kLanes], batch_mask[kLanes];
+    int32_t batch_prim[kLanes];
+    int batch_size = 0;
+    const auto flush = [&] {
+      ShadowCount count{lights, shadows.offset.mode, absolute, batch_mask};
+      const uint32_t done = decode_triangles_avx2(scene, tree, rays, batch_ray, batch_prim, batch_size, hits.data(),
+                                                  batch_counts ? &count : nullptr);
+      chunk_shadow += count.rays;
+      for (int k = 0; k < batch_size; ++k) {
+        if ((done >> k) & 1u) {
+          if (batch_counts) {
+            hits[batch_ray[k]].mask = batch_mask[k];
+          } else {
+            finish(batch_ray[k], batch_mask[k]);
+          }
+        } else {
+          decode_scalar(batch_ray[k], batch_prim[k], batch_mask[k]);
+        }
+      }
+      batch_size = 0;
+    };
+#endif
     const uint32_t end = std::min(n, (c + 1) * kChunk);
     for (uint32_t i = c * kChunk; i < end; ++i) {
       const TraceTexel texel = unpack_trace(packing, texels[i]);
@@ -326,12 +617,20 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
                                              " of a scene with " + std::to_string(prims));
       }
       ++chunk_hits;
-      const Ray ray = rays.ray(i);
-      SurfaceHit& hit = hits[i];
-      hit = surface_hit(scene, tree, ray, prim, shadows.ray_test.test);
-      hit.mask = texel.mask;
-      chunk_shadow += shadow_rays_cast(tree, lights, prim, ray, hit.t, shadows, texel.mask);
+#if defined(MOBIRT_DECODE_AVX2)
+      if (batched && uint32_t(prim) < triangles) {
+        batch_ray[batch_size] = i;
+        batch_prim[batch_size] = prim;
+        batch_mask[batch_size] = texel.mask;
+        if (++batch_size == kLanes) flush();
+        continue;
+      }
+#endif
+      decode_scalar(i, prim, texel.mask);
     }
+#if defined(MOBIRT_DECODE_AVX2)
+    if (batch_size > 0) flush();
+#endif
     hit_count.fetch_add(chunk_hits, std::memory_order_relaxed);
     capped_count.fetch_add(chunk_capped, std::memory_order_relaxed);
     shadow_count.fetch_add(chunk_shadow, std::memory_order_relaxed);
