@@ -698,6 +698,35 @@ TEST(KdClip, SplitTriangleContainsTheExactClip) {
   EXPECT_GT(compared, 1000);
 }
 
+// The SIMD split_triangle against the scalar one, bit for bit, including planes through a vertex,
+// on the box's faces, and at negative and zero coordinates (the outward rounding's sign cases).
+TEST(KdClip, SplitTriangleIsTheScalarSplitBitForBit) {
+  std::mt19937 rng(79);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  int both_sides = 0;
+  for (int trial = 0; trial < 20000; ++trial) {
+    glm::vec3 v[3];
+    const float scale = trial % 4 == 0 ? 1e-30f : (trial % 4 == 1 ? 1e6f : 1.0f);
+    for (glm::vec3& p : v) p = glm::vec3(u(rng), u(rng), u(rng)) * scale;
+    if (trial % 5 == 0) v[1][trial % 3] = 0.0f;  // zeros next to the plane
+    const int axis = trial % 3;
+    float split = v[0][axis] + (v[1][axis] - v[0][axis]) * (0.5f + 0.5f * u(rng));
+    if (trial % 7 == 0) split = v[2][axis];  // a plane through a vertex
+    if (trial % 11 == 0) split = 0.0f;
+    kdclip::Box simd[2];
+    kdclip::Box scalar[2];
+    const int simd_sides = kdclip::split_triangle(v, axis, split, simd[0], simd[1]);
+    const int scalar_sides = kdclip::split_triangle_scalar(v, axis, split, scalar[0], scalar[1]);
+    ASSERT_EQ(simd_sides, scalar_sides) << "trial " << trial;
+    for (int side = 0; side < 2; ++side) {
+      if (!(scalar_sides & (1 << side))) continue;
+      ASSERT_EQ(std::memcmp(&simd[side], &scalar[side], sizeof(kdclip::Box)), 0) << "trial " << trial << " side " << side;
+    }
+    both_sides += scalar_sides == 3 ? 1 : 0;
+  }
+  EXPECT_GT(both_sides, 10000);
+}
+
 TEST(KdTree, BuildModesParseAndNameEachOther) {
   for (KdBuildMode m : {KdBuildMode::Quality, KdBuildMode::Fast}) {
     KdBuildMode parsed = m == KdBuildMode::Fast ? KdBuildMode::Quality : KdBuildMode::Fast;

@@ -258,7 +258,9 @@ struct Binner {
   Binner() = default;
   Binner(const Box& box, int bins) : top(float(bins - 1)) {
     for (int a = 0; a < 3; ++a) {
-      const float s = active_axis(box, a, bins) ? float(bins) / (box.hi[a] - box.lo[a]) : 0.0f;
+      const float width = box.hi[a] - box.lo[a];
+      const float inverse = float(bins) / width;
+      const float s = width > 0.0f && std::isfinite(inverse) ? inverse : 0.0f;  // active_axis
       origin[a] = origin[a + 3] = box.lo[a];
       scale[a] = scale[a + 3] = s;  // inactive axes: everything in bin 0, never swept
     }
@@ -435,6 +437,7 @@ struct Task {
   size_t offset;     // references in the arena at [offset, offset + count)
   size_t count;
   Box box;
+  double area;       // area(box), computed once by the parent
   int depth;
   int64_t parent;    // node (local) whose "above" index is this task's node, or -1
   Histogram* hist;   // its references binned, or null when it must be a leaf
@@ -676,14 +679,15 @@ class Builder {
     // vector never moves while a subtree holds pointers into it.
     while (s.hists.size() < 2 * size_t(max_depth_ + 1)) s.hists.emplace_back(bins_);
     s.tasks.clear();
-    if (!hist && can_split(n, depth, area(box))) {  // the root of a small tree: nobody binned it
+    const double box_area = area(box);
+    if (!hist && can_split(n, depth, box_area)) {  // the root of a small tree: nobody binned it
       hist = &histogram_slot(s, depth, 0);
       bin_into(*hist, refs, n, box);
     }
     // The subtree's root reads the node's buffer itself and writes its children into the arena
     // where they would be had its references been copied there first (that copy was 0.9 % of a
     // 1M-triangle build's instructions).
-    process(Task{0, n, box, depth, -1, hist}, out, s, refs);
+    process(Task{0, n, box, box_area, depth, -1, hist}, out, s, refs);
     while (!s.tasks.empty()) {
       const Task task = s.tasks.back();
       s.tasks.pop_back();
@@ -693,8 +697,9 @@ class Builder {
 
   // The histogram of a child of a subtree node (its slot by depth and side), or null when the
   // child must be a leaf.
-  Histogram* bin_child(SubtreeScratch& s, const Ref* refs, size_t n, const Box& box, int depth, int side) const {
-    if (!can_split(n, depth, area(box))) return nullptr;
+  Histogram* bin_child(SubtreeScratch& s, const Ref* refs, size_t n, const Box& box, double box_area, int depth,
+                       int side) const {
+    if (!can_split(n, depth, box_area)) return nullptr;
     Histogram& hist = histogram_slot(s, depth, side);
     bin_into(hist, refs, n, box);
     return &hist;
@@ -720,7 +725,7 @@ class Builder {
   void process(const Task& task, Part& out, SubtreeScratch& s, const Ref* source = nullptr) {
     const Box& box = task.box;
     const size_t n = task.count;
-    const double box_area = area(box);
+    const double box_area = task.area;
     const Split split =
         task.hist && can_split(n, task.depth, box_area) ? choose_split(*task.hist, box, n, box_area, n) : Split{};
     if (split.axis < 0) {
@@ -743,13 +748,16 @@ class Builder {
     partition(source ? source : refs, n, box, split, b, a);
     // The children are binned after the partition, their references still in cache, and only those
     // that can split (many are leaves of one reference).
-    Histogram* below_hist = bin_child(s, b.out, b.count, below_box, child_depth, 0);
-    Histogram* above_hist = bin_child(s, a.out, a.count, above_box, child_depth, 1);
+    const double below_area = area(below_box);
+    const double above_area = area(above_box);
+    Histogram* below_hist = bin_child(s, b.out, b.count, below_box, below_area, child_depth, 0);
+    Histogram* above_hist = bin_child(s, a.out, a.count, above_box, above_area, child_depth, 1);
 
     const size_t index = emit(out, glm::vec4(split.position, 0.0f, static_cast<float>(split.axis), 0.0f), task.parent);
     out.tally.cost += options_.traversal_cost * box_area;
-    s.tasks.push_back(Task{task.offset, a.count, above_box, child_depth, static_cast<int64_t>(index), above_hist});
-    s.tasks.push_back(Task{below_offset, b.count, below_box, child_depth, -1, below_hist});
+    s.tasks.push_back(
+        Task{task.offset, a.count, above_box, above_area, child_depth, static_cast<int64_t>(index), above_hist});
+    s.tasks.push_back(Task{below_offset, b.count, below_box, below_area, child_depth, -1, below_hist});
   }
 
   size_t emit(Part& out, const glm::vec4& node, int64_t parent) const {
@@ -803,21 +811,27 @@ class Builder {
     float best_cost = kInfinity;
     Split best;
     const double inv_area = 1.0 / box_area;
-    const double ext[3] = {double(box.hi[0] - box.lo[0]), double(box.hi[1] - box.lo[1]), double(box.hi[2] - box.lo[2])};
+    // Per node, not per axis (a tenth of the sweep's set-up on the toaster): the widths, whether
+    // the sweep is sparse, 2 * min_width_.
+    const float width[3] = {box.hi[0] - box.lo[0], box.hi[1] - box.lo[1], box.hi[2] - box.lo[2]};
+    const bool sparse = sparse_sweep(n);
+    const float min_step = 2.0f * min_width_;
+    const float fk = float(k);
     for (int a = 0; a < 3; ++a) {
-      if (!Binner::active_axis(box, a, k)) continue;
-      const float o1 = static_cast<float>(ext[(a + 1) % 3]);
-      const float o2 = static_cast<float>(ext[(a + 2) % 3]);
-      const float step = (box.hi[a] - box.lo[a]) / float(k);
+      // Binner::active_axis, on the width computed once.
+      if (!(width[a] > 0.0f) || !std::isfinite(fk / width[a])) continue;
+      const double o1 = width[a == 2 ? 0 : a + 1];
+      const double o2 = width[a == 0 ? 2 : a - 1];
+      const float step = width[a] / fk;
       const SweepAxis axis{
           hist.mins(a), hist.maxs(a), k, static_cast<uint32_t>(binned),
-          static_cast<float>(2.0 * double(o1) * double(o2) * inv_area),
-          static_cast<float>(2.0 * double(step) * (double(o1) + double(o2)) * inv_area),
+          static_cast<float>(2.0 * o1 * o2 * inv_area),
+          static_cast<float>(2.0 * double(step) * (o1 + o2) * inv_area),
           box.lo[a], box.hi[a], step,
           // Planes computed as lo + i * step are monotone in i; every plane must keep
           // min_width_ from the node's faces (checked one by one only when the bins are that thin).
-          step >= 2.0f * min_width_};
-      if (sparse_sweep(n)) {
+          step >= min_step};
+      if (sparse) {
         sweep_sparse(axis, hist.tracked() ? hist.occupied(a) : occupied_bins(axis), a, best_cost, best);
       } else {
         sweep(axis, a, best_cost, best);
