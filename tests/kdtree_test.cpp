@@ -830,6 +830,48 @@ TEST(KdTree, NegativeThreadCountIsBadInput) {
   test::expect_bad_input([&] { build_kdtree(random_soup(10, 3), o); }, {"threads", "-1"});
 }
 
+TEST(KdTree, SmallSplitGainOutsideItsRangeIsBadInput) {
+  for (float gain : {1.0f, -0.5f, std::numeric_limits<float>::quiet_NaN()}) {
+    KdBuildOptions o;
+    o.small_split_gain = gain;
+    test::expect_bad_input([&] { build_kdtree(random_soup(10, 3), o); }, {"small_split_gain"});
+  }
+}
+
+// Fast's gain on small nodes: fewer nodes than gain 0 for a little more SAH cost, hits as brute
+// force's for any gain, and quality's default is the first builder's rule (gain 0) bit for bit.
+TEST(KdTree, SmallSplitGainMakesFewerNodesAndStaysExact) {
+  const Positions soup = random_soup(1500, 21);
+  const FlatKdTree reference = build_kdtree(soup);
+  const std::vector<Ray> rays = make_rays(reference, soup, 800, 22);
+  KdBuildOptions none;
+  none.small_split_gain = 0.0f;
+  const FlatKdTree plain = build_kdtree(soup, none);
+  EXPECT_LT(reference.stats.nodes, plain.stats.nodes);
+  EXPECT_GE(reference.stats.sah_cost, plain.stats.sah_cost);
+  EXPECT_LE(reference.stats.sah_cost, 1.05 * plain.stats.sah_cost);
+  for (float gain : {0.0f, 0.15f, 0.5f, 0.99f}) {
+    for (int refs : {2, 3, 8}) {
+      KdBuildOptions o;
+      o.small_split_gain = gain;
+      o.small_node_refs = refs;
+      const std::string what = "gain " + std::to_string(gain) + " refs " + std::to_string(refs);
+      SCOPED_TRACE(what);
+      const FlatKdTree tree = build_kdtree(soup, o);
+      check_layout(tree, soup, o);
+      ASSERT_EQ(check_rays(tree, rays, what), 0);
+    }
+  }
+  KdBuildOptions quality;
+  quality.build = KdBuildMode::Quality;
+  KdBuildOptions quality_none = quality;
+  quality_none.small_split_gain = 0.0f;
+  const FlatKdTree q = build_kdtree(soup, quality);
+  const FlatKdTree q_none = build_kdtree(soup, quality_none);
+  ASSERT_EQ(q.nodes.size(), q_none.nodes.size());
+  EXPECT_EQ(std::memcmp(q.nodes.data(), q_none.nodes.data(), q.nodes.size() * sizeof(glm::vec4)), 0);
+}
+
 TEST(KdTree, NonFiniteAndMalformedInputIsBadInput) {
   Positions p = random_soup(10, 3);
   p[7].y = std::numeric_limits<float>::quiet_NaN();
