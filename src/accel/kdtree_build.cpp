@@ -1193,6 +1193,22 @@ class Builder {
 
   // r's box cut down to `box`; false when nothing is left.
   static bool intersect(Ref& r, const Box& box) {
+#if defined(__SSE2__)
+    // Two overlapping runs of four bounds, (lo xyz, hi x) and (lo z, hi xyz): max for the lows,
+    // min for the highs, in std::max's and std::min's operand order (the same bits as the loop).
+    const __m128 r0 = _mm_loadu_ps(r.lo);
+    const __m128 r1 = _mm_loadu_ps(r.lo + 2);
+    const __m128 b0 = _mm_loadu_ps(box.lo);
+    const __m128 b1 = _mm_loadu_ps(box.lo + 2);
+    const __m128 lows0 = _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
+    const __m128 lows1 = _mm_castsi128_ps(_mm_setr_epi32(-1, 0, 0, 0));
+    const __m128 c0 = _mm_or_ps(_mm_and_ps(lows0, _mm_max_ps(b0, r0)), _mm_andnot_ps(lows0, _mm_min_ps(b0, r0)));
+    const __m128 c1 = _mm_or_ps(_mm_and_ps(lows1, _mm_max_ps(b1, r1)), _mm_andnot_ps(lows1, _mm_min_ps(b1, r1)));
+    _mm_storeu_ps(r.lo, c0);
+    _mm_storeu_ps(r.lo + 2, c1);
+    // lo xyz (c0's lanes 0-2) against hi xyz (c1's lanes 1-3).
+    return (_mm_movemask_ps(_mm_cmpgt_ps(c0, _mm_shuffle_ps(c1, c1, _MM_SHUFFLE(3, 3, 2, 1)))) & 7) == 0;
+#else
     bool empty = false;
     for (int a = 0; a < 3; ++a) {
       r.lo[a] = std::max(r.lo[a], box.lo[a]);
@@ -1200,6 +1216,7 @@ class Builder {
       empty = empty || r.lo[a] > r.hi[a];
     }
     return !empty;
+#endif
   }
 
   // ---- Layout -----------------------------------------------------------------------------------
