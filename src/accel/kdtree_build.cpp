@@ -1079,6 +1079,10 @@ class Builder {
       const __m256i max_prev = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(s.maxs + i - 1));
       const __m256i min_cur = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(s.mins + i));
       const __m256i max_cur = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(s.maxs + i));
+      const __m256i events = _mm256_or_si256(_mm256_or_si256(min_prev, max_prev), _mm256_or_si256(min_cur, max_cur));
+      // Eight planes next to no event, neither the first nor the last plane: none is a candidate
+      // and the counts carried on do not change (small nodes leave whole groups of bins empty).
+      if (i != 1 && i + 8 <= k - 1 && _mm256_testz_si256(events, events)) continue;
       // Inclusive prefix sums over the 8 lanes: within each half, then the low half's total
       // added to the high half.
       __m256i below = _mm256_add_epi32(min_prev, _mm256_slli_si256(min_prev, 4));
@@ -1102,7 +1106,6 @@ class Builder {
           _mm256_and_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(above, zero)), _mm256_cmp_ps(fk, min_bins, _CMP_GE_OQ)));
       cost = _mm256_blendv_ps(cost, _mm256_mul_ps(cost, factor), empty);
       cost = _mm256_add_ps(vtrav, _mm256_mul_ps(visect, cost));
-      const __m256i events = _mm256_or_si256(_mm256_or_si256(min_prev, max_prev), _mm256_or_si256(min_cur, max_cur));
       __m256 candidate = _mm256_or_ps(_mm256_cmp_ps(fi, one, _CMP_EQ_OQ), _mm256_cmp_ps(fk, one, _CMP_EQ_OQ));
       candidate = _mm256_or_ps(candidate, _mm256_xor_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(events, zero)),
                                                         _mm256_castsi256_ps(_mm256_set1_epi32(-1))));
