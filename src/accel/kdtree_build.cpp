@@ -267,7 +267,8 @@ struct Binner {
     for (int a = 0; a < 3; ++a) {
       const float width = box.hi[a] - box.lo[a];
       const float inverse = float(bins) / width;
-      const float s = width > 0.0f && std::isfinite(inverse) ? inverse : 0.0f;  // active_axis
+      // active_axis: for a positive width the quotient is finite exactly when it is below inf.
+      const float s = width > 0.0f && inverse < kInfinity ? inverse : 0.0f;
       origin[a] = origin[a + 3] = box.lo[a];
       scale[a] = scale[a + 3] = s;  // inactive axes: everything in bin 0, never swept
     }
@@ -872,7 +873,7 @@ class Builder {
     const float fk = float(k);
     for (int a = 0; a < 3; ++a) {
       // Binner::active_axis, on the width computed once.
-      if (!(width[a] > 0.0f) || !std::isfinite(fk / width[a])) continue;
+      if (!(width[a] > 0.0f) || !(fk / width[a] < kInfinity)) continue;
       const double o1 = width[a == 2 ? 0 : a + 1];
       const double o2 = width[a == 0 ? 2 : a - 1];
       const float step = width[a] / fk;
