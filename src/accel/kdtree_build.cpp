@@ -258,8 +258,8 @@ std::string count_text(size_t n) {
 // The six bounds of a reference (lo xyz, hi xyz) are binned together: origin and scale hold one
 // lane per bound, padded to 8.
 struct Binner {
-  alignas(32) float origin[8] = {};
-  alignas(32) float scale[8] = {};
+  alignas(16) float origin[8] = {};
+  alignas(16) float scale[8] = {};
   float top = 0.0f;
 
   Binner() = default;
@@ -332,34 +332,6 @@ class Histogram {
     tracked_ = false;
   }
 
-#if defined(MOBIRT_KD_AVX2)
-  // add() for each of refs[0..n) with the six bounds binned in one AVX2 register (the same
-  // arithmetic per lane, the same bins): a third fewer instructions per reference than add()'s two
-  // SSE2 halves, and binning was a fifth of a 1M-triangle build. Lanes 6 and 7 (the reference's
-  // prim and padding, times a scale of 0) are not used.
-  __attribute__((target("avx2"))) void add_all_avx2(const Binner& binner, const Ref* refs, size_t n) {
-    const __m256 origin = _mm256_load_ps(binner.origin);
-    const __m256 scale = _mm256_load_ps(binner.scale);
-    const __m256 zero = _mm256_setzero_ps();
-    const __m256 last = _mm256_set1_ps(binner.top);
-    const __m256i offsets = _mm256_load_si256(reinterpret_cast<const __m256i*>(offsets_));
-    uint32_t* c = counts_.data();
-    alignas(32) int32_t index[8];
-    for (size_t i = 0; i < n; ++i) {
-      const __m256 f = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(refs[i].lo), origin), scale);
-      const __m256i b = _mm256_cvttps_epi32(_mm256_min_ps(_mm256_max_ps(f, zero), last));
-      _mm256_store_si256(reinterpret_cast<__m256i*>(index), _mm256_add_epi32(b, offsets));
-      ++c[index[0]];
-      ++c[index[1]];
-      ++c[index[2]];
-      ++c[index[3]];
-      ++c[index[4]];
-      ++c[index[5]];
-    }
-    tracked_ = false;
-  }
-#endif
-
   // add() for the nodes of few references that sweep sparsely (bins <= 64): also keeps a bit per
   // occupied bin of each axis, so that the sweep need not scan the bins for them and clear() need
   // not touch every count (the two scans were a tenth of a toaster build).
@@ -408,7 +380,7 @@ class Histogram {
 
  private:
   int stride_;
-  alignas(32) int32_t offsets_[8] = {};  // row of each bound of Binner::bin
+  alignas(16) int32_t offsets_[8] = {};  // row of each bound of Binner::bin
   std::vector<uint32_t> counts_;         // [axis][min, max][stride]
   uint64_t occupied_[3] = {};            // add_tracked's bits per axis
   bool tracked_ = true;                  // no add() or merge() since the last clear()
@@ -760,12 +732,6 @@ class Builder {
     if (sparse_sweep(n)) {
       for (size_t i = 0; i < n; ++i) hist.add_tracked(binner, refs[i]);
     } else {
-#if defined(MOBIRT_KD_AVX2)
-      if (avx2_) {
-        hist.add_all_avx2(binner, refs, n);
-        return;
-      }
-#endif
       for (size_t i = 0; i < n; ++i) hist.add(binner, refs[i]);
     }
   }
