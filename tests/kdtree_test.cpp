@@ -698,6 +698,35 @@ TEST(KdClip, SplitTriangleContainsTheExactClip) {
   EXPECT_GT(compared, 1000);
 }
 
+// The SIMD split_triangle against the scalar one, bit for bit, including planes through a vertex,
+// on the box's faces, and at negative and zero coordinates (the outward rounding's sign cases).
+TEST(KdClip, SplitTriangleIsTheScalarSplitBitForBit) {
+  std::mt19937 rng(79);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  int both_sides = 0;
+  for (int trial = 0; trial < 20000; ++trial) {
+    glm::vec3 v[3];
+    const float scale = trial % 4 == 0 ? 1e-30f : (trial % 4 == 1 ? 1e6f : 1.0f);
+    for (glm::vec3& p : v) p = glm::vec3(u(rng), u(rng), u(rng)) * scale;
+    if (trial % 5 == 0) v[1][trial % 3] = 0.0f;  // zeros next to the plane
+    const int axis = trial % 3;
+    float split = v[0][axis] + (v[1][axis] - v[0][axis]) * (0.5f + 0.5f * u(rng));
+    if (trial % 7 == 0) split = v[2][axis];  // a plane through a vertex
+    if (trial % 11 == 0) split = 0.0f;
+    kdclip::Box simd[2];
+    kdclip::Box scalar[2];
+    const int simd_sides = kdclip::split_triangle(v, axis, split, simd[0], simd[1]);
+    const int scalar_sides = kdclip::split_triangle_scalar(v, axis, split, scalar[0], scalar[1]);
+    ASSERT_EQ(simd_sides, scalar_sides) << "trial " << trial;
+    for (int side = 0; side < 2; ++side) {
+      if (!(scalar_sides & (1 << side))) continue;
+      ASSERT_EQ(std::memcmp(&simd[side], &scalar[side], sizeof(kdclip::Box)), 0) << "trial " << trial << " side " << side;
+    }
+    both_sides += scalar_sides == 3 ? 1 : 0;
+  }
+  EXPECT_GT(both_sides, 10000);
+}
+
 TEST(KdTree, BuildModesParseAndNameEachOther) {
   for (KdBuildMode m : {KdBuildMode::Quality, KdBuildMode::Fast}) {
     KdBuildMode parsed = m == KdBuildMode::Fast ? KdBuildMode::Quality : KdBuildMode::Fast;
@@ -719,6 +748,9 @@ TEST(KdTree, EveryBuildModeTraversesCorrectly) {
     quality.build = KdBuildMode::Quality;
     KdBuildOptions fast = quality;
     fast.build = KdBuildMode::Fast;
+    // The looser clip alone (fast's small-node gain raises the cost of these small scenes' trees
+    // further, by design: SmallSplitGainMakesFewerNodesAndStaysExact).
+    fast.small_split_gain = 0.0f;
     const FlatKdTree quality_tree = build_kdtree(scene.positions, quality);
     const FlatKdTree fast_tree = build_kdtree(scene.positions, fast);
     EXPECT_LE(fast_tree.stats.sah_cost, 1.10 * quality_tree.stats.sah_cost + 1e-6);
@@ -799,6 +831,48 @@ TEST(KdTree, NegativeThreadCountIsBadInput) {
   KdBuildOptions o;
   o.threads = -1;
   test::expect_bad_input([&] { build_kdtree(random_soup(10, 3), o); }, {"threads", "-1"});
+}
+
+TEST(KdTree, SmallSplitGainOutsideItsRangeIsBadInput) {
+  for (float gain : {1.0f, -0.5f, std::numeric_limits<float>::quiet_NaN()}) {
+    KdBuildOptions o;
+    o.small_split_gain = gain;
+    test::expect_bad_input([&] { build_kdtree(random_soup(10, 3), o); }, {"small_split_gain"});
+  }
+}
+
+// Fast's gain on small nodes: fewer nodes than gain 0 for a little more SAH cost, hits as brute
+// force's for any gain, and quality's default is the first builder's rule (gain 0) bit for bit.
+TEST(KdTree, SmallSplitGainMakesFewerNodesAndStaysExact) {
+  const Positions soup = random_soup(1500, 21);
+  const FlatKdTree reference = build_kdtree(soup);
+  const std::vector<Ray> rays = make_rays(reference, soup, 800, 22);
+  KdBuildOptions none;
+  none.small_split_gain = 0.0f;
+  const FlatKdTree plain = build_kdtree(soup, none);
+  EXPECT_LT(reference.stats.nodes, plain.stats.nodes);
+  EXPECT_GE(reference.stats.sah_cost, plain.stats.sah_cost);
+  EXPECT_LE(reference.stats.sah_cost, 1.05 * plain.stats.sah_cost);
+  for (float gain : {0.0f, 0.15f, 0.5f, 0.99f}) {
+    for (int refs : {2, 3, 8}) {
+      KdBuildOptions o;
+      o.small_split_gain = gain;
+      o.small_node_refs = refs;
+      const std::string what = "gain " + std::to_string(gain) + " refs " + std::to_string(refs);
+      SCOPED_TRACE(what);
+      const FlatKdTree tree = build_kdtree(soup, o);
+      check_layout(tree, soup, o);
+      ASSERT_EQ(check_rays(tree, rays, what), 0);
+    }
+  }
+  KdBuildOptions quality;
+  quality.build = KdBuildMode::Quality;
+  KdBuildOptions quality_none = quality;
+  quality_none.small_split_gain = 0.0f;
+  const FlatKdTree q = build_kdtree(soup, quality);
+  const FlatKdTree q_none = build_kdtree(soup, quality_none);
+  ASSERT_EQ(q.nodes.size(), q_none.nodes.size());
+  EXPECT_EQ(std::memcmp(q.nodes.data(), q_none.nodes.data(), q.nodes.size() * sizeof(glm::vec4)), 0);
 }
 
 TEST(KdTree, NonFiniteAndMalformedInputIsBadInput) {

@@ -6,6 +6,10 @@
 #include <limits>
 #include <utility>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 namespace mobirt::kdclip {
 
 namespace {
@@ -80,11 +84,41 @@ int split_polygon(const double (*poly)[3], int n, int axis, float split, Box& be
 
 }  // namespace
 
+#if defined(__SSE2__)
+namespace {
+
+// A vertex in lanes x, y, z (w = 0) without reading past its 12 bytes (the last vertex of the
+// positions array may end the allocation).
+__m128 load_vertex(const glm::vec3& p) {
+  return _mm_movelh_ps(_mm_castpd_ps(_mm_load_sd(reinterpret_cast<const double*>(&p.x))), _mm_load_ss(&p.z));
+}
+
+// next_down (above) on the lanes of f that mask selects: the neighbour towards -inf.
+__m128 next_down_where(__m128 f, __m128 mask) {
+  const __m128i bits = _mm_castps_si128(f);
+  const __m128i sign = _mm_srai_epi32(bits, 31);  // 0 or -1
+  // Positive: bits - 1; negative and -0: bits + 1 (-0 becomes -denorm_min); +0 would become a
+  // NaN and is set to -denorm_min apart.
+  __m128i down = _mm_sub_epi32(_mm_sub_epi32(bits, _mm_set1_epi32(1)), _mm_add_epi32(sign, sign));
+  const __m128i plus_zero = _mm_cmpeq_epi32(bits, _mm_setzero_si128());
+  down = _mm_or_si128(_mm_andnot_si128(plus_zero, down),
+                      _mm_and_si128(plus_zero, _mm_set1_epi32(static_cast<int32_t>(0x80000001u))));
+  return _mm_or_ps(_mm_andnot_ps(mask, f), _mm_and_ps(mask, _mm_castsi128_ps(down)));
+}
+
+// The lanes of a double comparison (two 64-bit masks in each of lo, hi) as four 32-bit masks.
+__m128 narrow_masks(__m128d lo, __m128d hi) {
+  return _mm_shuffle_ps(_mm_castpd_ps(lo), _mm_castpd_ps(hi), _MM_SHUFFLE(2, 0, 2, 0));
+}
+
+}  // namespace
+#endif
+
 // split_polygon on the triangle itself, with the same result: its vertices are floats already
 // (no rounding), only the two edge crossings are computed in double and rounded outwards (round
 // down and up are monotone, so rounding each point equals rounding the bounds), and the crossing's
 // coordinate on the split axis is the plane itself.
-int split_triangle(const glm::vec3* v, int split_axis, float split, Box& below, Box& above) {
+int split_triangle_scalar(const glm::vec3* v, int split_axis, float split, Box& below, Box& above) {
   float p[3][3];
   for (int i = 0; i < 3; ++i) {
     p[i][0] = v[i].x;
@@ -131,6 +165,78 @@ int split_triangle(const glm::vec3* v, int split_axis, float split, Box& below, 
     }
   }
   return (below.lo[0] <= below.hi[0] ? 1 : 0) | (above.lo[0] <= above.hi[0] ? 2 : 0);
+}
+
+// split_triangle_scalar's bounds, the three coordinates of a point in the lanes of one register:
+// the vertices compared with the plane as floats, the two crossings computed in double as there
+// (the same operations, no FMA), rounded to nearest float and moved one ulp outwards where that
+// rounding went inwards (round_down, round_up). min and max take their operands in std::min's
+// and std::max's order, so even the signs of zeros are the same. 61,000 splits were 13 % of a
+// toaster build at 342 instructions each.
+int split_triangle(const glm::vec3* v, int split_axis, float split, Box& below, Box& above) {
+#if defined(__SSE2__)
+  const __m128 p[3] = {load_vertex(v[0]), load_vertex(v[1]), load_vertex(v[2])};
+  const float c[3] = {v[0][split_axis], v[1][split_axis], v[2][split_axis]};
+  const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
+  const __m128 minus_inf = _mm_set1_ps(-std::numeric_limits<float>::infinity());
+  __m128 below_lo = inf, below_hi = minus_inf, above_lo = inf, above_hi = minus_inf;
+  alignas(16) int32_t axis_lane[4] = {0, 0, 0, 0};
+  axis_lane[split_axis] = -1;
+  const __m128 on_axis = _mm_load_ps(reinterpret_cast<const float*>(axis_lane));
+  const __m128 plane = _mm_set1_ps(split);
+  const double s = split;
+  for (int i = 0; i < 3; ++i) {
+    const int j = i == 2 ? 0 : i + 1;
+    if (c[i] <= split) {
+      below_lo = _mm_min_ps(p[i], below_lo);
+      below_hi = _mm_max_ps(p[i], below_hi);
+    }
+    if (c[i] >= split) {
+      above_lo = _mm_min_ps(p[i], above_lo);
+      above_hi = _mm_max_ps(p[i], above_hi);
+    }
+    const double da = double(c[i]) - s;
+    const double db = double(c[j]) - s;
+    if ((da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0)) {
+      const __m128d t = _mm_set1_pd(da / (da - db));
+      const __m128d a01 = _mm_cvtps_pd(p[i]);
+      const __m128d a23 = _mm_cvtps_pd(_mm_movehl_ps(p[i], p[i]));
+      const __m128d b01 = _mm_cvtps_pd(p[j]);
+      const __m128d b23 = _mm_cvtps_pd(_mm_movehl_ps(p[j], p[j]));
+      const __m128d x01 = _mm_add_pd(a01, _mm_mul_pd(t, _mm_sub_pd(b01, a01)));
+      const __m128d x23 = _mm_add_pd(a23, _mm_mul_pd(t, _mm_sub_pd(b23, a23)));
+      const __m128 f = _mm_movelh_ps(_mm_cvtpd_ps(x01), _mm_cvtpd_ps(x23));
+      const __m128d f01 = _mm_cvtps_pd(f);
+      const __m128d f23 = _mm_cvtps_pd(_mm_movehl_ps(f, f));
+      __m128 lo = next_down_where(f, narrow_masks(_mm_cmpgt_pd(f01, x01), _mm_cmpgt_pd(f23, x23)));
+      // round_up(x) = next_up where the float is below: -next_down(-f).
+      const __m128 sign = _mm_set1_ps(-0.0f);
+      __m128 hi = _mm_xor_ps(
+          next_down_where(_mm_xor_ps(f, sign), narrow_masks(_mm_cmplt_pd(f01, x01), _mm_cmplt_pd(f23, x23))), sign);
+      // The crossing's coordinate on the split axis is the plane itself.
+      lo = _mm_or_ps(_mm_andnot_ps(on_axis, lo), _mm_and_ps(on_axis, plane));
+      hi = _mm_or_ps(_mm_andnot_ps(on_axis, hi), _mm_and_ps(on_axis, plane));
+      below_lo = _mm_min_ps(lo, below_lo);
+      below_hi = _mm_max_ps(hi, below_hi);
+      above_lo = _mm_min_ps(lo, above_lo);
+      above_hi = _mm_max_ps(hi, above_hi);
+    }
+  }
+  alignas(16) float out[4][4];
+  _mm_store_ps(out[0], below_lo);
+  _mm_store_ps(out[1], below_hi);
+  _mm_store_ps(out[2], above_lo);
+  _mm_store_ps(out[3], above_hi);
+  for (int a = 0; a < 3; ++a) {
+    below.lo[a] = out[0][a];
+    below.hi[a] = out[1][a];
+    above.lo[a] = out[2][a];
+    above.hi[a] = out[3][a];
+  }
+  return (below.lo[0] <= below.hi[0] ? 1 : 0) | (above.lo[0] <= above.hi[0] ? 2 : 0);
+#else
+  return split_triangle_scalar(v, split_axis, split, below, above);
+#endif
 }
 
 int clip_and_split(const glm::vec3* v, const Box& box, int split_axis, float split, Box& below, Box& above) {

@@ -25,5 +25,8 @@ int clip_and_split(const glm::vec3* v, const Box& box, int axis, float split, Bo
 // with a reference's box, a conservative (looser) stand-in for clip_and_split at a fraction of
 // its cost: 3 edges against one plane instead of up to 6 planes of polygon clipping.
 int split_triangle(const glm::vec3* v, int axis, float split, Box& below, Box& above);
+// split_triangle in plain scalar code: what it computes on CPUs without SSE2, and its test's oracle
+// (the two give the same bits).
+int split_triangle_scalar(const glm::vec3* v, int axis, float split, Box& below, Box& above);
 
 }  // namespace mobirt::kdclip
