@@ -303,10 +303,27 @@ TEST_F(VulkanBackendTest, ConstraintShadersAreRefused) {
 TEST_F(VulkanBackendTest, TexelBufferTraversalKeepsTheConstraints) {
   const ShaderInterface s = reflect_spirv(shader_source(ShaderId::TraverseTexelBuffers).spirv);
   ASSERT_TRUE(s.valid);
-  EXPECT_EQ(s.sampled_textures, 5);  // nodes, primitive list, triangles (texel buffers), two ray images
+  EXPECT_EQ(s.sampled_textures, 5);  // nodes, primitive list, triangles, ray origins and directions
   EXPECT_EQ(s.storage_resources, 0);
   EXPECT_EQ(s.storage_writes, 0);
   EXPECT_TRUE(es2_constraints_broken(shader_source(ShaderId::TraverseTexelBuffers).spirv).empty());
+}
+
+// The shading pass's buffer variants: texel buffers keep every ES 2.0 rule (five inputs and three
+// atlas pages are the 8 sampled textures); storage buffers break only the named one.
+TEST_F(VulkanBackendTest, ShadingPassBufferVariants) {
+  const ShaderInterface t = reflect_spirv(shader_source(ShaderId::ShadeTexelBuffers).spirv);
+  ASSERT_TRUE(t.valid);
+  EXPECT_EQ(t.sampled_textures, 8);  // hit position, normal, texcoord, ray direction, materials, 3 pages
+  EXPECT_EQ(t.storage_resources, 0);
+  EXPECT_TRUE(es2_constraints_broken(shader_source(ShaderId::ShadeTexelBuffers).spirv).empty());
+  const ShaderInterface b = reflect_spirv(shader_source(ShaderId::ShadeStorageBuffers).spirv);
+  ASSERT_TRUE(b.valid);
+  EXPECT_EQ(b.storage_resources, 5);
+  EXPECT_EQ(b.storage_writes, 0);
+  EXPECT_EQ(b.sampled_textures, 3);  // the atlas pages
+  EXPECT_EQ(es2_constraints_broken(shader_source(ShaderId::ShadeStorageBuffers).spirv),
+            std::vector<std::string>{kEs2StorageReads});
 }
 
 // --data storage-buffers: the one rule it breaks is named (reading storage buffers), it writes
@@ -315,9 +332,9 @@ TEST_F(VulkanBackendTest, StorageBufferTraversalBreaksOnlyTheNamedRule) {
   const std::span<const uint32_t> spirv = shader_source(ShaderId::TraverseStorageBuffers).spirv;
   const ShaderInterface s = reflect_spirv(spirv);
   ASSERT_TRUE(s.valid);
-  EXPECT_EQ(s.storage_resources, 3);  // nodes, primitive list, triangles
+  EXPECT_EQ(s.storage_resources, 5);  // nodes, primitive list, triangles, ray origins and directions
   EXPECT_EQ(s.storage_writes, 0);
-  EXPECT_EQ(s.sampled_textures, 2);   // the two ray images
+  EXPECT_EQ(s.sampled_textures, 0);
   EXPECT_EQ(es2_constraints_broken(spirv), std::vector<std::string>{kEs2StorageReads});
   EXPECT_NO_THROW(check_es2_constraints("trace_storage_buffers.frag", spirv, true));
   try {
@@ -335,8 +352,7 @@ TEST_F(VulkanBackendTest, StorageBufferTraversalBreaksOnlyTheNamedRule) {
   EXPECT_THROW(backend->create_pass(desc), Error);
   // Declared as storage buffers, the pass is made.
   desc.uniform_vec4s = MOBIRT_TP_LIGHTS;
-  desc.texture_kinds = {TextureKind::StorageBuffer, TextureKind::StorageBuffer, TextureKind::StorageBuffer,
-                        TextureKind::Image2D, TextureKind::Image2D};
+  desc.texture_kinds.assign(desc.texture_bindings.size(), TextureKind::StorageBuffer);
   const PassHandle pass = backend->create_pass(desc);
   backend->destroy(pass);
   // Storage-buffer writes stay refused whatever the pass declares.

@@ -547,6 +547,9 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
     vkCmdBindDescriptorSets(commands_, VK_PIPELINE_BIND_POINT_GRAPHICS, pass.pipeline_layout.get(), 0, 1,
                             &pass.descriptor_set, 0, nullptr);
   }
+  const int32_t ray_width = int32_t(width);
+  vkCmdPushConstants(commands_, pass.pipeline_layout.get(), VK_SHADER_STAGE_FRAGMENT_BIT, 0, vk::kPassConstantBytes,
+                     &ray_width);
   const VkViewport viewport{0.0f, 0.0f, float(width), float(height), 0.0f, 1.0f};
   const VkRect2D scissor{{0, 0}, {width, height}};
   vkCmdSetViewport(commands_, 0, 1, &viewport);
