@@ -77,14 +77,35 @@ int data_index(float index) {
 #define MOBIRT_ELEMENT_u_nodes vec4
 #define MOBIRT_ELEMENT_u_prim_list float
 #define MOBIRT_ELEMENT_u_triangles vec4
+#define MOBIRT_ELEMENT_u_ray_origin vec4
+#define MOBIRT_ELEMENT_u_ray_direction vec4
+#define MOBIRT_ELEMENT_u_hit_position vec4
+#define MOBIRT_ELEMENT_u_hit_normal vec4
+#define MOBIRT_ELEMENT_u_hit_texcoord vec4
+#define MOBIRT_ELEMENT_u_materials vec4
 #define DATA_SAMPLER(slot, name) \
   layout(std430, set = 0, binding = slot) readonly buffer name##_data { MOBIRT_ELEMENT_##name name[]; }
 #else
 #define DATA_TEXEL(tex, index) texelFetch(tex, data_coord(index), 0)
 #endif
 #ifndef MOBIRT_COMPUTE  // a compute shader reads its ray and writes its result itself
+#if defined(MOBIRT_DATA_TEXEL_BUFFERS) || defined(MOBIRT_DATA_STORAGE_BUFFERS)
+// Per-ray data (rays, the shading pass's inputs) in buffers like the scene data, in the pass's
+// layout: this fragment's ray is element y * width + x (an exact float below 2^23), the width
+// pushed by the backend with every pass. llvmpipe's 2D texelFetch is an indirect call with
+// mip-level work per fetch; a buffer's fetch is not.
+layout(push_constant) uniform PassConstants {
+  int u_ray_width;
+};
+float ray_index() {
+  vec2 p = floor(gl_FragCoord.xy);
+  return p.y * float(u_ray_width) + p.x;
+}
+#define RAY_TEXEL(tex) DATA_TEXEL(tex, ray_index())
+#else
 // Per-ray textures share the pass's layout: this fragment's own ray.
 #define RAY_TEXEL(tex) texelFetch(tex, small_floats_to_ints(floor(gl_FragCoord.xy)), 0)
+#endif
 // Texture atlas page (RGBA8, NEAREST): the texel at integer coordinates xy (exact floats), no filtering.
 // The GLES prelude reads it with texture2D at the texel centre (xy + 0.5) / MOBIRT_ATLAS_SIZE.
 // The clamp keeps a NaN coordinate (which the bit trick turns into a huge index) inside the atlas.

@@ -3,7 +3,11 @@
 // and GLSL ES 1.00. Needs from the prelude: DATA_TEXEL, PARAM, LIGHT_COUNT, TEXTURE_COUNT.
 #include "atlas.glsl"
 
-SAMPLER(MOBIRT_BIND_MATERIALS, u_materials);
+// Materials: a 2D texture, or a texel buffer where the prelude says so (DATA_SAMPLER).
+#ifndef DATA_SAMPLER
+#define DATA_SAMPLER(slot, name) SAMPLER(slot, name)
+#endif
+DATA_SAMPLER(MOBIRT_BIND_MATERIALS, u_materials);
 
 // Bit `index` of a float-encoded mask, without integer bit operations.
 bool mask_bit(float mask, int index) {

@@ -4,10 +4,11 @@
 #include "shade.glsl"
 #include "colour.glsl"
 
-SAMPLER(MOBIRT_BIND_HIT_POSITION, u_hit_position);      // xyz, material (-1 = miss)
-SAMPLER(MOBIRT_BIND_HIT_NORMAL, u_hit_normal);          // xyz, shadow mask
-SAMPLER(MOBIRT_BIND_SHADE_RAY_DIRECTION, u_ray_direction);
-SAMPLER(MOBIRT_BIND_HIT_TEXCOORD, u_hit_texcoord);      // xy
+// Per-ray data, read as the scene data is: 2D textures, or buffers where the prelude says so.
+DATA_SAMPLER(MOBIRT_BIND_HIT_POSITION, u_hit_position);      // xyz, material (-1 = miss)
+DATA_SAMPLER(MOBIRT_BIND_HIT_NORMAL, u_hit_normal);          // xyz, shadow mask
+DATA_SAMPLER(MOBIRT_BIND_SHADE_RAY_DIRECTION, u_ray_direction);
+DATA_SAMPLER(MOBIRT_BIND_HIT_TEXCOORD, u_hit_texcoord);      // xy
 
 void main() {
   vec4 position = RAY_TEXEL(u_hit_position);

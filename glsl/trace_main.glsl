@@ -4,8 +4,9 @@
 #include "traverse.glsl"
 #include "packing.glsl"
 
-SAMPLER(MOBIRT_BIND_RAY_ORIGIN, u_ray_origin);
-SAMPLER(MOBIRT_BIND_RAY_DIRECTION, u_ray_direction);
+// Per-ray data, read as the scene data is: 2D textures, or buffers where the prelude says so.
+DATA_SAMPLER(MOBIRT_BIND_RAY_ORIGIN, u_ray_origin);
+DATA_SAMPLER(MOBIRT_BIND_RAY_DIRECTION, u_ray_direction);
 
 void main() {
   vec4 origin = RAY_TEXEL(u_ray_origin);     // xyz, tmin

@@ -42,7 +42,8 @@ double resident_mib() {
 class VulkanBackendTest : public test::VulkanTest {
  protected:
   // A copy pass over `count` rays in rows of `width`: texel k/255 values, read back as RGBA8.
-  void copy_round_trip(uint32_t width, uint32_t count) {
+  void copy_round_trip(uint32_t width, uint32_t count) { copy_round_trip(*backend, width, count); }
+  void copy_round_trip(Backend& b, uint32_t width, uint32_t count) {
     SCOPED_TRACE("width " + std::to_string(width) + ", count " + std::to_string(count));
     const uint32_t height = (count + width - 1) / width;
     std::vector<float> texels(size_t(count) * 4);
@@ -55,10 +56,10 @@ class VulkanBackendTest : public test::VulkanTest {
       }
       expected[i] = pack_rgba8(k[0], k[1], k[2], k[3]);
     }
-    const TextureHandle input = backend->create_texture(width, height, TexelFormat::RGBA32F);
-    backend->upload(input, texels.data(), texels.size() * sizeof(float));
+    const TextureHandle input = b.create_texture(width, height, TexelFormat::RGBA32F);
+    b.upload(input, texels.data(), texels.size() * sizeof(float));
     std::vector<uint32_t> out(count + 5, 0xdeadbeefu);
-    const PassTiming timing = test::run_copy_pass(*backend, input, width, count, out);
+    const PassTiming timing = test::run_copy_pass(b, input, width, count, out);
     EXPECT_EQ(timing.bytes_read, uint64_t(count) * 4);
     EXPECT_GT(timing.upload_ms, 0.0);
     size_t wrong = 0;
@@ -69,7 +70,7 @@ class VulkanBackendTest : public test::VulkanTest {
     }
     EXPECT_EQ(wrong, 0u);
     for (uint32_t i = count; i < out.size(); ++i) EXPECT_EQ(out[i], 0xdeadbeefu) << "written past count";
-    backend->destroy(input);
+    b.destroy(input);
   }
 };
 
@@ -168,6 +169,46 @@ TEST_F(VulkanBackendTest, CopyRoundTripIsExact) {
   copy_round_trip(64, 64);       // smaller than the cached target: renders a sub-rectangle
 }
 
+// The staging path (optimal images, a copy command per chunk), which a device without host-mapped
+// linear images takes, gives the same texels as the default in-place writes.
+TEST_F(VulkanBackendTest, StagedImagesRoundTripToo) {
+  VulkanOptions options{test::validated_options()};
+  options.staged_images = true;
+  const std::unique_ptr<Backend> staged = create_vulkan_backend(options);
+  copy_round_trip(*staged, 7, 50);
+  copy_round_trip(*staged, 400, 95877);
+  copy_round_trip(*staged, 4096, 4096 * 300 + 17);  // 19 MB: two staging chunks
+  const std::vector<std::string> messages = staged->take_debug_messages();
+  EXPECT_TRUE(messages.empty()) << "validation layer messages:\n" << join(messages);
+}
+
+// An image takes new contents after a pass has read it (written in place in GENERAL layout, or
+// staged), and the next pass reads the new ones, on both upload paths.
+TEST_F(VulkanBackendTest, UploadsAfterAPassReachTheNextPass) {
+  VulkanOptions options{test::validated_options()};
+  options.staged_images = true;
+  const std::unique_ptr<Backend> staged = create_vulkan_backend(options);
+  for (Backend* b : {backend.get(), staged.get()}) {
+    SCOPED_TRACE(b == staged.get() ? "staged images" : "in-place images");
+    const uint32_t width = 6, count = 17;
+    const TextureHandle image = b->create_texture(width, 3, TexelFormat::RGBA32F);
+    std::vector<uint32_t> out(count);
+    for (uint32_t round = 1; round <= 3; ++round) {
+      std::vector<float> texels(size_t(count) * 4);
+      for (size_t i = 0; i < texels.size(); ++i) texels[i] = float((i * round * 13) % 256) / 255.0f;
+      b->upload(image, texels.data(), texels.size() * sizeof(float));
+      test::run_copy_pass(*b, image, width, count, out);
+      for (uint32_t i = 0; i < count; ++i) {
+        const auto k = [&](uint32_t c) { return uint32_t((size_t(i * 4 + c) * round * 13) % 256); };
+        EXPECT_EQ(out[i], pack_rgba8(k(0), k(1), k(2), k(3))) << "round " << round << ", texel " << i;
+      }
+    }
+    b->destroy(image);
+  }
+  const std::vector<std::string> messages = staged->take_debug_messages();
+  EXPECT_TRUE(messages.empty()) << "validation layer messages:\n" << join(messages);
+}
+
 TEST_F(VulkanBackendTest, UniformsReachTheShader) {
   test::expect_uniforms_reach_the_shader(*backend, 16, 40, ErrorKind::Internal);
 }
@@ -262,10 +303,27 @@ TEST_F(VulkanBackendTest, ConstraintShadersAreRefused) {
 TEST_F(VulkanBackendTest, TexelBufferTraversalKeepsTheConstraints) {
   const ShaderInterface s = reflect_spirv(shader_source(ShaderId::TraverseTexelBuffers).spirv);
   ASSERT_TRUE(s.valid);
-  EXPECT_EQ(s.sampled_textures, 5);  // nodes, primitive list, triangles (texel buffers), two ray images
+  EXPECT_EQ(s.sampled_textures, 5);  // nodes, primitive list, triangles, ray origins and directions
   EXPECT_EQ(s.storage_resources, 0);
   EXPECT_EQ(s.storage_writes, 0);
   EXPECT_TRUE(es2_constraints_broken(shader_source(ShaderId::TraverseTexelBuffers).spirv).empty());
+}
+
+// The shading pass's buffer variants: texel buffers keep every ES 2.0 rule (five inputs and three
+// atlas pages are the 8 sampled textures); storage buffers break only the named one.
+TEST_F(VulkanBackendTest, ShadingPassBufferVariants) {
+  const ShaderInterface t = reflect_spirv(shader_source(ShaderId::ShadeTexelBuffers).spirv);
+  ASSERT_TRUE(t.valid);
+  EXPECT_EQ(t.sampled_textures, 8);  // hit position, normal, texcoord, ray direction, materials, 3 pages
+  EXPECT_EQ(t.storage_resources, 0);
+  EXPECT_TRUE(es2_constraints_broken(shader_source(ShaderId::ShadeTexelBuffers).spirv).empty());
+  const ShaderInterface b = reflect_spirv(shader_source(ShaderId::ShadeStorageBuffers).spirv);
+  ASSERT_TRUE(b.valid);
+  EXPECT_EQ(b.storage_resources, 5);
+  EXPECT_EQ(b.storage_writes, 0);
+  EXPECT_EQ(b.sampled_textures, 3);  // the atlas pages
+  EXPECT_EQ(es2_constraints_broken(shader_source(ShaderId::ShadeStorageBuffers).spirv),
+            std::vector<std::string>{kEs2StorageReads});
 }
 
 // --data storage-buffers: the one rule it breaks is named (reading storage buffers), it writes
@@ -274,9 +332,9 @@ TEST_F(VulkanBackendTest, StorageBufferTraversalBreaksOnlyTheNamedRule) {
   const std::span<const uint32_t> spirv = shader_source(ShaderId::TraverseStorageBuffers).spirv;
   const ShaderInterface s = reflect_spirv(spirv);
   ASSERT_TRUE(s.valid);
-  EXPECT_EQ(s.storage_resources, 3);  // nodes, primitive list, triangles
+  EXPECT_EQ(s.storage_resources, 5);  // nodes, primitive list, triangles, ray origins and directions
   EXPECT_EQ(s.storage_writes, 0);
-  EXPECT_EQ(s.sampled_textures, 2);   // the two ray images
+  EXPECT_EQ(s.sampled_textures, 0);
   EXPECT_EQ(es2_constraints_broken(spirv), std::vector<std::string>{kEs2StorageReads});
   EXPECT_NO_THROW(check_es2_constraints("trace_storage_buffers.frag", spirv, true));
   try {
@@ -294,8 +352,7 @@ TEST_F(VulkanBackendTest, StorageBufferTraversalBreaksOnlyTheNamedRule) {
   EXPECT_THROW(backend->create_pass(desc), Error);
   // Declared as storage buffers, the pass is made.
   desc.uniform_vec4s = MOBIRT_TP_LIGHTS;
-  desc.texture_kinds = {TextureKind::StorageBuffer, TextureKind::StorageBuffer, TextureKind::StorageBuffer,
-                        TextureKind::Image2D, TextureKind::Image2D};
+  desc.texture_kinds.assign(desc.texture_bindings.size(), TextureKind::StorageBuffer);
   const PassHandle pass = backend->create_pass(desc);
   backend->destroy(pass);
   // Storage-buffer writes stay refused whatever the pass declares.

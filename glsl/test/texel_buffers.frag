@@ -16,8 +16,11 @@ SAMPLER(7, t7);
 SAMPLER(8, t8);
 SAMPLER(9, t9);
 
+// RAY_TEXEL reads buffers under MOBIRT_DATA_TEXEL_BUFFERS: the images are fetched here by hand.
+#define IMAGE_TEXEL(tex) texelFetch(tex, ivec2(gl_FragCoord.xy), 0)
+
 void main() {
   float i = floor(gl_FragCoord.x);
   OUTPUT(DATA_TEXEL(b1, i) + DATA_TEXEL(b2, i) + DATA_TEXEL(b3, i) + DATA_TEXEL(b4, i) + DATA_TEXEL(b5, i) +
-         RAY_TEXEL(t6) + RAY_TEXEL(t7) + RAY_TEXEL(t8) + RAY_TEXEL(t9));
+         IMAGE_TEXEL(t6) + IMAGE_TEXEL(t7) + IMAGE_TEXEL(t8) + IMAGE_TEXEL(t9));
 }

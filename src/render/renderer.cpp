@@ -241,7 +241,7 @@ PassHandle Renderer::trace_pass(int lights, Packing packing, bool analytic) {
   desc.uniform_vec4s = MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * uint32_t(lights);
   desc.texture_bindings = {MOBIRT_BIND_NODES, MOBIRT_BIND_PRIM_LIST, MOBIRT_BIND_TRIANGLES,
                            MOBIRT_BIND_RAY_ORIGIN, MOBIRT_BIND_RAY_DIRECTION};
-  desc.texture_kinds = {data_kind_, data_kind_, data_kind_, TextureKind::Image2D, TextureKind::Image2D};
+  desc.texture_kinds.assign(desc.texture_bindings.size(), data_kind_);
   PassHandle pass = backend_.create_pass(desc);
   data_->trace_passes.emplace(key, pass);
   return pass;
@@ -252,7 +252,9 @@ PassHandle Renderer::shade_pass(int lights, int textures, int pages, int colour)
   auto it = data_->shade_passes.find(key);
   if (it != data_->shade_passes.end()) return it->second;
   PassDesc desc;
-  desc.shader = ShaderId::Shade;
+  desc.shader = data_kind_ == TextureKind::TexelBuffer     ? ShaderId::ShadeTexelBuffers
+                : data_kind_ == TextureKind::StorageBuffer ? ShaderId::ShadeStorageBuffers
+                                                           : ShaderId::Shade;
   desc.specialization = {{MOBIRT_SPEC_LIGHT_COUNT, lights},
                          {MOBIRT_SPEC_TEXTURE_COUNT, textures},
                          {MOBIRT_SPEC_ATLAS_PAGES, pages},
@@ -265,6 +267,8 @@ PassHandle Renderer::shade_pass(int lights, int textures, int pages, int colour)
   static_assert(std::size(data_slots) == MOBIRT_SHADE_DATA_TEXTURES && std::size(page_slots) == MOBIRT_ATLAS_MAX_PAGES);
   desc.texture_bindings.assign(std::begin(data_slots), std::end(data_slots));
   desc.texture_bindings.insert(desc.texture_bindings.end(), std::begin(page_slots), std::end(page_slots));
+  desc.texture_kinds.assign(std::size(data_slots), data_kind_);
+  desc.texture_kinds.resize(desc.texture_bindings.size(), TextureKind::Image2D);  // the pages stay 2D images
   PassHandle pass = backend_.create_pass(desc);
   data_->shade_passes.emplace(key, pass);
   return pass;
@@ -327,8 +331,9 @@ void Renderer::upload_rays(const RayBatch& rays) {
     }
     d.ray_width = rays.width;
   }
-  ensure_texture(d.ray_origin.handle, d.ray_origin.rows, rays.width, rays.rows(), TexelFormat::RGBA32F);
-  ensure_texture(d.ray_direction.handle, d.ray_direction.rows, rays.width, rays.rows(), TexelFormat::RGBA32F);
+  ensure_texture(d.ray_origin.handle, d.ray_origin.rows, rays.width, rays.rows(), TexelFormat::RGBA32F, data_kind_);
+  ensure_texture(d.ray_direction.handle, d.ray_direction.rows, rays.width, rays.rows(), TexelFormat::RGBA32F,
+                 data_kind_);
   backend_.upload(d.ray_origin.handle, rays.origin.data(), rays.origin.size() * sizeof(glm::vec4));
   backend_.upload(d.ray_direction.handle, rays.direction.data(), rays.direction.size() * sizeof(glm::vec4));
 }
@@ -374,7 +379,7 @@ void Renderer::upload_materials(const Scene& scene) {
   }
   Data& d = *data_;
   ensure_texture(d.materials.handle, d.materials.rows, kDataWidth,
-                 data_rows(materials.size() * MOBIRT_TEXELS_PER_MATERIAL), TexelFormat::RGBA32F);
+                 data_rows(materials.size() * MOBIRT_TEXELS_PER_MATERIAL), TexelFormat::RGBA32F, data_kind_);
   backend_.upload(d.materials.handle, materials.data(), materials.size() * sizeof(MaterialTexels));
 }
 
@@ -398,8 +403,8 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
 
   Data& d = *data_;
   prepare_atlas(scene);
-  ensure_texture(d.hit_position.handle, d.hit_position.rows, rays.width, rays.rows(), TexelFormat::RGBA32F);
-  ensure_texture(d.hit_normal.handle, d.hit_normal.rows, rays.width, rays.rows(), TexelFormat::RGBA32F);
+  ensure_texture(d.hit_position.handle, d.hit_position.rows, rays.width, rays.rows(), TexelFormat::RGBA32F, data_kind_);
+  ensure_texture(d.hit_normal.handle, d.hit_normal.rows, rays.width, rays.rows(), TexelFormat::RGBA32F, data_kind_);
   backend_.upload(d.hit_position.handle, position.data(), position.size() * sizeof(HitPositionTexel));
   backend_.upload(d.hit_normal.handle, normal.data(), normal.size() * sizeof(HitNormalTexel));
   // Texture coordinates only where the scene has textures (the CPU computed them in decoding).
@@ -411,7 +416,8 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
       if (hits[i].valid()) uv[i].texcoord = hits[i].texcoord;
     }
     timings.decode_ms += elapsed_ms(stage);
-    ensure_texture(d.hit_texcoord.handle, d.hit_texcoord.rows, rays.width, rays.rows(), TexelFormat::RGBA32F);
+    ensure_texture(d.hit_texcoord.handle, d.hit_texcoord.rows, rays.width, rays.rows(), TexelFormat::RGBA32F,
+                   data_kind_);
     backend_.upload(d.hit_texcoord.handle, uv.data(), uv.size() * sizeof(HitTexcoordTexel));
     texcoords = d.hit_texcoord.handle;
   }

@@ -117,7 +117,9 @@ class Renderer {
 
   Backend& backend_;
   RenderSettings settings_;
-  TextureKind data_kind_ = TextureKind::Image2D;  // of the nodes, primitive list and triangles
+  // Of the nodes, primitive list and triangles, and of the rays, the shading pass's inputs and the
+  // materials (a 2D texelFetch per input costs llvmpipe an indirect call with mip-level work).
+  TextureKind data_kind_ = TextureKind::Image2D;
   std::unique_ptr<Data> data_;
   std::unique_ptr<Engine> engine_;
 };

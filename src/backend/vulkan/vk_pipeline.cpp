@@ -277,9 +277,14 @@ Pass Pipelines::create_pass(const PassDesc& desc) const {
   VK_CHECK(vkCreateDescriptorSetLayout(vk_device, &set_info, nullptr, &set_layout));
   pass.set_layout = DescriptorSetLayout(vk_device, set_layout);
 
+  // Every pass gets its width as a push constant: a shader that reads per-ray texel buffers
+  // (prelude_vk.glsl's ray_index) needs it; others ignore it.
+  const VkPushConstantRange push_range{VK_SHADER_STAGE_FRAGMENT_BIT, 0, kPassConstantBytes};
   VkPipelineLayoutCreateInfo layout_info{VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO};
   layout_info.setLayoutCount = 1;
   layout_info.pSetLayouts = &set_layout;
+  layout_info.pushConstantRangeCount = 1;
+  layout_info.pPushConstantRanges = &push_range;
   VkPipelineLayout pipeline_layout = VK_NULL_HANDLE;
   VK_CHECK(vkCreatePipelineLayout(vk_device, &layout_info, nullptr, &pipeline_layout));
   pass.pipeline_layout = PipelineLayout(vk_device, pipeline_layout);

@@ -52,6 +52,9 @@ class SpecializationConstants {
 VkPipeline create_compute_pipeline(VkDevice device, VkPipelineLayout layout, VkShaderModule shader,
                                    const VkSpecializationInfo* specialization, VkPipelineCache cache);
 
+// The push constants of every fragment pass: the pass's width (int u_ray_width, prelude_vk.glsl).
+constexpr uint32_t kPassConstantBytes = 4;
+
 struct Pass {
   PassDesc desc;
   DescriptorSetLayout set_layout;

@@ -32,12 +32,14 @@ void HostBuffer::reset() {
 }
 
 void DeviceImage::reset() {
+  mapped = nullptr;
   view.reset();
   image.reset();
   memory.reset();
 }
 
 void TexelBuffer::reset() {
+  mapped = nullptr;
   view.reset();
   buffer.reset();
   memory.reset();
@@ -107,9 +109,11 @@ HostBuffer create_host_buffer(const Device& device, VkDeviceSize size, VkBufferU
   return result;
 }
 
-DeviceImage create_image(const Device& device, uint32_t width, uint32_t height, VkFormat format,
-                         VkImageUsageFlags usage) {
-  const VkDevice vk_device = device.handle();
+namespace {
+
+// A 2D image of one level and layer; its memory and view are the caller's.
+Image create_bare_image(VkDevice vk_device, uint32_t width, uint32_t height, VkFormat format, VkImageUsageFlags usage,
+                        VkImageTiling tiling, VkImageLayout initial_layout) {
   VkImageCreateInfo info{VK_STRUCTURE_TYPE_IMAGE_CREATE_INFO};
   info.imageType = VK_IMAGE_TYPE_2D;
   info.format = format;
@@ -117,19 +121,16 @@ DeviceImage create_image(const Device& device, uint32_t width, uint32_t height, 
   info.mipLevels = 1;
   info.arrayLayers = 1;
   info.samples = VK_SAMPLE_COUNT_1_BIT;
-  info.tiling = VK_IMAGE_TILING_OPTIMAL;
+  info.tiling = tiling;
   info.usage = usage;
   info.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
-  info.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+  info.initialLayout = initial_layout;
   VkImage image = VK_NULL_HANDLE;
   VK_CHECK(vkCreateImage(vk_device, &info, nullptr, &image));
-  DeviceImage result;
-  result.image = Image(vk_device, image);
-  VkMemoryRequirements requirements{};
-  vkGetImageMemoryRequirements(vk_device, image, &requirements);
-  result.memory = allocate(device, requirements, 0, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
-  VK_CHECK(vkBindImageMemory(vk_device, image, result.memory.get(), 0));
+  return Image(vk_device, image);
+}
 
+ImageView create_view(VkDevice vk_device, VkImage image, VkFormat format) {
   VkImageViewCreateInfo view_info{VK_STRUCTURE_TYPE_IMAGE_VIEW_CREATE_INFO};
   view_info.image = image;
   view_info.viewType = VK_IMAGE_VIEW_TYPE_2D;
@@ -137,16 +138,100 @@ DeviceImage create_image(const Device& device, uint32_t width, uint32_t height, 
   view_info.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 1, 0, 1};
   VkImageView view = VK_NULL_HANDLE;
   VK_CHECK(vkCreateImageView(vk_device, &view_info, nullptr, &view));
-  result.view = ImageView(vk_device, view);
+  return ImageView(vk_device, view);
+}
+
+// The format features that `usage` relies on, of those mobirt uses.
+VkFormatFeatureFlags usage_features(VkImageUsageFlags usage) {
+  VkFormatFeatureFlags features = 0;
+  if (usage & VK_IMAGE_USAGE_SAMPLED_BIT) {
+    features |= VK_FORMAT_FEATURE_SAMPLED_IMAGE_BIT | VK_FORMAT_FEATURE_SAMPLED_IMAGE_FILTER_LINEAR_BIT;
+  }
+  if (usage & VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT) {
+    features |= VK_FORMAT_FEATURE_COLOR_ATTACHMENT_BIT | VK_FORMAT_FEATURE_COLOR_ATTACHMENT_BLEND_BIT;
+  }
+  if (usage & VK_IMAGE_USAGE_TRANSFER_SRC_BIT) features |= VK_FORMAT_FEATURE_TRANSFER_SRC_BIT;
+  if (usage & VK_IMAGE_USAGE_TRANSFER_DST_BIT) features |= VK_FORMAT_FEATURE_TRANSFER_DST_BIT;
+  return features;
+}
+
+}  // namespace
+
+DeviceImage create_image(const Device& device, uint32_t width, uint32_t height, VkFormat format,
+                         VkImageUsageFlags usage) {
+  const VkDevice vk_device = device.handle();
+  DeviceImage result;
+  result.image = create_bare_image(vk_device, width, height, format, usage, VK_IMAGE_TILING_OPTIMAL,
+                                   VK_IMAGE_LAYOUT_UNDEFINED);
+  VkMemoryRequirements requirements{};
+  vkGetImageMemoryRequirements(vk_device, result.image.get(), &requirements);
+  result.memory = allocate(device, requirements, 0, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+  VK_CHECK(vkBindImageMemory(vk_device, result.image.get(), result.memory.get(), 0));
+  result.view = create_view(vk_device, result.image.get(), format);
   return result;
 }
+
+DeviceImage create_host_image(const Device& device, uint32_t width, uint32_t height, VkFormat format,
+                              VkImageUsageFlags usage) {
+  const VkDevice vk_device = device.handle();
+  DeviceImage result;
+  // Only where the linear image does everything the optimal one would (a filtered atlas page, a
+  // blended target), in this size.
+  VkFormatProperties format_properties{};
+  vkGetPhysicalDeviceFormatProperties(device.physical(), format, &format_properties);
+  const VkFormatFeatureFlags wanted = usage_features(usage) & format_properties.optimalTilingFeatures;
+  if ((format_properties.linearTilingFeatures & wanted) != wanted) return result;
+  VkImageFormatProperties limits{};
+  if (vkGetPhysicalDeviceImageFormatProperties(device.physical(), format, VK_IMAGE_TYPE_2D, VK_IMAGE_TILING_LINEAR,
+                                               usage, 0, &limits) != VK_SUCCESS ||
+      width > limits.maxExtent.width || height > limits.maxExtent.height) {
+    return result;
+  }
+  Image image = create_bare_image(vk_device, width, height, format, usage, VK_IMAGE_TILING_LINEAR,
+                                  VK_IMAGE_LAYOUT_PREINITIALIZED);
+  VkMemoryRequirements requirements{};
+  vkGetImageMemoryRequirements(vk_device, image.get(), &requirements);
+  bool any_host_visible = false;
+  const VkPhysicalDeviceMemoryProperties& memory = device.memory_properties();
+  for (uint32_t i = 0; i < memory.memoryTypeCount; ++i) {
+    if ((requirements.memoryTypeBits & (1u << i)) &&
+        (memory.memoryTypes[i].propertyFlags & VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT)) {
+      any_host_visible = true;
+    }
+  }
+  if (!any_host_visible) return result;
+  result.memory = allocate(device, requirements, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT,
+                           VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT,
+                           &result.coherent);
+  result.image = std::move(image);
+  VK_CHECK(vkBindImageMemory(vk_device, result.image.get(), result.memory.get(), 0));
+  const VkImageSubresource subresource{VK_IMAGE_ASPECT_COLOR_BIT, 0, 0};
+  VkSubresourceLayout layout{};
+  vkGetImageSubresourceLayout(vk_device, result.image.get(), &subresource, &layout);
+  void* base = nullptr;
+  VK_CHECK(vkMapMemory(vk_device, result.memory.get(), 0, VK_WHOLE_SIZE, 0, &base));
+  result.mapped = static_cast<char*>(base) + layout.offset;
+  result.row_pitch = layout.rowPitch;
+  result.view = create_view(vk_device, result.image.get(), format);
+  return result;
+}
+
+namespace {
+
+// Host-visible (device-local too where it can be), mapped: the host writes the data in place.
+void create_mapped_buffer(const Device& device, VkDeviceSize size, VkBufferUsageFlags usage, TexelBuffer& result) {
+  create_bound_buffer(device, size, usage, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT,
+                      VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT, result.buffer,
+                      result.memory, &result.coherent);
+  VK_CHECK(vkMapMemory(device.handle(), result.memory.get(), 0, VK_WHOLE_SIZE, 0, &result.mapped));
+}
+
+}  // namespace
 
 TexelBuffer create_texel_buffer(const Device& device, uint32_t texels, VkFormat format, size_t texel_bytes) {
   const VkDevice vk_device = device.handle();
   TexelBuffer result;
-  create_bound_buffer(device, VkDeviceSize(texels) * texel_bytes,
-                      VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT, 0,
-                      VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT, result.buffer, result.memory, nullptr);
+  create_mapped_buffer(device, VkDeviceSize(texels) * texel_bytes, VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT, result);
   VkBufferViewCreateInfo view_info{VK_STRUCTURE_TYPE_BUFFER_VIEW_CREATE_INFO};
   view_info.buffer = result.buffer.get();
   view_info.format = format;
@@ -160,9 +245,7 @@ TexelBuffer create_texel_buffer(const Device& device, uint32_t texels, VkFormat 
 
 TexelBuffer create_storage_buffer(const Device& device, uint32_t texels, size_t texel_bytes) {
   TexelBuffer result;
-  create_bound_buffer(device, VkDeviceSize(texels) * texel_bytes,
-                      VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT, 0,
-                      VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT, result.buffer, result.memory, nullptr);
+  create_mapped_buffer(device, VkDeviceSize(texels) * texel_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, result);
   return result;
 }
 

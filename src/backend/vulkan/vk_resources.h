@@ -29,21 +29,30 @@ struct HostBuffer {
   void reset();
 };
 
-// A 2D image of one mip level and layer in device memory, with a colour view of it.
+// A 2D image of one mip level and layer with a colour view of it: optimally tiled in device
+// memory, or linearly tiled in host-visible memory, persistently mapped (`mapped` not null), that
+// the host writes straight into, rows `row_pitch` bytes apart.
 struct DeviceImage {
   Memory memory;
   Image image;
   ImageView view;
+  void* mapped = nullptr;  // the first texel; unmapped when the memory is freed
+  VkDeviceSize row_pitch = 0;
+  bool coherent = true;
 
   void reset();
 };
 
-// A device-local buffer with a texel view of it: a uniform texel buffer (samplerBuffer); without
-// the view, a read-only storage buffer.
+// A buffer in host-visible memory, persistently mapped, with a texel view of it: a uniform texel
+// buffer (samplerBuffer); without the view, a read-only storage buffer. The host writes it
+// directly: every Vulkan device has host-visible coherent memory for buffers, and on lavapipe it
+// is the only memory there is.
 struct TexelBuffer {
   Memory memory;
   Buffer buffer;
   BufferView view;
+  void* mapped = nullptr;
+  bool coherent = true;
 
   void reset();
 };
@@ -81,8 +90,15 @@ HostBuffer create_host_buffer(const Device& device, VkDeviceSize size, VkBufferU
 DeviceImage create_image(const Device& device, uint32_t width, uint32_t height, VkFormat format,
                          VkImageUsageFlags usage);
 
-// A device-local uniform texel buffer of `texels` texels of `format` (also a transfer destination),
-// with its view.
+// A linearly tiled, host-mapped width x height image of `format` for `usage`, created in
+// VK_IMAGE_LAYOUT_PREINITIALIZED (host writes are defined in it and in GENERAL), where the device
+// supports one that the usage's features work on as on an optimal image (sampling and linear
+// filtering for a sampled image, blending for an attachment) and maps its memory; otherwise an
+// image without `mapped`, and the caller uses create_image().
+DeviceImage create_host_image(const Device& device, uint32_t width, uint32_t height, VkFormat format,
+                              VkImageUsageFlags usage);
+
+// A host-visible uniform texel buffer of `texels` texels of `format`, mapped, with its view.
 TexelBuffer create_texel_buffer(const Device& device, uint32_t texels, VkFormat format, size_t texel_bytes);
 TexelBuffer create_storage_buffer(const Device& device, uint32_t texels, size_t texel_bytes);
 

@@ -1,6 +1,11 @@
 // Headless Vulkan backend: lavapipe (or any Vulkan 1.1 device), one full-screen fragment pass per
 // call, one RGBA8 texel per ray read back. Every pass is synchronous: record, submit, wait on a
 // fence, read back; so objects can be reused across passes without further synchronisation.
+// Uploads write the host's data once, in place: buffers and (where the device has them, as
+// lavapipe does) linearly tiled images live in host-visible memory, persistently mapped, and every
+// earlier pass was waited for, so nothing still reads them; a submission makes the host's writes
+// visible to the device. Only optimal images (staged_images, or a device without such linear
+// images) go through a staging buffer and a copy command.
 // This file is the pass: textures, uploads, recording and timing a pass. The instance and device
 // are vk_device.*, memory and images vk_resources.*, pipelines vk_pipeline.*.
 #include "backend/vulkan/vulkan_backend.h"
@@ -32,6 +37,12 @@ long vulkan_live_objects() { return vk::live_object_counter().load(); }
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+// The layout a pass reads an image in: GENERAL for a host-written linear image (host writes are
+// defined there), else the read-only one.
+VkImageLayout read_layout(const vk::Texture& texture) {
+  return texture.image.mapped ? VK_IMAGE_LAYOUT_GENERAL : VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
+}
 
 constexpr size_t kStagingChunkBytes = size_t(16) << 20;  // uploads go through at most 16 MiB
 constexpr uint32_t kTimestampCount = 3;
@@ -65,6 +76,7 @@ class Impl {
   void usable() const;
   VkResult device_result(VkResult result, const char* call);  // notes VK_ERROR_DEVICE_LOST
   void ensure_staging(VkDeviceSize size);
+  void flush(const vk::Memory& memory, bool coherent);  // host writes to non-coherent memory
   void stage(const void* data, size_t bytes);  // into the staging buffer, flushed
   void ensure_readback(VkDeviceSize size);
   void ensure_target(uint32_t width, uint32_t height);
@@ -73,6 +85,8 @@ class Impl {
   vk::Texture& texture_ref(TextureHandle handle);
   TextureHandle keep(vk::Texture texture);
   void upload_buffer(vk::Texture& texture, const void* data, size_t bytes);
+  void upload_mapped_image(vk::Texture& texture, const void* data, size_t bytes);
+  void upload_staged_image(vk::Texture& texture, const void* data, size_t bytes);
   vk::Pass& pass_ref(PassHandle handle);
 
   // Members go in reverse order: resources, pipelines and commands, the device and instance.
@@ -91,12 +105,13 @@ class Impl {
   uint32_t next_pass_ = 1;
   double pending_upload_ms_ = 0.0;
   double timeout_s_ = vk::pass_timeout_seconds();
+  bool staged_images_ = false;
   bool lost_ = false;
   bool hung_ = false;
 };
 
 Impl::Impl(const VulkanOptions& options)
-    : device_(options), pipelines_(device_, options.pipeline_cache_dir) {
+    : device_(options), pipelines_(device_, options.pipeline_cache_dir), staged_images_(options.staged_images) {
   create_command_objects();
   device_.throw_validation_errors();
 }
@@ -158,14 +173,17 @@ void Impl::ensure_staging(VkDeviceSize size) {
   staging_ = vk::create_host_buffer(device_, std::max(size, VkDeviceSize(1) << 20), VK_BUFFER_USAGE_TRANSFER_SRC_BIT, false);
 }
 
+void Impl::flush(const vk::Memory& memory, bool coherent) {
+  if (coherent) return;
+  VkMappedMemoryRange range{VK_STRUCTURE_TYPE_MAPPED_MEMORY_RANGE};
+  range.memory = memory.get();
+  range.size = VK_WHOLE_SIZE;
+  VK_CHECK(vkFlushMappedMemoryRanges(device_.handle(), 1, &range));
+}
+
 void Impl::stage(const void* data, size_t bytes) {
   std::memcpy(staging_.mapped, data, bytes);
-  if (!staging_.coherent) {
-    VkMappedMemoryRange range{VK_STRUCTURE_TYPE_MAPPED_MEMORY_RANGE};
-    range.memory = staging_.memory.get();
-    range.size = VK_WHOLE_SIZE;
-    VK_CHECK(vkFlushMappedMemoryRanges(device_.handle(), 1, &range));
-  }
+  flush(staging_.memory, staging_.coherent);
 }
 
 void Impl::ensure_readback(VkDeviceSize size) {
@@ -256,8 +274,15 @@ TextureHandle Impl::create_texture(uint32_t width, uint32_t height, TexelFormat 
   texture.width = width;
   texture.height = height;
   texture.format = format;
-  texture.image = vk::create_image(device_, width, height, vk::vk_format(format),
-                                   VK_IMAGE_USAGE_SAMPLED_BIT | VK_IMAGE_USAGE_TRANSFER_DST_BIT);
+  if (!staged_images_) {
+    texture.image = vk::create_host_image(device_, width, height, vk::vk_format(format), VK_IMAGE_USAGE_SAMPLED_BIT);
+  }
+  if (texture.image.mapped) {
+    texture.layout = VK_IMAGE_LAYOUT_PREINITIALIZED;
+  } else {
+    texture.image = vk::create_image(device_, width, height, vk::vk_format(format),
+                                     VK_IMAGE_USAGE_SAMPLED_BIT | VK_IMAGE_USAGE_TRANSFER_DST_BIT);
+  }
 
   return keep(std::move(texture));
 }
@@ -298,32 +323,25 @@ TextureHandle Impl::create_buffer(uint32_t texels, TexelFormat format, TextureKi
   return keep(std::move(texture));
 }
 
-// A texel buffer's upload: staged copies of at most kStagingChunkBytes, each one submission.
+// A buffer's upload: in place (every earlier pass was waited for).
 void Impl::upload_buffer(vk::Texture& texture, const void* data, size_t bytes) {
-  const auto start = Clock::now();
-  ensure_staging(std::min(bytes, kStagingChunkBytes));
-  for (size_t offset = 0; offset < bytes; offset += kStagingChunkBytes) {
-    const size_t chunk = std::min(kStagingChunkBytes, bytes - offset);
-    stage(static_cast<const char*>(data) + offset, chunk);
-    begin_commands();
-    // Earlier reads finished (every submission is waited for), so only the write needs ordering
-    // before the next pass's reads.
-    const VkBufferCopy region{0, offset, chunk};
-    vkCmdCopyBuffer(commands_, staging_.buffer.get(), texture.buffer.buffer.get(), 1, &region);
-    VkBufferMemoryBarrier barrier{VK_STRUCTURE_TYPE_BUFFER_MEMORY_BARRIER};
-    barrier.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
-    barrier.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
-    barrier.srcQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
-    barrier.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
-    barrier.buffer = texture.buffer.buffer.get();
-    barrier.offset = offset;
-    barrier.size = chunk;
-    vkCmdPipelineBarrier(commands_, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, 0, 0, nullptr,
-                         1, &barrier, 0, nullptr);
-    submit_and_wait("texel buffer upload");
+  std::memcpy(texture.buffer.mapped, data, bytes);
+  flush(texture.buffer.memory, texture.buffer.coherent);
+}
+
+// A linear image's upload: in place, row by row where its rows are padded.
+void Impl::upload_mapped_image(vk::Texture& texture, const void* data, size_t bytes) {
+  const size_t row_bytes = size_t(texture.width) * texel_bytes(texture.format);
+  char* target = static_cast<char*>(texture.image.mapped);
+  const char* source = static_cast<const char*>(data);
+  if (texture.image.row_pitch == row_bytes) {
+    std::memcpy(target, source, bytes);
+  } else {
+    for (size_t done = 0; done < bytes; done += row_bytes, target += texture.image.row_pitch) {
+      std::memcpy(target, source + done, std::min(row_bytes, bytes - done));
+    }
   }
-  pending_upload_ms_ += elapsed_ms(start);
-  device_.throw_validation_errors();
+  flush(texture.image.memory, texture.image.coherent);
 }
 
 void Impl::upload(TextureHandle handle, const void* data, size_t bytes) {
@@ -343,9 +361,22 @@ void Impl::upload(TextureHandle handle, const void* data, size_t bytes) {
   }
   if (bytes == 0) return;
   if (!data) throw Error(ErrorKind::Internal, "upload: no data");
-  if (texture.kind != TextureKind::Image2D) return upload_buffer(texture, data, bytes);
   const auto start = Clock::now();
+  if (texture.kind != TextureKind::Image2D) {
+    upload_buffer(texture, data, bytes);
+  } else if (texture.image.mapped) {
+    upload_mapped_image(texture, data, bytes);
+  } else {
+    upload_staged_image(texture, data, bytes);
+  }
+  pending_upload_ms_ += elapsed_ms(start);
+  device_.throw_validation_errors();
+}
 
+// An optimal image's upload: staged copies of at most kStagingChunkBytes, each one submission.
+void Impl::upload_staged_image(vk::Texture& texture, const void* data, size_t bytes) {
+  const size_t texel = texel_bytes(texture.format);
+  const size_t row_bytes = size_t(texture.width) * texel;
   // Whole rows, then the partial last row, in chunks that fit the reusable staging buffer.
   const size_t texels = bytes / texel;
   const size_t rows_per_chunk = std::max<size_t>(1, kStagingChunkBytes / row_bytes);
@@ -398,8 +429,6 @@ void Impl::upload(TextureHandle handle, const void* data, size_t bytes) {
     submit_and_wait("texture upload");
     row += full_rows + (tail > 0 ? 1 : 0);
   }
-  pending_upload_ms_ += elapsed_ms(start);
-  device_.throw_validation_errors();
 }
 
 void Impl::destroy(TextureHandle handle) {
@@ -475,7 +504,7 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
         buffer_infos[i] = {bound[i]->buffer.buffer.get(), 0, VK_WHOLE_SIZE};
         writes[i].pBufferInfo = &buffer_infos[i];
       } else {
-        image_infos[i] = {VK_NULL_HANDLE, bound[i]->image.view.get(), VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
+        image_infos[i] = {VK_NULL_HANDLE, bound[i]->image.view.get(), read_layout(*bound[i])};
         writes[i].pImageInfo = &image_infos[i];
       }
     }
@@ -485,23 +514,25 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
   begin_commands();
   const bool timed = bool(queries_);
   if (timed) vkCmdResetQueryPool(commands_, queries_.get(), 0, kTimestampCount);
-  // A texture never uploaded still needs its layout (its contents are undefined).
+  // An image's first pass: a linear one leaves its initial layout for GENERAL (the host goes on
+  // writing it there), an optimal one never uploaded gets the layout it is read in.
   std::vector<VkImageMemoryBarrier> first_use;
   for (vk::Texture* t : bound) {
-    if (t->kind != TextureKind::Image2D || t->layout != VK_IMAGE_LAYOUT_UNDEFINED) continue;
+    if (t->kind != TextureKind::Image2D || t->layout == read_layout(*t)) continue;
     VkImageMemoryBarrier barrier{VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER};
+    barrier.srcAccessMask = t->image.mapped ? VK_ACCESS_HOST_WRITE_BIT : 0;
     barrier.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
-    barrier.oldLayout = VK_IMAGE_LAYOUT_UNDEFINED;
-    barrier.newLayout = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
+    barrier.oldLayout = t->layout;
+    barrier.newLayout = read_layout(*t);
     barrier.srcQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
     barrier.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
     barrier.image = t->image.image.get();
     barrier.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 1, 0, 1};
     first_use.push_back(barrier);
-    t->layout = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
+    t->layout = barrier.newLayout;
   }
   if (!first_use.empty()) {
-    vkCmdPipelineBarrier(commands_, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, 0, 0,
+    vkCmdPipelineBarrier(commands_, VK_PIPELINE_STAGE_HOST_BIT | VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, 0, 0,
                          nullptr, 0, nullptr, uint32_t(first_use.size()), first_use.data());
   }
   if (timed) vkCmdWriteTimestamp(commands_, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, queries_.get(), 0);
@@ -516,6 +547,9 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
     vkCmdBindDescriptorSets(commands_, VK_PIPELINE_BIND_POINT_GRAPHICS, pass.pipeline_layout.get(), 0, 1,
                             &pass.descriptor_set, 0, nullptr);
   }
+  const int32_t ray_width = int32_t(width);
+  vkCmdPushConstants(commands_, pass.pipeline_layout.get(), VK_SHADER_STAGE_FRAGMENT_BIT, 0, vk::kPassConstantBytes,
+                     &ray_width);
   const VkViewport viewport{0.0f, 0.0f, float(width), float(height), 0.0f, 1.0f};
   const VkRect2D scissor{{0, 0}, {width, height}};
   vkCmdSetViewport(commands_, 0, 1, &viewport);

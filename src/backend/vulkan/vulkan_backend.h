@@ -15,6 +15,10 @@ struct VulkanOptions : BackendOptions {
   // by the cache UUID), so that a known scene's first frame does not compile again. Empty: no cache
   // on disk.
   std::string pipeline_cache_dir;
+  // Data textures as optimally tiled images filled through a staging buffer and a copy command,
+  // the path of a device without host-mapped linear images that sample as optimal ones do; off:
+  // linear images written in place where the device has them (lavapipe). Tests compare the two.
+  bool staged_images = false;
 };
 
 std::unique_ptr<Backend> create_vulkan_backend(const VulkanOptions& options);
