@@ -1,17 +1,19 @@
 // Texture lookup in the atlas pages: the MobiRT paper's 2048 x 2048 RGBA8 atlas of up to 16
 // textures, repeated on as many pages as the texture units allow. Common subset of GLSL 450 and
 // GLSL ES 1.00: no bit operations, no %, no integer textures, uniforms indexed only by loop
-// indices. Needs from the prelude: PARAM, ATLAS_TEXEL, TEXTURE_COUNT, ATLAS_PAGES, LIGHT_COUNT.
-// The CPU mirror, step for step, is sample_atlas() in src/scene/atlas.cpp; packing and the
-// design choices are written down in src/scene/atlas.h.
+// indices. Needs from the prelude: PARAM, ATLAS_FILTERED or ATLAS_TEXEL, TEXTURE_COUNT, ATLAS_PAGES,
+// LIGHT_COUNT. The CPU mirror of the ATLAS_TEXEL path, step for step, is sample_atlas() in
+// src/scene/atlas.cpp; packing, gutters and the design choices are written down in src/scene/atlas.h.
 //
 // Uniforms, per texture t at PARAM(MOBIRT_SP_TEXTURES(LIGHT_COUNT) + MOBIRT_SP_VEC4S_PER_TEXTURE * t):
-//   [0] xy = tile origin in its page's texels, zw = tile size in texels
+//   [0] xy = the tile's first texel in its page (inside its gutter), zw = tile size in texels
 //   [1] x = wrap s, y = wrap t (MOBIRT_WRAP_*), z = page
 //
-// Filtering is bilinear and done by hand: 4 fetches at texel centres, each texel index wrapped or
-// clamped inside its own tile, so tiles need no gutter and never bleed into each other. The atlas
-// holds sRGB-encoded values; each fetched texel is converted to linear before the blend.
+// The coordinate is wrapped into [0, 1] once; the tile's gutter (src/scene/atlas.h) holds the
+// texels its wrap mode puts beyond each edge, so a bilinear footprint never leaves tile + gutter.
+// Where the prelude offers ATLAS_FILTERED (Vulkan: an R8G8B8A8_SRGB page behind a LINEAR sampler),
+// ONE hardware fetch filters, decoding sRGB per texel first. GLSL ES 1.00 has no sRGB textures
+// (no GL_EXT_sRGB on Mesa's ES 2.0 context): 4 NEAREST fetches, each decoded, blended exactly.
 
 // Every page is declared (SPIR-V cannot drop a binding by a specialization constant); ATLAS_PAGES
 // folds the reads of pages the scene does not have away.
@@ -19,20 +21,16 @@ SAMPLER(MOBIRT_BIND_ATLAS_PAGE_0, u_atlas_page0);
 SAMPLER(MOBIRT_BIND_ATLAS_PAGE_1, u_atlas_page1);
 SAMPLER(MOBIRT_BIND_ATLAS_PAGE_2, u_atlas_page2);
 
-// One texel index (an integer as a float) wrapped into [0, size) by mode, as OpenGL wraps the
-// texels of a GL_LINEAR lookup. (i + 0.5) / size is never within 0.5 / size of an integer, so
-// floor() of it is exact even with a division that is not correctly rounded. The final clamp keeps
-// the index inside the tile even where float precision runs out (huge coordinates).
-float atlas_wrap(float i, float size, float mode) {
-  float r = i;
+// A texture coordinate wrapped into [0, 1] by mode (as atlas_wrap_coord() on the CPU). The clamp
+// keeps even a NaN coordinate inside the tile.
+float atlas_wrap_coord(float u, float mode) {
+  float r = u - floor(u);
   if (mode == MOBIRT_WRAP_MIRRORED_REPEAT) {
-    float period = 2.0 * size;
-    r = i - period * floor((i + 0.5) / period);
-    if (r >= size) r = period - 1.0 - r;
-  } else if (mode != MOBIRT_WRAP_CLAMP) {
-    r = i - size * floor((i + 0.5) / size);
+    r = 1.0 - abs(1.0 - (u - 2.0 * floor(0.5 * u)));
+  } else if (mode == MOBIRT_WRAP_CLAMP) {
+    r = u;
   }
-  return clamp(r, 0.0, size - 1.0);
+  return clamp(r, 0.0, 1.0);
 }
 
 // sRGB-encoded [0, 1] to linear.
@@ -42,6 +40,20 @@ vec3 atlas_srgb_to_linear(vec3 c) {
 
 // Samplers cannot be chosen by a value in GLSL ES 1.00 (no dynamic indexing of samplers, no
 // sampler variables), hence one branch per page.
+#ifdef ATLAS_FILTERED
+// Linear RGB filtered by the sampler at xy, normalised page coordinates.
+vec3 atlas_filtered(float page, vec2 xy) {
+  vec4 texel;
+  if (ATLAS_PAGES > 2 && page == 2.0) {
+    texel = ATLAS_FILTERED(u_atlas_page2, xy);
+  } else if (ATLAS_PAGES > 1 && page == 1.0) {
+    texel = ATLAS_FILTERED(u_atlas_page1, xy);
+  } else {
+    texel = ATLAS_FILTERED(u_atlas_page0, xy);
+  }
+  return texel.rgb;
+}
+#else
 vec3 atlas_texel_linear(float page, float x, float y) {
   vec2 xy = vec2(x, y);
   vec4 texel;
@@ -54,6 +66,7 @@ vec3 atlas_texel_linear(float page, float x, float y) {
   }
   return atlas_srgb_to_linear(texel.rgb);
 }
+#endif
 
 // Linear RGB of texture `texture_index` (an index into the scene's textures, as a float) at
 // texture coordinate uv (glTF convention: (0, 0) is the top-left corner of the image).
@@ -66,14 +79,18 @@ vec3 sample_atlas(float texture_index, vec2 uv) {
       wrap = PARAM(MOBIRT_SP_TEXTURES(LIGHT_COUNT) + MOBIRT_SP_VEC4S_PER_TEXTURE * t + 1);
     }
   }
-  vec2 p = uv * tile.zw - 0.5;
+  vec2 w = vec2(atlas_wrap_coord(uv.x, wrap.x), atlas_wrap_coord(uv.y, wrap.y));
+#ifdef ATLAS_FILTERED
+  return atlas_filtered(wrap.z, (tile.xy + w * tile.zw) * (1.0 / float(MOBIRT_ATLAS_SIZE)));
+#else
+  // Texels floor(p) and floor(p) + 1 lie in [-1, size]: the tile or its gutter.
+  vec2 p = w * tile.zw - 0.5;
   vec2 p0 = floor(p);
   vec2 f = p - p0;
-  float x0 = tile.x + atlas_wrap(p0.x, tile.z, wrap.x);
-  float x1 = tile.x + atlas_wrap(p0.x + 1.0, tile.z, wrap.x);
-  float y0 = tile.y + atlas_wrap(p0.y, tile.w, wrap.y);
-  float y1 = tile.y + atlas_wrap(p0.y + 1.0, tile.w, wrap.y);
-  vec3 top = mix(atlas_texel_linear(wrap.z, x0, y0), atlas_texel_linear(wrap.z, x1, y0), f.x);
-  vec3 bottom = mix(atlas_texel_linear(wrap.z, x0, y1), atlas_texel_linear(wrap.z, x1, y1), f.x);
+  vec2 xy0 = tile.xy + p0;
+  vec2 xy1 = xy0 + 1.0;
+  vec3 top = mix(atlas_texel_linear(wrap.z, xy0.x, xy0.y), atlas_texel_linear(wrap.z, xy1.x, xy0.y), f.x);
+  vec3 bottom = mix(atlas_texel_linear(wrap.z, xy0.x, xy1.y), atlas_texel_linear(wrap.z, xy1.x, xy1.y), f.x);
   return mix(top, bottom, f.y);
+#endif
 }

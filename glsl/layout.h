@@ -138,7 +138,7 @@
                                    //   [3] x = cos(outer), yzw = unused
 #define MOBIRT_SP_VEC4S_PER_LIGHT 4
 // Texture atlas: after the lights, MOBIRT_SP_VEC4S_PER_TEXTURE vec4 per texture (see atlas.glsl):
-//   [0] xy = tile origin in its page's texels, zw = tile size in texels
+//   [0] xy = tile origin in its page's texels (its first texel, inside the gutter), zw = tile size in texels
 //   [1] x = wrap s, y = wrap t (MOBIRT_WRAP_*), z = page (0 .. MOBIRT_ATLAS_MAX_PAGES - 1), w = unused
 #define MOBIRT_SP_TEXTURES(light_count) (MOBIRT_SP_LIGHTS + MOBIRT_SP_VEC4S_PER_LIGHT * (light_count))
 #define MOBIRT_SP_VEC4S_PER_TEXTURE 2
@@ -147,13 +147,16 @@
 #define MOBIRT_WRAP_CLAMP 2.0
 // Atlas pages of MOBIRT_ATLAS_SIZE^2 texels, the paper's atlas repeated: as many as the units that
 // the shading pass's data textures leave, up to MOBIRT_ATLAS_TILES_PER_PAGE tiles each (the
-// paper's 16), a tile at most a page. Any 16 tiles up to MOBIRT_ATLAS_SURE_TILE on a side fit one
-// page (4 x 512 = 2048), so every scene within MOBIRT_ATLAS_MAX_TEXTURES packs.
+// paper's 16), a tile and its gutter at most a page. Each tile is framed by MOBIRT_ATLAS_GUTTER
+// texels a side copied by its wrap mode, for one hardware bilinear fetch (src/scene/atlas.h). Any 16
+// tiles up to MOBIRT_ATLAS_SURE_TILE on a side fit one page (4 x (510 + 2) = 2048), so every scene
+// within MOBIRT_ATLAS_MAX_TEXTURES packs.
 #define MOBIRT_ATLAS_SIZE 2048
 #define MOBIRT_ATLAS_MAX_PAGES 3  // MOBIRT_MAX_SAMPLED_TEXTURES - MOBIRT_SHADE_DATA_TEXTURES
 #define MOBIRT_ATLAS_TILES_PER_PAGE 16
 #define MOBIRT_ATLAS_MAX_TEXTURES 48  // MOBIRT_ATLAS_MAX_PAGES x MOBIRT_ATLAS_TILES_PER_PAGE
-#define MOBIRT_ATLAS_SURE_TILE 512
+#define MOBIRT_ATLAS_GUTTER 1
+#define MOBIRT_ATLAS_SURE_TILE 510
 
 // ---- Specialization constants (Vulkan constant_id; #defines on GLES) -------------------------
 #define MOBIRT_SPEC_LIGHT_COUNT 0  // lights in the scene, 0..MOBIRT_MAX_LIGHTS

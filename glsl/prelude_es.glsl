@@ -98,7 +98,9 @@ vec4 mobirt_data_texel(sampler2D tex, float row_and_fraction, float inv_rows) {
 // Per-ray textures share the pass's layout: this fragment's own ray. gl_FragCoord.xy is already
 // the texel centre (x + 0.5, y + 0.5); window row 0 is texture row 0 and glReadPixels' first row.
 #define RAY_TEXEL(s) texture2D((s).tex, gl_FragCoord.xy * (s).inv_size)
-// Texture atlas page (RGBA8, NEAREST): the texel at integer coordinates xy (exact floats).
+// Texture atlas page (RGBA8, NEAREST): the texel at integer coordinates xy (exact floats). No
+// ATLAS_FILTERED: without GL_EXT_sRGB (Mesa offers none to ES 2.0) a LINEAR fetch would blend the
+// sRGB-encoded values, so atlas.glsl blends 4 decoded texels itself.
 #define ATLAS_TEXEL(s, xy) texture2D((s).tex, ((xy) + 0.5) * (s).inv_size)
 
 #define OUTPUT(value) gl_FragColor = (value)

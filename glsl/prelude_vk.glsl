@@ -110,6 +110,10 @@ float ray_index() {
 // The GLES prelude reads it with texture2D at the texel centre (xy + 0.5) / MOBIRT_ATLAS_SIZE.
 // The clamp keeps a NaN coordinate (which the bit trick turns into a huge index) inside the atlas.
 #define ATLAS_TEXEL(tex, xy) texelFetch(tex, clamp(small_floats_to_ints(xy), 0, MOBIRT_ATLAS_SIZE - 1), 0)
+// Texture atlas page (R8G8B8A8_SRGB behind the LINEAR sampler of PassDesc::linear_bindings): one
+// bilinear fetch at normalised page coordinates uv, decoded from sRGB per texel before the filter.
+// Its presence selects atlas.glsl's one-fetch lookup.
+#define ATLAS_FILTERED(tex, uv) textureLod(tex, uv, 0.0)
 
 #define SAMPLER(slot, name) layout(set = 0, binding = slot) uniform sampler2D name
 

@@ -143,7 +143,7 @@ static_assert(sizeof(ShadeLightParams) == MOBIRT_SP_VEC4S_PER_LIGHT * sizeof(glm
 
 // Shading pass, MOBIRT_SP_VEC4S_PER_TEXTURE vec4 per atlas tile from MOBIRT_SP_TEXTURES(lights).
 struct AtlasTileParams {
-  glm::vec2 origin;  // in its page's texels
+  glm::vec2 origin;  // in its page's texels: the tile's first texel, inside its gutter
   glm::vec2 size;
   float wrap_s;      // MOBIRT_WRAP_*
   float wrap_t;
@@ -172,7 +172,7 @@ static_assert(sizeof(HitRecord) == MOBIRT_HIT_RECORD_BYTES && std::is_trivially_
 static_assert(MOBIRT_ATLAS_MAX_PAGES == MOBIRT_MAX_SAMPLED_TEXTURES - MOBIRT_SHADE_DATA_TEXTURES);
 static_assert(MOBIRT_ATLAS_MAX_TEXTURES == MOBIRT_ATLAS_MAX_PAGES * MOBIRT_ATLAS_TILES_PER_PAGE);
 static_assert(MOBIRT_BIND_ATLAS_PAGE_2 == MOBIRT_BIND_ATLAS_PAGE_0 + MOBIRT_ATLAS_MAX_PAGES - 1);
-static_assert(MOBIRT_ATLAS_SURE_TILE * 4 == MOBIRT_ATLAS_SIZE && MOBIRT_ATLAS_TILES_PER_PAGE == 16);
+static_assert((MOBIRT_ATLAS_SURE_TILE + 2 * MOBIRT_ATLAS_GUTTER) * 4 == MOBIRT_ATLAS_SIZE && MOBIRT_ATLAS_TILES_PER_PAGE == 16);
 
 // The largest passes fit the uniform array.
 static_assert(MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * MOBIRT_MAX_LIGHTS <= MOBIRT_MAX_PARAM_VEC4S);

@@ -2,8 +2,8 @@
 // decoding feed both; only the backend differs. Per backend (one test body, parameterised over
 // {vulkan, gles}): the traversal pass agrees with the CPU traversal and the image with the CPU
 // expectation. Across backends, for every project scene and effect level: the same hit index and
-// shadow mask on >= 99.9% of rays, final images within 1/255 on >= 99.5% of pixels and PSNR >= 45
-// dB; a failing comparison writes its diff image and names it.
+// shadow mask on >= 99.9% of rays, final images within 1/255 (2/255 with textures: the filters
+// differ) on >= 99.5% of pixels and PSNR >= 45 dB; a failing comparison writes its diff image and names it.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -267,7 +267,9 @@ TEST_P(CrossBackend, SameHitsAndShadowMasks) {
   EXPECT_GE(double(same_mask), 0.999 * double(hits)) << same_mask << " of " << hits << " masks agree; first: " << first;
 }
 
-// The final images: within 1/255 on >= 99.5% of pixels, PSNR >= 45 dB.
+// The final images: within 1/255 on >= 99.5% of pixels, PSNR >= 45 dB. With textures 2/255: Vulkan
+// filters the atlas in hardware (one fetch, within 0.8/255 of the exact blend, atlas_test), GLES
+// blends 4 texels exactly, and a pixel sums several lookups through mirrors and glass.
 TEST_P(CrossBackend, SameImage) {
   const ParityCase& c = GetParam();
   const Scene scene = load_scene(std::string(MOBIRT_SOURCE_DIR "/scenes/") + c.scene);
@@ -278,16 +280,17 @@ TEST_P(CrossBackend, SameImage) {
   const Image a = on_vulkan.render(scene, camera);
   const Image b = on_gles.render(scene, camera);
   // Accumulated float colours: one 8-bit step is 1/255, plus float rounding of the weights.
-  const ImageDiff d = compare_images(a, b, 1.0f / 255.0f + 1e-5f);
-  std::printf("[ parity ] %s image: PSNR %.2f dB, max error %.4f (%.1f/255), %.4f%% of pixels beyond 1/255\n",
-              case_name(c).c_str(), d.psnr, d.max_error, 255.0 * d.max_error, 100.0 * d.share_over);
+  const float steps = scene.textures.empty() ? 1.0f : 2.0f;
+  const ImageDiff d = compare_images(a, b, steps / 255.0f + 1e-5f);
+  std::printf("[ parity ] %s image: PSNR %.2f dB, max error %.4f (%.1f/255), %.4f%% of pixels beyond %.0f/255\n",
+              case_name(c).c_str(), d.psnr, d.max_error, 255.0 * d.max_error, 100.0 * d.share_over, steps);
   if (d.psnr < 45.0 || d.share_over > 0.005) {
     const std::string diff = "parity-" + case_name(c) + "-diff.png";
     write_image(test::output_path(diff).string(), difference_image(a, b));
     write_image(test::output_path("parity-" + case_name(c) + "-vulkan.png").string(), a);
     write_image(test::output_path("parity-" + case_name(c) + "-gles.png").string(), b);
     ADD_FAILURE() << "Vulkan and GLES images differ: PSNR " << d.psnr << " dB, " << 100.0 * d.share_over
-                  << "% of pixels beyond 1/255; see " << test::output_path(diff);
+                  << "% of pixels beyond " << steps << "/255; see " << test::output_path(diff);
   }
 }
 

@@ -13,8 +13,18 @@ size_t texel_bytes(TexelFormat format) {
     case TexelFormat::RGBA32F: return 16;
     case TexelFormat::R32F: return 4;
     case TexelFormat::RGBA8: return 4;
+    case TexelFormat::SRGBA8: return 4;
   }
   throw Error(ErrorKind::Internal, "texel_bytes: unknown texel format " + std::to_string(int(format)));
+}
+
+TexelFormat atlas_page_format(const DeviceInfo& info) {
+  return info.srgb_textures ? TexelFormat::SRGBA8 : TexelFormat::RGBA8;
+}
+
+std::vector<uint32_t> atlas_linear_bindings(const DeviceInfo& info) {
+  if (!info.srgb_textures) return {};
+  return {MOBIRT_BIND_ATLAS_PAGE_0, MOBIRT_BIND_ATLAS_PAGE_1, MOBIRT_BIND_ATLAS_PAGE_2};
 }
 
 void check_pass_desc(const PassDesc& desc) {

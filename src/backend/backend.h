@@ -3,6 +3,7 @@
 // sees a VkImage or a GLuint, only typed handles.
 #pragma once
 
+#include <algorithm>
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
@@ -24,7 +25,9 @@ struct Handle {
 using TextureHandle = Handle<struct TextureTag>;
 using PassHandle = Handle<struct PassTag>;
 
-enum class TexelFormat { RGBA32F, R32F, RGBA8 };
+// SRGBA8: 8-bit sRGB-encoded RGBA that the sampler decodes to linear per texel, before it filters
+// (Vulkan's R8G8B8A8_SRGB; OpenGL ES 2.0 only with GL_EXT_sRGB: DeviceInfo::srgb_textures).
+enum class TexelFormat { RGBA32F, R32F, RGBA8, SRGBA8 };
 size_t texel_bytes(TexelFormat format);
 
 // How a pass reads a data texture: a 2D image (texelFetch / texture2D, both APIs) or a uniform
@@ -76,6 +79,12 @@ struct PassDesc {
   // The kind of each of texture_bindings, in the same order; empty = every one a 2D image.
   std::vector<TextureKind> texture_kinds;
   TextureKind kind(size_t i) const { return i < texture_kinds.size() ? texture_kinds[i] : TextureKind::Image2D; }
+  // Bindings (2D images) read through a bilinear sampler (LINEAR, no mipmaps, clamp to edge)
+  // instead of NEAREST: the atlas pages' one filtered fetch (src/scene/atlas.h).
+  std::vector<uint32_t> linear_bindings;
+  bool linear(uint32_t binding) const {
+    return std::find(linear_bindings.begin(), linear_bindings.end(), binding) != linear_bindings.end();
+  }
 };
 
 // One pass's cost, as measured by the backend.
@@ -100,6 +109,10 @@ struct DeviceInfo {
   bool texel_buffers = false;
   // Read-only storage buffers (Backend::create_storage_buffer): Vulkan, never OpenGL ES 2.0.
   bool storage_buffers = false;
+  // TexelFormat::SRGBA8 textures, filtered in linear light: Vulkan always; OpenGL ES 2.0 needs
+  // GL_EXT_sRGB, which Mesa does not offer to an ES 2.0 context. Without them the atlas pages are
+  // RGBA8 read texel by texel (atlas_page_format()).
+  bool srgb_textures = false;
   std::vector<std::string> limits;  // "name: value" lines that matter to mobirt
 };
 
@@ -136,6 +149,12 @@ class Backend {
   // Every validation/debug message received since the last call (tests assert there are none).
   virtual std::vector<std::string> take_debug_messages() = 0;
 };
+
+// The atlas pages' format on this device, and the page bindings its shading pass reads through a
+// bilinear sampler: SRGBA8 and all pages with DeviceInfo::srgb_textures (glsl/atlas.glsl's one
+// filtered fetch), else RGBA8 and none (4 NEAREST fetches).
+TexelFormat atlas_page_format(const DeviceInfo& info);
+std::vector<uint32_t> atlas_linear_bindings(const DeviceInfo& info);
 
 // A pass description checked the same way by every backend before it builds anything: at most
 // MOBIRT_MAX_SAMPLED_TEXTURES textures (Error(Constraint)), at most MOBIRT_MAX_PARAM_VEC4S uniform

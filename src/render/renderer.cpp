@@ -269,6 +269,7 @@ PassHandle Renderer::shade_pass(int lights, int textures, int pages, int colour)
   desc.texture_bindings.insert(desc.texture_bindings.end(), std::begin(page_slots), std::end(page_slots));
   desc.texture_kinds.assign(std::size(data_slots), data_kind_);
   desc.texture_kinds.resize(desc.texture_bindings.size(), TextureKind::Image2D);  // the pages stay 2D images
+  desc.linear_bindings = atlas_linear_bindings(backend_.device_info());
   PassHandle pass = backend_.create_pass(desc);
   data_->shade_passes.emplace(key, pass);
   return pass;
@@ -288,13 +289,14 @@ void Renderer::prepare_atlas(const Scene& scene) {
   d.atlas_data = build_atlas(scene);
   d.has_atlas = !d.atlas_data.empty();
   const uint32_t size = uint32_t(d.atlas_data.size);
+  const TexelFormat format = atlas_page_format(backend_.device_info());
   for (const std::vector<uint32_t>& pixels : d.atlas_data.pages) {
-    d.atlas_pages.push_back(backend_.create_texture(size, size, TexelFormat::RGBA8));
+    d.atlas_pages.push_back(backend_.create_texture(size, size, format));
     backend_.upload(d.atlas_pages.back(), pixels.data(), pixels.size() * sizeof(uint32_t));
   }
   if (d.atlas_pages.empty()) {
     // The shading pass always binds the page slots; specialised to no textures, it never reads them.
-    d.atlas_pages.push_back(backend_.create_texture(1, 1, TexelFormat::RGBA8));
+    d.atlas_pages.push_back(backend_.create_texture(1, 1, format));
     const uint32_t black = 0;
     backend_.upload(d.atlas_pages.back(), &black, sizeof(black));
   }

@@ -15,6 +15,9 @@ namespace mobirt {
 
 namespace {
 
+// A tile and its gutter fit a page.
+constexpr int kLargestTile = MOBIRT_ATLAS_SIZE - 2 * MOBIRT_ATLAS_GUTTER;
+
 std::string size_text(int width, int height) {
   std::string s = std::to_string(width);
   s.append("x").append(std::to_string(height));
@@ -60,6 +63,25 @@ glm::vec3 texel_linear(const Atlas& atlas, int page, float x, float y) {
 // GLSL mix(): x * (1 - a) + y * a.
 glm::vec3 mix3(const glm::vec3& x, const glm::vec3& y, float a) { return x * (1.0f - a) + y * a; }
 
+// The tile's texels and its gutter: gutter texel i (i = -1 or size on an axis) holds the texel
+// that the tile's wrap mode maps i to (atlas_wrap: the last column left of a REPEAT tile, the edge
+// itself for MIRRORED_REPEAT and CLAMP_TO_EDGE), so that a bilinear fetch of a coordinate wrapped
+// into [0, 1] reads, at the tile's edges, the neighbours the texture's own sampler would read.
+void copy_tile(const TextureImage& image, const AtlasTile& tile, int page_size, std::vector<uint32_t>& page) {
+  const float w = float(image.width), h = float(image.height);
+  constexpr int g = MOBIRT_ATLAS_GUTTER;
+  for (int row = -g; row < image.height + g; ++row) {
+    const int src_row = row < 0 || row >= image.height ? int(atlas_wrap(float(row), h, tile.wrap_t)) : row;
+    const uint32_t* src = &image.pixels[size_t(src_row) * size_t(image.width)];
+    uint32_t* dst = &page[size_t(tile.y + row) * size_t(page_size) + size_t(tile.x)];
+    std::copy_n(src, size_t(image.width), dst);
+    for (int k = 1; k <= g; ++k) {
+      dst[-k] = src[size_t(atlas_wrap(float(-k), w, tile.wrap_s))];
+      dst[image.width - 1 + k] = src[size_t(atlas_wrap(float(image.width - 1 + k), w, tile.wrap_s))];
+    }
+  }
+}
+
 }  // namespace
 
 float wrap_value(TextureWrap wrap) {
@@ -81,10 +103,11 @@ std::optional<std::vector<AtlasTile>> try_pack_tiles(const std::vector<glm::ivec
     return sizes[a].x > sizes[b].x;
   });
   std::vector<AtlasTile> tiles(sizes.size());
+  constexpr int frame = 2 * MOBIRT_ATLAS_GUTTER;  // each tile's footprint is its size plus a gutter a side
   int page = 0, on_page = 0, x = 0, y = 0, shelf_height = 0;
   for (size_t i : order) {
-    const int w = sizes[i].x, h = sizes[i].y;
-    if (w <= 0 || h <= 0 || w > page_size || h > page_size) return std::nullopt;
+    const int w = sizes[i].x + frame, h = sizes[i].y + frame;
+    if (sizes[i].x <= 0 || sizes[i].y <= 0 || w > page_size || h > page_size) return std::nullopt;
     if (x + w > page_size) {  // next shelf
       y += shelf_height;
       x = 0;
@@ -95,7 +118,7 @@ std::optional<std::vector<AtlasTile>> try_pack_tiles(const std::vector<glm::ivec
       on_page = x = y = shelf_height = 0;
     }
     if (page >= max_pages) return std::nullopt;
-    tiles[i] = AtlasTile{page, x, y, w, h, 0.0f, 0.0f};
+    tiles[i] = AtlasTile{page, x + MOBIRT_ATLAS_GUTTER, y + MOBIRT_ATLAS_GUTTER, sizes[i].x, sizes[i].y, 0.0f, 0.0f};
     x += w;
     shelf_height = std::max(shelf_height, h);
     ++on_page;
@@ -123,7 +146,7 @@ int atlas_tile_limit(const std::vector<glm::ivec2>& sizes) {
   // Downward from the longest side (or a page): the first cap that packs is the largest. At most
   // 1,537 packings of at most 48 tiles, once per scene; MOBIRT_ATLAS_SURE_TILE always packs.
   std::vector<glm::ivec2> fitted(sizes.size());
-  for (int limit = std::min(longest, MOBIRT_ATLAS_SIZE); limit > MOBIRT_ATLAS_SURE_TILE; --limit) {
+  for (int limit = std::min(longest, kLargestTile); limit > MOBIRT_ATLAS_SURE_TILE; --limit) {
     for (size_t i = 0; i < sizes.size(); ++i) fitted_size(sizes[i].x, sizes[i].y, limit, fitted[i].x, fitted[i].y);
     if (try_pack_tiles(fitted)) return limit;
   }
@@ -155,12 +178,7 @@ Atlas assemble_atlas(const std::vector<AtlasTexture>& textures) {
     AtlasTile& tile = atlas.tiles[i];
     tile.wrap_s = wrap_value(textures[i].wrap_s);
     tile.wrap_t = wrap_value(textures[i].wrap_t);
-    const TextureImage& image = textures[i].image;
-    std::vector<uint32_t>& page = atlas.pages[size_t(tile.page)];
-    for (int row = 0; row < image.height; ++row) {
-      std::copy_n(&image.pixels[size_t(row) * size_t(image.width)], size_t(image.width),
-                  &page[size_t(tile.y + row) * size_t(atlas.size) + size_t(tile.x)]);
-    }
+    copy_tile(textures[i].image, tile, atlas.size, atlas.pages[size_t(tile.page)]);
   }
   return atlas;
 }
@@ -213,6 +231,16 @@ float atlas_wrap(float texel, float size, float mode) {
   return std::clamp(r, 0.0f, size - 1.0f);
 }
 
+float atlas_wrap_coord(float u, float mode) {
+  float r = u - std::floor(u);  // repeat
+  if (mode == float(MOBIRT_WRAP_MIRRORED_REPEAT)) {
+    r = 1.0f - std::fabs(1.0f - (u - 2.0f * std::floor(0.5f * u)));
+  } else if (mode == float(MOBIRT_WRAP_CLAMP)) {
+    r = u;
+  }
+  return std::clamp(r, 0.0f, 1.0f);
+}
+
 glm::vec3 sample_atlas(const Atlas& atlas, int texture, glm::vec2 uv) {
   glm::vec4 tile(0.0f, 0.0f, 1.0f, 1.0f);
   glm::vec2 wrap(0.0f);
@@ -224,13 +252,13 @@ glm::vec3 sample_atlas(const Atlas& atlas, int texture, glm::vec2 uv) {
     page = t.page;
   }
   if (atlas.pages.empty()) return glm::vec3(0.0f);
-  const glm::vec2 p = uv * glm::vec2(tile.z, tile.w) - 0.5f;
+  const glm::vec2 w(atlas_wrap_coord(uv.x, wrap.x), atlas_wrap_coord(uv.y, wrap.y));
+  const glm::vec2 p = w * glm::vec2(tile.z, tile.w) - 0.5f;
   const glm::vec2 p0 = glm::floor(p);
   const glm::vec2 f = p - p0;
-  const float x0 = tile.x + atlas_wrap(p0.x, tile.z, wrap.x);
-  const float x1 = tile.x + atlas_wrap(p0.x + 1.0f, tile.z, wrap.x);
-  const float y0 = tile.y + atlas_wrap(p0.y, tile.w, wrap.y);
-  const float y1 = tile.y + atlas_wrap(p0.y + 1.0f, tile.w, wrap.y);
+  // p0 is in [-1, size - 1]: texels -1 and size are the gutter (at most one texel out on each side).
+  const float x0 = tile.x + p0.x, x1 = x0 + 1.0f;
+  const float y0 = tile.y + p0.y, y1 = y0 + 1.0f;
   const glm::vec3 top = mix3(texel_linear(atlas, page, x0, y0), texel_linear(atlas, page, x1, y0), f.x);
   const glm::vec3 bottom = mix3(texel_linear(atlas, page, x0, y1), texel_linear(atlas, page, x1, y1), f.x);
   return mix3(top, bottom, f.y);

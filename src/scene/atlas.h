@@ -5,27 +5,35 @@
 //
 // - Decoding: scene/texture_images.h (OpenImageIO; embedded bytes through its in-memory IOProxy).
 // - Tile sizes: every texture keeps its own size up to one cap on the longest side, the largest cap
-//   (at most a page, 2048) at which the scene's textures pack into the pages (atlas_tile_limit).
+//   (at most a page less its gutter, 2046) at which the scene's textures pack into the pages (atlas_tile_limit).
 //   Only textures over the cap are scaled down (aspect ratio kept, filtered in linear light), with
 //   one warning per texture and build_atlas() call on stderr:
-//     "mobirt: warning: SCENE: texture 'name' 4096x4096 downscaled to 2048x2048 for the atlas"
-//   A cap of 512 always packs (any 16 tiles up to 512 fill at most one page), so no scene within
+//     "mobirt: warning: SCENE: texture 'name' 4096x4096 downscaled to 2046x2046 for the atlas"
+//   A cap of 510 always packs (any 16 tiles up to 512 fill at most one page), so no scene within
 //   the count limit is refused for its sizes.
 // - More than 48 textures: Error(BadInput) naming the scene, the count, the limit and the fix.
 //   mobirt refuses rather than dropping textures silently (never a wrong image).
 // - Packing: shelves, tiles sorted by height (tallest first), filling one page after another: a
 //   tile that does not fit the page's next shelf, or a page that holds 16 tiles, opens the next.
-// - No gutter between tiles: the shader filters by hand (4 texel fetches, each texel index wrapped
-//   or clamped inside its own tile), so a lookup never reads a neighbour's texel whatever the
-//   wrap mode or coordinate. tests/atlas_test.cpp proves it on the CPU and on the GPU.
-// - Lookup (glsl/atlas.glsl, mirrored by sample_atlas() below): p = uv * size - 0.5 in tile
-//   texels; texels floor(p) and floor(p) + 1 on each axis, each wrapped by the glTF sampler's mode
-//   exactly as OpenGL wraps the texels of a GL_LINEAR lookup (repeat, mirrored repeat,
-//   clamp-to-edge), so a tile behaves like a texture of its own with a LINEAR sampler (no mipmaps).
+// - Gutters: each tile is framed by MOBIRT_ATLAS_GUTTER (1) texel a side, copied by the tile's
+//   wrap modes (atlas_wrap() of the texel indices -1 and size: the opposite edge for REPEAT, the
+//   edge itself for MIRRORED_REPEAT and CLAMP_TO_EDGE; corners by both axes). A lookup wraps its
+//   coordinate into [0, 1] once (atlas_wrap_coord()) and then a bilinear footprint reads texels
+//   -1 .. size at most: the tile or its gutter, never a neighbour. Capacity: a tile's footprint is
+//   its size + 2, so a tile is at most 2046 a side (a lone 2048 texture is downscaled to 2046) and
+//   the size that always packs 16 a page is 510 (4 x 512 = 2048); a 1024x1024 texture stays whole.
+// - Lookup (glsl/atlas.glsl): u' = wrap(uv) per axis; Vulkan: ONE hardware bilinear fetch of the
+//   page, an R8G8B8A8_SRGB image behind a LINEAR sampler (no mipmaps), at (origin + u' * size) /
+//   page size: the sampler decodes each texel from sRGB before it filters, as the texture's own
+//   sampler would; the weights and the decode are the sampler's (on lavapipe within 0.79/255 of
+//   the exact blend, tests/atlas_test.cpp).
+//   OpenGL ES 2.0 has no sRGB texture without GL_EXT_sRGB, which Mesa does not offer to an ES 2.0
+//   context, and filtering the encoded values would blend in the wrong space, so GLES keeps 4
+//   NEAREST fetches at texels floor(p) and floor(p) + 1 (p = u' * size - 0.5, reading the gutter
+//   at the edges instead of wrapping each index), each decoded before an exact bilinear blend.
+//   sample_atlas() below is that exact lookup; it equals the texture's own GL_LINEAR lookup.
 // - Colour: the pages store the 8-bit values as the file has them (sRGB-encoded, as glTF base
-//   colour textures are); the shader converts each of the 4 fetched texels from sRGB to linear
-//   before the bilinear blend, as hardware sRGB textures do, and returns linear RGB. Alpha is kept
-//   but not used.
+//   colour textures are); every lookup returns linear RGB. Alpha is kept but not used.
 #pragma once
 
 #include <glm/glm.hpp>
@@ -42,7 +50,7 @@ namespace mobirt {
 
 struct AtlasTile {
   int page = 0;              // which page holds it
-  int x = 0, y = 0;          // placement in the page's texels
+  int x = 0, y = 0;          // placement in the page's texels: the first texel, inside the gutter
   int width = 0, height = 0;
   float wrap_s = 0.0f, wrap_t = 0.0f;  // MOBIRT_WRAP_* values
 };
@@ -77,9 +85,10 @@ struct AtlasTexture {
 // fit the pages.
 Atlas assemble_atlas(const std::vector<AtlasTexture>& textures);
 
-// Shelf packing of tiles of the given sizes (width, height) onto at most `max_pages` square pages
-// of `page_size`, MOBIRT_ATLAS_TILES_PER_PAGE tiles a page at most, in input order; wrap fields are
-// left 0. Empty when they do not fit.
+// Shelf packing of tiles of the given sizes (width, height), each with its gutter, onto at most
+// `max_pages` square pages of `page_size`, MOBIRT_ATLAS_TILES_PER_PAGE tiles a page at most, in
+// input order; x and y are the tiles' first texels, wrap fields are left 0. Empty when they do not
+// fit.
 std::optional<std::vector<AtlasTile>> try_pack_tiles(const std::vector<glm::ivec2>& sizes,
                                                      int max_pages = MOBIRT_ATLAS_MAX_PAGES,
                                                      int page_size = MOBIRT_ATLAS_SIZE);
@@ -87,7 +96,8 @@ std::optional<std::vector<AtlasTile>> try_pack_tiles(const std::vector<glm::ivec
 std::vector<AtlasTile> pack_tiles(const std::vector<glm::ivec2>& sizes, int max_pages = MOBIRT_ATLAS_MAX_PAGES,
                                   int page_size = MOBIRT_ATLAS_SIZE);
 
-// The largest cap on the longest side (at most MOBIRT_ATLAS_SIZE, at least MOBIRT_ATLAS_SURE_TILE)
+// The largest cap on the longest side (at most MOBIRT_ATLAS_SIZE less the gutters, at least
+// MOBIRT_ATLAS_SURE_TILE)
 // at which images of `sizes`, each fitted to the cap (fitted_size()), pack into the pages; the
 // longest side among them when they all fit as they are. Throws Error(Internal) for more than
 // MOBIRT_ATLAS_MAX_TEXTURES sizes.
@@ -101,14 +111,21 @@ float wrap_value(TextureWrap wrap);
 // from vec4 index MOBIRT_SP_TEXTURES(light_count) on, growing `uniforms` as needed.
 void append_atlas_uniforms(const Atlas& atlas, int light_count, std::vector<float>& uniforms);
 
-// The shader's lookup on the CPU (same arithmetic as glsl/atlas.glsl): linear RGB of `texture`
+// The exact lookup on the CPU (the GLES shader's arithmetic in glsl/atlas.glsl; Vulkan's hardware
+// filter differs from it by its 8-bit weights): linear RGB of `texture`
 // at texture coordinate `uv` (glTF convention, (0, 0) the top-left corner). uv must be finite.
 // An index outside the atlas reads as the shader reads it: texel (0, 0) of page 0.
 glm::vec3 sample_atlas(const Atlas& atlas, int texture, glm::vec2 uv);
 
 // The wrap of one texel index (an integer as a float) into [0, size) by mode (MOBIRT_WRAP_*),
 // as atlas.glsl's atlas_wrap(): repeat = i mod size, mirrored repeat = GL's mirror of i mod
-// 2 size, clamp = clamp(i, 0, size - 1). The result is clamped into the tile in every mode.
+// 2 size, clamp = clamp(i, 0, size - 1). The result is clamped into the tile in every mode. The
+// gutters are filled with it.
 float atlas_wrap(float texel, float size, float mode);
+
+// A texture coordinate wrapped into [0, 1] by mode, as atlas.glsl's atlas_wrap_coord(): repeat =
+// fract(u), mirrored repeat = 1 - |1 - (u mod 2)|, clamp = clamp(u, 0, 1). With the gutters, the
+// bilinear lookup of the wrapped coordinate equals the texture's GL_LINEAR lookup of u.
+float atlas_wrap_coord(float u, float mode);
 
 }  // namespace mobirt

@@ -272,6 +272,7 @@ struct Texture {
   uint32_t width = 0, height = 0;
   TexelFormat format = TexelFormat::RGBA32F;
   GLuint name = 0;
+  GLint filter = GL_NEAREST;  // as last set: PassDesc::linear_bindings switch it at binding
 };
 
 struct SamplerUniform {
@@ -533,6 +534,10 @@ TextureHandle GlesBackend::create_texture(uint32_t width, uint32_t height, Texel
                                          " texture exceeds GL_MAX_TEXTURE_SIZE (" + std::to_string(max_texture_size_) +
                                          "): the scene is too large for this context");
   }
+  if (format == TexelFormat::SRGBA8) {
+    // DeviceInfo::srgb_textures is false here: atlas_page_format() never asks for it.
+    throw Error(ErrorKind::Unsupported, "OpenGL ES 2.0 has no sRGB textures without GL_EXT_sRGB, which this context lacks");
+  }
   Texture t;
   t.width = width;
   t.height = height;
@@ -554,6 +559,7 @@ TextureHandle GlesBackend::create_texture(uint32_t width, uint32_t height, Texel
     case TexelFormat::RGBA8:
       glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA, GLsizei(width), GLsizei(height), 0, GL_RGBA, GL_UNSIGNED_BYTE, nullptr);
       break;
+    case TexelFormat::SRGBA8: break;  // refused above
   }
   try {
     check_gl("glTexImage2D");
@@ -780,6 +786,12 @@ PassTiming GlesBackend::run_pass(PassHandle handle, std::span<const TextureHandl
   for (size_t i = 0; i < bound.size(); ++i) {
     glActiveTexture(GLenum(GL_TEXTURE0 + i));
     glBindTexture(GL_TEXTURE_2D, bound[i]->name);
+    const GLint filter = pass.desc.linear(pass.desc.texture_bindings[i]) ? GL_LINEAR : GL_NEAREST;
+    if (bound[i]->filter != filter) {  // filtering is the texture object's state in ES 2.0
+      glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, filter);
+      glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, filter);
+      bound[i]->filter = filter;
+    }
     const SamplerUniform& s = pass.samplers[i];
     if (s.inv_size_location >= 0) {
       glUniform2f(s.inv_size_location, 1.0f / float(bound[i]->width), 1.0f / float(bound[i]->height));

@@ -257,6 +257,10 @@ void Device::pick_physical_device(const std::string& wanted) {
        "R32_SFLOAT sampled images"},
       {VK_FORMAT_R8G8B8A8_UNORM, VK_FORMAT_FEATURE_SAMPLED_IMAGE_BIT | VK_FORMAT_FEATURE_TRANSFER_DST_BIT,
        "R8G8B8A8_UNORM sampled images"},
+      {VK_FORMAT_R8G8B8A8_SRGB,
+       VK_FORMAT_FEATURE_SAMPLED_IMAGE_BIT | VK_FORMAT_FEATURE_SAMPLED_IMAGE_FILTER_LINEAR_BIT |
+           VK_FORMAT_FEATURE_TRANSFER_DST_BIT,
+       "R8G8B8A8_SRGB sampled images with linear filtering (the atlas pages)"},
       {kTargetFormat, VK_FORMAT_FEATURE_COLOR_ATTACHMENT_BIT | VK_FORMAT_FEATURE_TRANSFER_SRC_BIT,
        "R8G8B8A8_UNORM colour attachments"},
   };
@@ -313,6 +317,7 @@ DeviceInfo Device::info() const {
   info.ray_query = ray_query_;
   info.texel_buffers = true;  // uniform texel buffers of RGBA32F and R32F are core Vulkan 1.0
   info.storage_buffers = true;  // and storage buffers, read from a fragment shader
+  info.srgb_textures = true;    // R8G8B8A8_SRGB, checked with linear filtering at device creation
   info.is_software = properties_.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
   const VkPhysicalDeviceLimits& l = properties_.limits;
   auto add = [&](const char* name, const std::string& value) { info.limits.push_back(std::string(name) + ": " + value); };

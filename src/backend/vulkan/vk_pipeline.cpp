@@ -46,12 +46,13 @@ std::string cache_file_name(const std::string& dir, const VkPhysicalDeviceProper
 
 }  // namespace
 
-Sampler create_fetch_sampler(VkDevice vk_device) {
+Sampler create_fetch_sampler(VkDevice vk_device, VkFilter filter) {
   // Shaders read texels with texelFetch: the sampler's filtering never applies, but a sampler is
-  // part of a combined image sampler, so one immutable NEAREST / CLAMP_TO_EDGE sampler serves all.
+  // part of a combined image sampler, so one immutable NEAREST / CLAMP_TO_EDGE sampler serves all;
+  // a LINEAR one serves PassDesc::linear_bindings (the atlas pages' one bilinear fetch).
   VkSamplerCreateInfo sampler_info{VK_STRUCTURE_TYPE_SAMPLER_CREATE_INFO};
-  sampler_info.magFilter = VK_FILTER_NEAREST;
-  sampler_info.minFilter = VK_FILTER_NEAREST;
+  sampler_info.magFilter = filter;
+  sampler_info.minFilter = filter;
   sampler_info.mipmapMode = VK_SAMPLER_MIPMAP_MODE_NEAREST;
   sampler_info.addressModeU = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
   sampler_info.addressModeV = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
@@ -109,7 +110,8 @@ RenderPass create_target_render_pass(VkDevice vk_device) {
 Pipelines::Pipelines(const Device& device, const std::string& cache_dir)
     : device_(device), cache_file_(cache_file_name(cache_dir, device.properties())) {
   const VkDevice vk_device = device.handle();
-  sampler_ = create_fetch_sampler(vk_device);
+  sampler_ = create_fetch_sampler(vk_device, VK_FILTER_NEAREST);
+  linear_sampler_ = create_fetch_sampler(vk_device, VK_FILTER_LINEAR);
 
   render_pass_ = create_target_render_pass(vk_device);
 
@@ -261,6 +263,7 @@ Pass Pipelines::create_pass(const PassDesc& desc) const {
   // Descriptor set layout: the uniform block, then per texture its kind's descriptor (images with
   // the immutable texelFetch sampler).
   const VkSampler immutable_sampler = sampler_.get();
+  const VkSampler linear_sampler = linear_sampler_.get();
   std::vector<VkDescriptorSetLayoutBinding> bindings;
   if (desc.uniform_vec4s > 0) {
     bindings.push_back({MOBIRT_BIND_TRACE_PARAMS, VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr});
@@ -268,7 +271,9 @@ Pass Pipelines::create_pass(const PassDesc& desc) const {
   for (size_t i = 0; i < desc.texture_bindings.size(); ++i) {
     const TextureKind kind = desc.kind(i);
     bindings.push_back({desc.texture_bindings[i], descriptor_type(kind), 1, VK_SHADER_STAGE_FRAGMENT_BIT,
-                        kind == TextureKind::Image2D ? &immutable_sampler : nullptr});
+                        kind != TextureKind::Image2D                  ? nullptr
+                        : desc.linear(desc.texture_bindings[i]) ? &linear_sampler
+                                                                : &immutable_sampler});
   }
   VkDescriptorSetLayoutCreateInfo set_info{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO};
   set_info.bindingCount = uint32_t(bindings.size());

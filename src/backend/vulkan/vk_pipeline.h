@@ -20,8 +20,9 @@ namespace mobirt::vk {
 // buffer or a storage buffer. The set layout, its pool and the writes all take it from here.
 VkDescriptorType descriptor_type(TextureKind kind);
 
-// The immutable sampler of every texelFetch (NEAREST, CLAMP_TO_EDGE: its filtering never applies).
-Sampler create_fetch_sampler(VkDevice device);
+// The immutable sampler of every texelFetch (NEAREST, CLAMP_TO_EDGE: its filtering never applies),
+// or with LINEAR the bilinear sampler of PassDesc::linear_bindings (no mipmaps, CLAMP_TO_EDGE).
+Sampler create_fetch_sampler(VkDevice device, VkFilter filter = VK_FILTER_NEAREST);
 // The render pass of every fragment pass: one kTargetFormat attachment, not loaded, stored and left
 // for the copy to the host, ordered after the previous pass's copy and before this one's.
 RenderPass create_target_render_pass(VkDevice device);
@@ -85,6 +86,7 @@ class Pipelines {
   const Device& device_;
   std::string cache_file_;  // where the pipeline cache is saved, empty = nowhere
   Sampler sampler_;
+  Sampler linear_sampler_;  // PassDesc::linear_bindings
   RenderPass render_pass_;
   ShaderModule vertex_shader_;
   PipelineCache cache_;

@@ -11,6 +11,7 @@ VkFormat vk_format(TexelFormat format) {
     case TexelFormat::RGBA32F: return VK_FORMAT_R32G32B32A32_SFLOAT;
     case TexelFormat::R32F: return VK_FORMAT_R32_SFLOAT;
     case TexelFormat::RGBA8: return VK_FORMAT_R8G8B8A8_UNORM;
+    case TexelFormat::SRGBA8: return VK_FORMAT_R8G8B8A8_SRGB;
   }
   throw Error(ErrorKind::Internal, "unknown texel format " + std::to_string(int(format)));
 }
@@ -20,6 +21,7 @@ const char* format_name(TexelFormat format) {
     case TexelFormat::RGBA32F: return "RGBA32F";
     case TexelFormat::R32F: return "R32F";
     case TexelFormat::RGBA8: return "RGBA8";
+    case TexelFormat::SRGBA8: return "SRGBA8";
   }
   return "unknown";
 }
