@@ -88,9 +88,11 @@ int split_polygon(const double (*poly)[3], int n, int axis, float split, Box& be
 namespace {
 
 // A vertex in lanes x, y, z (w = 0) without reading past its 12 bytes (the last vertex of the
-// positions array may end the allocation).
+// positions array may end the allocation). x and y by _mm_loadl_epi64, whose 8-byte read has no
+// alignment requirement (a `double` load from a float's address is misaligned: UBSan stops there).
 __m128 load_vertex(const glm::vec3& p) {
-  return _mm_movelh_ps(_mm_castpd_ps(_mm_load_sd(reinterpret_cast<const double*>(&p.x))), _mm_load_ss(&p.z));
+  const __m128 xy = _mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(&p.x)));
+  return _mm_movelh_ps(xy, _mm_load_ss(&p.z));
 }
 
 // next_down (above) on the lanes of f that mask selects: the neighbour towards -inf.
