@@ -52,6 +52,17 @@ glm::vec3 light_where(const Light& light) {
   return light.type == LightType::Directional ? -light.direction : light.position;
 }
 
+// A pass's shader for how it reads its data: one SPIR-V module per kind (a binding's type cannot
+// be specialised).
+ShaderId by_data_kind(TextureKind kind, ShaderId images, ShaderId texel_buffers, ShaderId storage_buffers) {
+  switch (kind) {
+    case TextureKind::TexelBuffer: return texel_buffers;
+    case TextureKind::StorageBuffer: return storage_buffers;
+    case TextureKind::Image2D: break;
+  }
+  return images;
+}
+
 }  // namespace
 
 std::vector<float> trace_uniforms(const FlatKdTree& tree, std::span<const Light> lights,
@@ -227,9 +238,8 @@ PassHandle Renderer::trace_pass(int lights, Packing packing, bool analytic) {
   auto it = data_->trace_passes.find(key);
   if (it != data_->trace_passes.end()) return it->second;
   PassDesc desc;
-  desc.shader = data_kind_ == TextureKind::TexelBuffer     ? ShaderId::TraverseTexelBuffers
-                : data_kind_ == TextureKind::StorageBuffer ? ShaderId::TraverseStorageBuffers
-                                                           : ShaderId::Traverse;
+  desc.shader = by_data_kind(data_kind_, ShaderId::Traverse, ShaderId::TraverseTexelBuffers,
+                             ShaderId::TraverseStorageBuffers);
   desc.specialization = {{MOBIRT_SPEC_LIGHT_COUNT, lights},
                          {MOBIRT_SPEC_STACK_DEPTH, settings_.stack_depth},
                          {MOBIRT_SPEC_MAX_STEPS, settings_.max_steps},
@@ -252,9 +262,7 @@ PassHandle Renderer::shade_pass(int lights, int textures, int pages, int colour)
   auto it = data_->shade_passes.find(key);
   if (it != data_->shade_passes.end()) return it->second;
   PassDesc desc;
-  desc.shader = data_kind_ == TextureKind::TexelBuffer     ? ShaderId::ShadeTexelBuffers
-                : data_kind_ == TextureKind::StorageBuffer ? ShaderId::ShadeStorageBuffers
-                                                           : ShaderId::Shade;
+  desc.shader = by_data_kind(data_kind_, ShaderId::Shade, ShaderId::ShadeTexelBuffers, ShaderId::ShadeStorageBuffers);
   desc.specialization = {{MOBIRT_SPEC_LIGHT_COUNT, lights},
                          {MOBIRT_SPEC_TEXTURE_COUNT, textures},
                          {MOBIRT_SPEC_ATLAS_PAGES, pages},
