@@ -17,11 +17,13 @@
 #include <cstring>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <tuple>
 #include <utility>
 
 #include "backend/shader_constraints.h"
 #include "backend/vulkan/vk_pipeline.h"
+#include "backend/vulkan/vk_resources.h"
 #include "backend/vulkan/vk_util.h"
 #include "core/error.h"
 #include "layout.h"
@@ -581,11 +583,7 @@ void RayQueryEngine::Impl::create_objects() {
 
 uint32_t RayQueryEngine::Impl::memory_type(uint32_t bits, VkMemoryPropertyFlags required,
                                            VkMemoryPropertyFlags preferred) const {
-  for (const VkMemoryPropertyFlags wanted : {required | preferred, required}) {
-    for (uint32_t i = 0; i < memory.memoryTypeCount; ++i) {
-      if ((bits & (1u << i)) && (memory.memoryTypes[i].propertyFlags & wanted) == wanted) return i;
-    }
-  }
+  if (const std::optional<uint32_t> type = vk::find_memory_type(memory, bits, required, preferred)) return *type;
   throw Error(ErrorKind::Unsupported, who + " has no memory type the ray-query peer can use");
 }
 

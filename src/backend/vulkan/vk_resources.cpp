@@ -53,8 +53,9 @@ void RenderTarget::reset() {
   width = height = 0;
 }
 
-uint32_t memory_type(const VkPhysicalDeviceMemoryProperties& properties, uint32_t type_bits,
-                     VkMemoryPropertyFlags required, VkMemoryPropertyFlags preferred, bool* coherent) {
+std::optional<uint32_t> find_memory_type(const VkPhysicalDeviceMemoryProperties& properties, uint32_t type_bits,
+                                         VkMemoryPropertyFlags required, VkMemoryPropertyFlags preferred,
+                                         bool* coherent) {
   for (const VkMemoryPropertyFlags wanted : {required | preferred, required}) {
     for (uint32_t i = 0; i < properties.memoryTypeCount; ++i) {
       const VkMemoryPropertyFlags flags = properties.memoryTypes[i].propertyFlags;
@@ -63,6 +64,14 @@ uint32_t memory_type(const VkPhysicalDeviceMemoryProperties& properties, uint32_
         return i;
       }
     }
+  }
+  return std::nullopt;
+}
+
+uint32_t memory_type(const VkPhysicalDeviceMemoryProperties& properties, uint32_t type_bits,
+                     VkMemoryPropertyFlags required, VkMemoryPropertyFlags preferred, bool* coherent) {
+  if (const std::optional<uint32_t> type = find_memory_type(properties, type_bits, required, preferred, coherent)) {
+    return *type;
   }
   throw Error(ErrorKind::Unsupported, "the Vulkan device has no memory type with the properties mobirt needs");
 }
@@ -193,15 +202,10 @@ DeviceImage create_host_image(const Device& device, uint32_t width, uint32_t hei
                                   VK_IMAGE_LAYOUT_PREINITIALIZED);
   VkMemoryRequirements requirements{};
   vkGetImageMemoryRequirements(vk_device, image.get(), &requirements);
-  bool any_host_visible = false;
-  const VkPhysicalDeviceMemoryProperties& memory = device.memory_properties();
-  for (uint32_t i = 0; i < memory.memoryTypeCount; ++i) {
-    if ((requirements.memoryTypeBits & (1u << i)) &&
-        (memory.memoryTypes[i].propertyFlags & VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT)) {
-      any_host_visible = true;
-    }
+  if (!find_memory_type(device.memory_properties(), requirements.memoryTypeBits, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT, 0,
+                        nullptr)) {
+    return result;
   }
-  if (!any_host_visible) return result;
   result.memory = allocate(device, requirements, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT,
                            VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT,
                            &result.coherent);

@@ -6,6 +6,7 @@
 #include <vulkan/vulkan.h>
 
 #include <cstdint>
+#include <optional>
 
 #include "backend/backend.h"
 #include "backend/vulkan/vk_device.h"
@@ -75,8 +76,12 @@ struct RenderTarget {
   void reset();
 };
 
-// The first memory type in type_bits with required | preferred, else with required; throws
-// Error(Unsupported) when none has `required`. *coherent: whether it is host-coherent.
+// The first memory type in type_bits with required | preferred, else with required; nullopt
+// (find_memory_type) or Error(Unsupported) (memory_type) when none has `required`. *coherent:
+// whether it is host-coherent.
+std::optional<uint32_t> find_memory_type(const VkPhysicalDeviceMemoryProperties& properties, uint32_t type_bits,
+                                         VkMemoryPropertyFlags required, VkMemoryPropertyFlags preferred,
+                                         bool* coherent = nullptr);
 uint32_t memory_type(const VkPhysicalDeviceMemoryProperties& properties, uint32_t type_bits,
                      VkMemoryPropertyFlags required, VkMemoryPropertyFlags preferred, bool* coherent = nullptr);
 Memory allocate(const Device& device, const VkMemoryRequirements& requirements, VkMemoryPropertyFlags required,
