@@ -38,33 +38,36 @@ vec3 atlas_srgb_to_linear(vec3 c) {
   return mix(c / 12.92, pow((c + 0.055) / 1.055, vec3(2.4)), step(vec3(0.04045), c));
 }
 
+// What a lookup reads from a page: one filtered sample at normalised page coordinates where the
+// prelude offers ATLAS_FILTERED (sRGB decoded by the sampler), else one texel at integer coordinates.
+#ifdef ATLAS_FILTERED
+#define ATLAS_READ(tex, xy) ATLAS_FILTERED(tex, xy)
+#else
+#define ATLAS_READ(tex, xy) ATLAS_TEXEL(tex, xy)
+#endif
+
 // Samplers cannot be chosen by a value in GLSL ES 1.00 (no dynamic indexing of samplers, no
 // sampler variables), hence one branch per page.
+vec4 atlas_page_read(float page, vec2 xy) {
+  vec4 texel;
+  if (ATLAS_PAGES > 2 && page == 2.0) {
+    texel = ATLAS_READ(u_atlas_page2, xy);
+  } else if (ATLAS_PAGES > 1 && page == 1.0) {
+    texel = ATLAS_READ(u_atlas_page1, xy);
+  } else {
+    texel = ATLAS_READ(u_atlas_page0, xy);
+  }
+  return texel;
+}
+
 #ifdef ATLAS_FILTERED
 // Linear RGB filtered by the sampler at xy, normalised page coordinates.
 vec3 atlas_filtered(float page, vec2 xy) {
-  vec4 texel;
-  if (ATLAS_PAGES > 2 && page == 2.0) {
-    texel = ATLAS_FILTERED(u_atlas_page2, xy);
-  } else if (ATLAS_PAGES > 1 && page == 1.0) {
-    texel = ATLAS_FILTERED(u_atlas_page1, xy);
-  } else {
-    texel = ATLAS_FILTERED(u_atlas_page0, xy);
-  }
-  return texel.rgb;
+  return atlas_page_read(page, xy).rgb;
 }
 #else
 vec3 atlas_texel_linear(float page, float x, float y) {
-  vec2 xy = vec2(x, y);
-  vec4 texel;
-  if (ATLAS_PAGES > 2 && page == 2.0) {
-    texel = ATLAS_TEXEL(u_atlas_page2, xy);
-  } else if (ATLAS_PAGES > 1 && page == 1.0) {
-    texel = ATLAS_TEXEL(u_atlas_page1, xy);
-  } else {
-    texel = ATLAS_TEXEL(u_atlas_page0, xy);
-  }
-  return atlas_srgb_to_linear(texel.rgb);
+  return atlas_srgb_to_linear(atlas_page_read(page, vec2(x, y)).rgb);
 }
 #endif
 
