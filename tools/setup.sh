@@ -28,7 +28,9 @@ PACKAGES=(
 MESA_PACKAGES=(mesa-vulkan-drivers libegl-mesa0 libgl1-mesa-dri)
 MESA_MIN=25.0
 
-installed_version() { dpkg-query -W -f='${Status} ${Version}' "$1" 2>/dev/null | sed -n 's/^install ok installed //p'; }
+# Prints the installed version, or nothing. Never fails: dpkg-query exits 1 for a package it has
+# never seen, which under pipefail would make `v=$(installed_version ...)` end the script silently.
+installed_version() { { dpkg-query -W -f='${Status} ${Version}' "$1" 2>/dev/null || true; } | sed -n 's/^install ok installed //p'; }
 
 missing=()
 for p in "${PACKAGES[@]}"; do
