@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <sstream>
 
 #include "accel/kdtree.h"
@@ -44,6 +45,39 @@ Scene glass_slab(float thickness, float ior) {
   s.materials.push_back(glass);
   test::add_box(s, {-50, -thickness, -50}, {50, 0, 50}, 2);
   return s;
+}
+
+// primary_rays() computes CameraBasis::ray inline, row by row: every ray must keep the very floats
+// of camera_ray (the reference tracer and the tests' oracles make theirs with it), at odd sizes
+// and for cameras looking along an axis, obliquely and from far away.
+TEST(RayTree, PrimaryRaysAreCameraRaysBitForBit) {
+  const Camera cameras[] = {
+      Camera{},
+      Camera{glm::vec3(1.5f, -2.0f, 7.25f), glm::vec3(-0.3f, 0.1f, 0.0f), glm::vec3(0.0f, 1.0f, 0.0f), 0.9f, 1e-3f},
+      Camera{glm::vec3(1e4f, 3e3f, -2e4f), glm::vec3(0.0f), glm::vec3(0.2f, 1.0f, 0.1f), 0.2f, 0.5f},
+  };
+  const std::pair<int, int> sizes[] = {{1, 1}, {7, 3}, {400, 240}, {33, 65}};
+  for (const Camera& camera : cameras) {
+    for (const auto& [w, h] : sizes) {
+      const RayBatch rays = primary_rays(camera, w, h);
+      ASSERT_EQ(rays.count(), uint32_t(w * h));
+      ASSERT_EQ(rays.width, uint32_t(w));
+      for (int y = 0; y < h; ++y) {
+        for (int x = 0; x < w; ++x) {
+          const uint32_t i = uint32_t(y * w + x);
+          const Ray expected = camera_ray(camera, w, h, float(x) + 0.5f, float(y) + 0.5f);
+          const Ray got = rays.ray(i);
+          ASSERT_EQ(std::memcmp(&got.origin, &expected.origin, sizeof(glm::vec3)), 0) << w << "x" << h << " pixel " << i;
+          ASSERT_EQ(std::memcmp(&got.direction, &expected.direction, sizeof(glm::vec3)), 0)
+              << w << "x" << h << " pixel " << i << ": " << got.direction.x << " " << expected.direction.x;
+          ASSERT_EQ(got.tmin, expected.tmin);
+          ASSERT_EQ(got.tmax, expected.tmax);
+          ASSERT_EQ(rays.pixel[i], i);
+          ASSERT_EQ(rays.weight[i], glm::vec3(1.0f));
+        }
+      }
+    }
+  }
 }
 
 TEST(RayTree, GlassSlabShiftsTheRayWithoutTurningIt) {
