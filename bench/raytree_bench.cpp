@@ -3,6 +3,8 @@
 // toaster scene's primary rays at the paper's 400x240, with its lights: the texels are what the
 // GPU would return (closest hit and shadow mask, computed once on the CPU before timing), so the
 // batch has the scene's real mix of hits, misses and shadow bits.
+// NextGeneration/fish: the ray-tree manager's step from the fish's primary hits (400x240) to the
+// mirror and refracted rays of its glass (raytree/secondary.h), on all cores.
 // OrderRays/fish/<coherent>: packing the fish's first secondary generation (mirror and refracted
 // rays of its glass, 400x240 primary rays) for the traversal pass: 1 = the coherent order
 // (raytree/ray_order.h: sort, then SIMD tiles), 0 = the SIMD tiles alone; the sort's cost.
@@ -67,17 +69,41 @@ void hit_decoding(benchmark::State& state) {
       benchmark::Counter(double(rays.count()), benchmark::Counter::kIsIterationInvariantRate);
 }
 
+// The fish's primary hits, for the secondary-ray benchmarks.
+struct FishGeneration {
+  const Scene& scene;
+  FlatKdTree tree;
+  RayBatch primary;
+  std::vector<SurfaceHit> hits;
+};
+
+FishGeneration fish_generation() {
+  const Scene& scene = project_scene_loaded("fish");
+  FishGeneration g{scene, build_kdtree(scene.mesh.positions), primary_rays(scene_camera(scene, 400, 240), 400, 240), {}};
+  g.hits.resize(g.primary.count());
+  for (uint32_t i = 0; i < g.primary.count(); ++i) {
+    const Hit h = traverse(g.tree, g.primary.ray(i));
+    if (h.valid()) g.hits[i] = surface_hit(scene, g.tree, g.primary.ray(i), h.prim);
+  }
+  return g;
+}
+
+void secondary_ray_generation(benchmark::State& state) {
+  const FishGeneration g = fish_generation();
+  uint32_t count = 0;
+  for (auto _ : state) {
+    RayBatch rays = next_generation(g.scene, g.tree.bounds, g.primary, g.hits, SecondarySettings{});
+    count = rays.count();
+    benchmark::DoNotOptimize(rays.origin.data());
+  }
+  state.counters["rays"] = double(count);
+}
+
 void secondary_ray_order(benchmark::State& state) {
   const bool coherent = state.range(0) != 0;
-  const Scene& scene = project_scene_loaded("fish");
-  const FlatKdTree tree = build_kdtree(scene.mesh.positions);
-  const RayBatch primary = primary_rays(scene_camera(scene, 400, 240), 400, 240);
-  std::vector<SurfaceHit> hits(primary.count());
-  for (uint32_t i = 0; i < primary.count(); ++i) {
-    const Hit h = traverse(tree, primary.ray(i));
-    if (h.valid()) hits[i] = surface_hit(scene, tree, primary.ray(i), h.prim);
-  }
-  const RayBatch secondary = next_generation(scene, tree.bounds, primary, hits, SecondarySettings{});
+  const FishGeneration g = fish_generation();
+  const FlatKdTree& tree = g.tree;
+  const RayBatch secondary = next_generation(g.scene, tree.bounds, g.primary, g.hits, SecondarySettings{});
   for (auto _ : state) {
     RayBatch rays = secondary;
     if (coherent) {
@@ -98,6 +124,7 @@ void register_raytree_benchmarks() {
       ->Args({1920, 1080})
       ->ArgNames({"w", "h"})
       ->Unit(benchmark::kMicrosecond);
+  benchmark::RegisterBenchmark("NextGeneration/fish", secondary_ray_generation)->Unit(benchmark::kMicrosecond);
   benchmark::RegisterBenchmark("OrderRays/fish", secondary_ray_order)
       ->Arg(0)
       ->Arg(1)

@@ -141,6 +141,13 @@ constexpr size_t kBinSampleRefs = 4096;
 // puts the Utah toasters at 5.0 % above the first builder's SAH; nodes of up to 4 references
 // put fish at 4.9 %.
 constexpr float kFastSmallSplitGain = 0.15f;
+// The leaf size of --build fast (kd_leaf_size). Measured (mobirt_kdprofile, 2 threads, idle
+// machine; nodes, build wall ms, steps per ray, leaf size 1 -> 3): fish 11,883 -> 6,675, 2.18 ->
+// 1.36, 14.46 -> 14.25; toaster 63,649 -> 40,071, 9.17 -> 6.47, 23.61 -> 23.48; Utah toasters
+// 76,457 -> 54,477, 10.85 -> 7.76, 29.45 -> 29.03; the tori, whose trees stop at the depth
+// limit, within 2 %. The traversal passes' JIT instructions per frame and Mrays/s: README.
+// With 3, fast's small_split_gain no longer applies (it is for nodes of up to 3 references).
+constexpr int kFastLeafSize = 3;
 
 Box to_box(const Aabb& a) { return Box{{a.lo.x, a.lo.y, a.lo.z}, {a.hi.x, a.hi.y, a.hi.z}}; }
 
@@ -477,6 +484,7 @@ class Builder {
     small_split_gain_ = options.small_split_gain >= 0.0f ? options.small_split_gain
                         : options.build == KdBuildMode::Fast ? kFastSmallSplitGain
                                                              : 0.0f;
+    max_leaf_prims_ = size_t(kd_leaf_size(options));
   }
 
   FlatKdTree build() {
@@ -582,7 +590,7 @@ class Builder {
   }
 
   bool can_split(size_t n, int depth, double box_area) const {
-    return n > static_cast<size_t>(std::max(0, options_.max_leaf_prims)) && depth < max_depth_ && box_area > 0.0;
+    return n > max_leaf_prims_ && depth < max_depth_ && box_area > 0.0;
   }
 
   // ---- Top nodes -------------------------------------------------------------------------------
@@ -1325,11 +1333,17 @@ class Builder {
   bool avx2_ = false;  // the CPU runs sweep_avx2
   size_t sparse_refs_ = kSparseSweepRefs;
   float small_split_gain_ = 0.0f;  // options_.small_split_gain, the mode's when -1
+  size_t max_leaf_prims_ = 1;      // kd_leaf_size(options_)
   BufferPool pool_;
   tbb::enumerable_thread_specific<SubtreeScratch> scratch_;
 };
 
 }  // namespace
+
+int kd_leaf_size(const KdBuildOptions& options) {
+  if (options.max_leaf_prims >= 0) return options.max_leaf_prims;
+  return options.build == KdBuildMode::Fast ? kFastLeafSize : 1;
+}
 
 const char* kd_build_mode_name(KdBuildMode mode) { return mode == KdBuildMode::Fast ? "fast" : "quality"; }
 
@@ -1380,6 +1394,10 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, std::span<const Sh
   if (!(options.small_split_gain == -1.0f || (options.small_split_gain >= 0.0f && options.small_split_gain < 1.0f))) {
     throw Error(ErrorKind::BadInput, "kd-tree: small_split_gain must be in [0, 1), or -1 for the build mode's (got " +
                                          std::to_string(options.small_split_gain) + ")");
+  }
+  if (options.max_leaf_prims < -1) {
+    throw Error(ErrorKind::BadInput, "kd-tree: max_leaf_prims must be -1 (the build mode's) or more (got " +
+                                         std::to_string(options.max_leaf_prims) + ")");
   }
   if (options.threads < 0) {
     throw Error(ErrorKind::BadInput, "kd-tree: threads must be 0 (all) or more (got " +

@@ -98,7 +98,9 @@ const Setting kSettings[] = {
                                                                        {"quality", KdBuildMode::Quality}};
        o.settings.kd.build = v.choice(modes);
      }},
-    {"--leaf-size", "N", kFrames, "largest leaf the build may make without trying to split (default 1)",
+    {"--leaf-size", "N", kFrames,
+     "largest leaf the build makes without trying to split (default: the\n"
+     "build's: fast 3, quality 1)",
      [](CommonOptions& o, const Value& v) { o.settings.kd.max_leaf_prims = v.integer(1, 1 << 20); }},
     {"--max-depth", "N", kFrames, "kd-tree depth limit, -1 = 8 + 1.3 log2(triangles) (default -1)",
      [](CommonOptions& o, const Value& v) { o.settings.kd.max_depth = v.integer(-1, 128); }},
