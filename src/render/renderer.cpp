@@ -11,6 +11,7 @@
 #include <utility>
 
 #include "core/error.h"
+#include "core/parallel.h"
 #include "layout.h"
 #include "raytree/ray_order.h"
 #include "render/whitted.h"
@@ -397,18 +398,20 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
                                        std::span<const SurfaceHit> hits, GenerationTimings& timings) {
   // The shading pass's inputs, one texel per ray in the ray layout.
   auto stage = Clock::now();
+  // On all cores, like the decoding that made the hits (a serial loop here cost 0.5 ms a generation).
+  constexpr uint32_t kChunk = 1024;
   std::vector<HitPositionTexel> position(rays.count());
   std::vector<HitNormalTexel> normal(rays.count());
-  for (uint32_t i = 0; i < rays.count(); ++i) {
+  parallel_for(rays.count(), 0, [&](uint32_t i) {
     const SurfaceHit& h = hits[i];
     if (!h.valid()) {
       position[i] = HitPositionTexel::miss();
       normal[i] = HitNormalTexel{glm::vec3(0.0f), 0.0f};
-      continue;
+      return;
     }
     position[i] = HitPositionTexel{h.position, float(h.material)};
     normal[i] = HitNormalTexel{h.normal, float(h.mask)};
-  }
+  }, kChunk);
   timings.decode_ms += elapsed_ms(stage);
 
   Data& d = *data_;
@@ -421,10 +424,10 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   TextureHandle texcoords = d.hit_position.handle;
   if (d.has_atlas) {
     stage = Clock::now();
-    std::vector<HitTexcoordTexel> uv(rays.count(), HitTexcoordTexel{glm::vec2(0.0f), glm::vec2(0.0f)});
-    for (uint32_t i = 0; i < rays.count(); ++i) {
-      if (hits[i].valid()) uv[i].texcoord = hits[i].texcoord;
-    }
+    std::vector<HitTexcoordTexel> uv(rays.count());
+    parallel_for(rays.count(), 0, [&](uint32_t i) {
+      uv[i] = HitTexcoordTexel{hits[i].valid() ? hits[i].texcoord : glm::vec2(0.0f), glm::vec2(0.0f)};
+    }, kChunk);
     timings.decode_ms += elapsed_ms(stage);
     ensure_texture(d.hit_texcoord.handle, d.hit_texcoord.rows, rays.width, rays.rows(), TexelFormat::RGBA32F,
                    data_kind_);
@@ -459,9 +462,9 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   }
   stage = Clock::now();
   std::vector<glm::vec3> colors(rays.count());
-  for (uint32_t i = 0; i < rays.count(); ++i) {
+  parallel_for(rays.count(), 0, [&](uint32_t i) {
     colors[i] = deep ? decode_colour(texels[0][i], texels[1][i]) : decode_colour(texels[0][i]);
-  }
+  }, kChunk);
   timings.accumulate_ms += elapsed_ms(stage);
   return colors;
 }

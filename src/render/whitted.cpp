@@ -72,10 +72,14 @@ std::vector<SurfaceHit> decode_generation(const Scene& scene, const RenderSettin
   }
   const uint32_t all_lights = all_lights_mask(scene);
   const bool count = traced.form != TracedGeneration::Form::PackedTexels;
-  for (SurfaceHit& h : hits) {
-    if (!h.valid()) continue;
-    if (count) ++g.hits;
-    if (!settings.shadows) h.mask = all_lights;
+  // Packed texels with shadows (the paper's passes) need neither: a pass over 72 bytes a ray
+  // skipped.
+  if (count || !settings.shadows) {
+    for (SurfaceHit& h : hits) {
+      if (!h.valid()) continue;
+      if (count) ++g.hits;
+      if (!settings.shadows) h.mask = all_lights;
+    }
   }
   return hits;
 }

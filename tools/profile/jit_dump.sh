@@ -15,6 +15,8 @@ set -euo pipefail
 OUT=${1:?usage: tools/profile/jit_dump.sh OUT MOBIRT RENDER-ARGS...}
 MOBIRT=${2:?usage: tools/profile/jit_dump.sh OUT MOBIRT RENDER-ARGS...}
 shift 2
+# gdb runs the program by its absolute path, which pgrep must match below.
+MOBIRT=$(realpath "$MOBIRT")
 mkdir -p "$OUT"
 HERE=$(cd "$(dirname "$0")" && pwd)
 # Dumps every executable anonymous mapping of the inferior into $OUT/jit_START.bin.
