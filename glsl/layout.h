@@ -76,6 +76,13 @@
 #define MOBIRT_HIT_NO_BARYCENTRICS 2  // the hit's second test missed (rounding): the CPU intersects it
 #define MOBIRT_COMPUTE_GROUP_SIZE 64  // invocations per workgroup, one ray each
 
+// ---- Push constants of every Vulkan fragment pass ----------------------------------------------
+// int u_ray_width at byte 0 (the pass's width); from byte MOBIRT_PASS_ADDRESSES, 8 bytes per binding
+// slot (slot = binding number, 0 .. MOBIRT_PASS_ADDRESS_SLOTS - 1), the device address of each
+// binding read as a buffer reference (--data device-addresses, prelude_vk.glsl), else 0.
+#define MOBIRT_PASS_ADDRESSES 16
+#define MOBIRT_PASS_ADDRESS_SLOTS 9
+
 // ---- Limits mirrored from OpenGL ES 2.0 ------------------------------------------------------
 #define MOBIRT_MAX_SAMPLED_TEXTURES 8  // GL_MAX_TEXTURE_IMAGE_UNITS minimum of ES 2.0
 #define MOBIRT_MAX_LIGHTS 16

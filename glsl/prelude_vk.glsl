@@ -68,11 +68,7 @@ int data_index(float index) {
 // A textureBuffer, not a samplerBuffer: SPIR-V forbids a sampled image of a buffer (Mesa warns),
 // so the includer enables GL_EXT_samplerless_texture_functions for texelFetch on it.
 #define DATA_SAMPLER(slot, name) layout(set = 0, binding = slot) uniform textureBuffer name
-#elif defined(MOBIRT_DATA_STORAGE_BUFFERS)
-// Data arrays as read-only storage buffers (the compute pass's default, trace_compute.comp, and
-// the fragment pass's --data storage-buffers, trace_storage_buffers.frag): element i of the array
-// is element i of its buffer, laid out (std430) byte for byte as the texel buffers are.
-#define DATA_TEXEL(data, index) data[data_index(index)]
+#elif defined(MOBIRT_DATA_STORAGE_BUFFERS) || defined(MOBIRT_DATA_DEVICE_ADDRESSES)
 // Each array's element type, by the name traverse.glsl gives it.
 #define MOBIRT_ELEMENT_u_nodes vec4
 #define MOBIRT_ELEMENT_u_prim_list float
@@ -83,19 +79,39 @@ int data_index(float index) {
 #define MOBIRT_ELEMENT_u_hit_normal vec4
 #define MOBIRT_ELEMENT_u_hit_texcoord vec4
 #define MOBIRT_ELEMENT_u_materials vec4
+#if defined(MOBIRT_DATA_STORAGE_BUFFERS)
+// Data arrays as read-only storage buffers (the compute pass's default, trace_compute.comp, and
+// the fragment pass's --data storage-buffers, trace_storage_buffers.frag): element i of the array
+// is element i of its buffer, laid out (std430) byte for byte as the texel buffers are.
+#define DATA_TEXEL(data, index) data[data_index(index)]
 #define DATA_SAMPLER(slot, name) \
   layout(std430, set = 0, binding = slot) readonly buffer name##_data { MOBIRT_ELEMENT_##name name[]; }
+#else
+// Data arrays read through buffer references (--data device-addresses): the same buffers, laid
+// out as the storage buffers are, each reached by the address the backend pushes for its binding
+// (layout.h, MOBIRT_PASS_ADDRESSES). A name declares its slot; a read makes the reference.
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer MobirtData_vec4 { vec4 e[]; };
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer MobirtData_float { float e[]; };
+#define MOBIRT_REFERENCE_TYPE2(element) MobirtData_##element
+#define MOBIRT_REFERENCE_TYPE(element) MOBIRT_REFERENCE_TYPE2(element)
+#define DATA_SAMPLER(slot, name) const int mobirt_slot_##name = slot
+#define DATA_TEXEL(data, index) \
+  MOBIRT_REFERENCE_TYPE(MOBIRT_ELEMENT_##data)(u_address[mobirt_slot_##data]).e[data_index(index)]
+#endif
 #else
 #define DATA_TEXEL(tex, index) texelFetch(tex, data_coord(index), 0)
 #endif
 #ifndef MOBIRT_COMPUTE  // a compute shader reads its ray and writes its result itself
-#if defined(MOBIRT_DATA_TEXEL_BUFFERS) || defined(MOBIRT_DATA_STORAGE_BUFFERS)
+#if defined(MOBIRT_DATA_TEXEL_BUFFERS) || defined(MOBIRT_DATA_STORAGE_BUFFERS) || defined(MOBIRT_DATA_DEVICE_ADDRESSES)
 // Per-ray data (rays, the shading pass's inputs) in buffers like the scene data, in the pass's
 // layout: this fragment's ray is element y * width + x (an exact float below 2^23), the width
 // pushed by the backend with every pass. llvmpipe's 2D texelFetch is an indirect call with
 // mip-level work per fetch; a buffer's fetch is not.
 layout(push_constant) uniform PassConstants {
   int u_ray_width;
+#if defined(MOBIRT_DATA_DEVICE_ADDRESSES)
+  layout(offset = MOBIRT_PASS_ADDRESSES) uvec2 u_address[MOBIRT_PASS_ADDRESS_SLOTS];  // per binding slot
+#endif
 };
 float ray_index() {
   vec2 p = floor(gl_FragCoord.xy);

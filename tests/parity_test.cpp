@@ -309,9 +309,10 @@ std::vector<ParityCase> parity_cases() {
 INSTANTIATE_TEST_SUITE_P(Scenes, CrossBackend, ::testing::ValuesIn(parity_cases()),
                          [](const ::testing::TestParamInfo<ParityCase>& p) { return case_name(p.param); });
 
-// ---- Vulkan: texel buffers against 2D images and storage buffers ------------------------------
+// ---- Vulkan: texel buffers against 2D images, storage buffers and device addresses -----------
 
-// --data texel-buffers, images and storage-buffers run the same arithmetic on the same texels, so
+// --data texel-buffers, images, storage-buffers and device-addresses run the same arithmetic on the
+// same texels, so
 // the traversal pass must give the same packed texel ray by ray, and the frame the same image.
 class DataReadParity : public ::testing::TestWithParam<ParityCase> {
  protected:
@@ -336,22 +337,30 @@ TEST_P(DataReadParity, SameHitsAndShadowMasks) {
   Renderer buffers(*vulkan, with_data(settings, DataReads::TexelBuffers));
   Renderer images(*vulkan, with_data(settings, DataReads::Images));
   Renderer storage(*vulkan, with_data(settings, DataReads::StorageBuffers));
+  Renderer addresses(*vulkan, with_data(settings, DataReads::DeviceAddresses));
   ASSERT_EQ(buffers.data_kind(), TextureKind::TexelBuffer);
   ASSERT_EQ(images.data_kind(), TextureKind::Image2D);
   ASSERT_EQ(storage.data_kind(), TextureKind::StorageBuffer);
+  ASSERT_TRUE(vulkan->device_info().device_addresses) << "lavapipe has VK_KHR_buffer_device_address";
+  ASSERT_EQ(addresses.data_kind(), TextureKind::DeviceAddress);
   const TraceResult a = buffers.trace(scene, tree, rays);
   const TraceResult b = images.trace(scene, tree, rays);
   const TraceResult s = storage.trace(scene, tree, rays);
+  const TraceResult r = addresses.trace(scene, tree, rays);
   ASSERT_EQ(a.packing, b.packing);
   ASSERT_EQ(a.packing, s.packing);
+  ASSERT_EQ(a.packing, r.packing);
   ASSERT_EQ(a.texels.size(), b.texels.size());
   ASSERT_EQ(a.texels.size(), s.texels.size());
+  ASSERT_EQ(a.texels.size(), r.texels.size());
   size_t hits = 0, masked = 0;
   for (size_t i = 0; i < a.texels.size(); ++i) {
     ASSERT_EQ(a.texels[i], b.texels[i]) << "ray " << i << ": texel buffers " << std::hex << a.texels[i]
                                         << ", images " << b.texels[i];
     ASSERT_EQ(a.texels[i], s.texels[i]) << "ray " << i << ": texel buffers " << std::hex << a.texels[i]
                                         << ", storage buffers " << s.texels[i];
+    ASSERT_EQ(a.texels[i], r.texels[i]) << "ray " << i << ": texel buffers " << std::hex << a.texels[i]
+                                        << ", device addresses " << r.texels[i];
     const TraceTexel t = unpack_trace(a.packing, a.texels[i]);
     if (t.hit()) ++hits;
     if (t.hit() && t.mask != 0) ++masked;
@@ -371,13 +380,18 @@ TEST_P(DataReadParity, SameImage) {
   Renderer buffers(*vulkan, with_data(settings, DataReads::TexelBuffers));
   Renderer images(*vulkan, with_data(settings, DataReads::Images));
   Renderer storage(*vulkan, with_data(settings, DataReads::StorageBuffers));
+  Renderer addresses(*vulkan, with_data(settings, DataReads::DeviceAddresses));
   const Image a = buffers.render(scene, camera);
   const Image b = images.render(scene, camera);
   const Image s = storage.render(scene, camera);
+  const Image r = addresses.render(scene, camera);
   const ImageDiff d = compare_images(a, b, 0.0f);
   EXPECT_EQ(d.max_error, 0.0) << "images: PSNR " << d.psnr << " dB, " << 100.0 * d.share_over << "% of pixels differ";
   const ImageDiff ds = compare_images(a, s, 0.0f);
   EXPECT_EQ(ds.max_error, 0.0) << "storage buffers: PSNR " << ds.psnr << " dB, " << 100.0 * ds.share_over
+                               << "% of pixels differ";
+  const ImageDiff dr = compare_images(a, r, 0.0f);
+  EXPECT_EQ(dr.max_error, 0.0) << "device addresses: PSNR " << dr.psnr << " dB, " << 100.0 * dr.share_over
                                << "% of pixels differ";
 }
 

@@ -360,6 +360,41 @@ TEST_F(VulkanBackendTest, StorageBufferTraversalBreaksOnlyTheNamedRule) {
                Error);
 }
 
+// --data device-addresses: the scene's buffers read through buffer references count as storage
+// reads (the one rule named), nothing is written, no texture is sampled; the pass is made only when
+// its description reads those bindings by address, and a write through a reference stays refused.
+TEST_F(VulkanBackendTest, DeviceAddressTraversalBreaksOnlyTheNamedRule) {
+  ASSERT_TRUE(backend->device_info().device_addresses) << "lavapipe has VK_KHR_buffer_device_address";
+  for (ShaderId id : {ShaderId::TraverseDeviceAddresses, ShaderId::ShadeDeviceAddresses}) {
+    const std::span<const uint32_t> spirv = shader_source(id).spirv;
+    const ShaderInterface s = reflect_spirv(spirv);
+    ASSERT_TRUE(s.valid);
+    EXPECT_GT(s.storage_resources, 0);
+    EXPECT_EQ(s.storage_writes, 0);
+    EXPECT_EQ(s.sampled_textures, id == ShaderId::ShadeDeviceAddresses ? 3 : 0);  // the atlas pages
+    EXPECT_EQ(es2_constraints_broken(spirv), std::vector<std::string>{kEs2StorageReads});
+  }
+  PassDesc desc;
+  desc.shader = ShaderId::TraverseDeviceAddresses;
+  desc.uniform_vec4s = MOBIRT_TP_LIGHTS;
+  desc.texture_bindings = {MOBIRT_BIND_NODES, MOBIRT_BIND_PRIM_LIST, MOBIRT_BIND_TRIANGLES,
+                           MOBIRT_BIND_RAY_ORIGIN, MOBIRT_BIND_RAY_DIRECTION};
+  EXPECT_THROW(backend->create_pass(desc), Error);  // declared as images: storage reads refused
+  desc.texture_kinds.assign(desc.texture_bindings.size(), TextureKind::DeviceAddress);
+  const PassHandle pass = backend->create_pass(desc);
+  // Its textures are storage buffers; a texel buffer where the pass reads an address is refused.
+  const TextureHandle wrong = backend->create_texel_buffer(16, TexelFormat::RGBA32F);
+  std::vector<TextureHandle> textures(desc.texture_bindings.size(), wrong);
+  std::vector<uint32_t> out(4);
+  const std::vector<float> uniforms(4 * MOBIRT_TP_LIGHTS, 0.0f);
+  EXPECT_THROW(backend->run_pass(pass, textures, uniforms, 4, 4, out), Error);
+  backend->destroy(wrong);
+  backend->destroy(pass);
+  const std::span<const uint32_t> store = test_shader(TestShader::DeviceAddressStore).spirv;
+  EXPECT_GT(reflect_spirv(store).storage_writes, 0);
+  EXPECT_THROW(check_es2_constraints("device_address_store.frag", store, true), Error);
+}
+
 TEST_F(VulkanBackendTest, TexelBuffersRefuseBadUse) {
   EXPECT_TRUE(backend->device_info().texel_buffers);
   try {

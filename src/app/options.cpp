@@ -150,12 +150,16 @@ const Setting kSettings[] = {
     {"--data", "READS", kFrames,
      "how the Vulkan traversal pass reads nodes, primitive lists and\n"
      "triangles: texel-buffers (uniform texel buffers), images (2D\n"
-     "textures, as OpenGL ES 2.0 always does) or storage-buffers (read-only;\n"
-     "breaks the ES 2.0 model, to measure) (default texel-buffers)",
+     "textures, as OpenGL ES 2.0 always does), storage-buffers (read-only;\n"
+     "breaks the ES 2.0 model, to measure) or device-addresses (the same\n"
+     "buffers through buffer references, no texture calls in llvmpipe;\n"
+     "breaks the model too, to measure) (default texel-buffers)",
      [](CommonOptions& o, const Value& v) {
-       static constexpr std::pair<const char*, DataReads> reads[] = {{"texel-buffers", DataReads::TexelBuffers},
-                                                                     {"images", DataReads::Images},
-                                                                     {"storage-buffers", DataReads::StorageBuffers}};
+       static constexpr std::pair<const char*, DataReads> reads[] = {
+           {"texel-buffers", DataReads::TexelBuffers},
+           {"images", DataReads::Images},
+           {"storage-buffers", DataReads::StorageBuffers},
+           {"device-addresses", DataReads::DeviceAddresses}};
        o.settings.data = v.choice(reads);
      }},
     {"--light", "SPEC", kViews,

@@ -64,6 +64,7 @@ const char* texture_kind_name(TextureKind kind) {
     case TextureKind::Image2D: return "2D image";
     case TextureKind::TexelBuffer: return "texel buffer";
     case TextureKind::StorageBuffer: return "storage buffer";
+    case TextureKind::DeviceAddress: return "device address";
   }
   return "texture";
 }

@@ -35,8 +35,14 @@ size_t texel_bytes(TexelFormat format);
 // still one of the 8 sampled-texture slots of the ES 2.0 model. Or a read-only storage buffer
 // (Vulkan only, the traversal pass's --data storage-buffers): a measurement variant that breaks the
 // model (OpenGL ES 2.0 has no storage buffers) and is allowed to only because its pass declares it.
-enum class TextureKind { Image2D, TexelBuffer, StorageBuffer };
-const char* texture_kind_name(TextureKind kind);  // "2D image", "texel buffer", "storage buffer"
+// Or a storage buffer read through its device address (Vulkan with VK_KHR_buffer_device_address,
+// the passes' --data device-addresses): no descriptor, the address in the pass's push constants
+// (layout.h, MOBIRT_PASS_ADDRESSES); llvmpipe reads through a pointer with an inline gather where
+// every texel or storage-buffer fetch is a call or a per-lane loop. Outside the model as storage
+// buffers are, and allowed the same way. Its texture is a storage buffer (create_storage_buffer).
+enum class TextureKind { Image2D, TexelBuffer, StorageBuffer, DeviceAddress };
+// "2D image", "texel buffer", "storage buffer", "device address"
+const char* texture_kind_name(TextureKind kind);
 
 // A fragment shader as built into the binary: SPIR-V for Vulkan and GLSL ES 1.00 for OpenGL ES 2.0,
 // both generated from glsl/ at build time. Every shader is one line of the shader list in
@@ -109,6 +115,9 @@ struct DeviceInfo {
   bool texel_buffers = false;
   // Read-only storage buffers (Backend::create_storage_buffer): Vulkan, never OpenGL ES 2.0.
   bool storage_buffers = false;
+  // Storage buffers read through their device addresses (TextureKind::DeviceAddress): Vulkan with
+  // VK_KHR_buffer_device_address.
+  bool device_addresses = false;
   // TexelFormat::SRGBA8 textures, filtered in linear light: Vulkan always; OpenGL ES 2.0 needs
   // GL_EXT_sRGB, which Mesa does not offer to an ES 2.0 context. Without them the atlas pages are
   // RGBA8 read texel by texel (atlas_page_format()).

@@ -15,11 +15,15 @@ namespace {
 enum Op : uint32_t {
   OpTypeImage = 25, OpTypeSampledImage = 27, OpTypeArray = 28, OpTypeStruct = 30,
   OpEntryPoint = 15, OpTypePointer = 32, OpConstant = 43, OpVariable = 59, OpStore = 62, OpAccessChain = 65,
-  OpDecorate = 71, OpImageWrite = 99,
+  OpInBoundsAccessChain = 66, OpPtrAccessChain = 67, OpDecorate = 71, OpCopyObject = 83, OpImageWrite = 99,
+  OpConvertUToPtr = 120, OpBitcast = 124,
   OpAtomicFirst = 227, OpAtomicLast = 242,  // OpAtomicLoad .. OpAtomicXor
   OpTypeRayQueryKHR = 4472, OpTypeAccelerationStructureKHR = 5341,  // SPV_KHR_ray_query, _ray_tracing
 };
-enum StorageClass : uint32_t { UniformConstant = 0, Input = 1, Uniform = 2, Output = 3, StorageBuffer = 12 };
+enum StorageClass : uint32_t {
+  UniformConstant = 0, Input = 1, Uniform = 2, Output = 3, StorageBuffer = 12,
+  PhysicalStorageBuffer = 5349,  // buffer references (GL_EXT_buffer_reference): memory by device address
+};
 enum ExecutionModel : uint32_t { GLCompute = 5 };
 enum Decoration : uint32_t { BufferBlock = 3, BuiltIn = 11, Location = 30 };
 
@@ -37,7 +41,8 @@ ShaderInterface reflect_spirv(std::span<const uint32_t> words) {
   std::unordered_set<uint32_t> buffer_blocks, located, builtins;
   struct Variable { uint32_t id, pointer_type, storage; };
   std::vector<Variable> variables;
-  std::unordered_set<uint32_t> storage_pointers;  // ids of pointers into storage buffers
+  std::unordered_set<uint32_t> storage_pointers;  // ids of pointers into storage buffers or by address
+  std::unordered_set<uint32_t> address_pointer_types;  // pointer types into PhysicalStorageBuffer
 
   for (size_t i = 5; i < words.size();) {
     const uint32_t count = words[i] >> 16;
@@ -51,7 +56,11 @@ ShaderInterface reflect_spirv(std::span<const uint32_t> words) {
       case OpTypeAccelerationStructureKHR: acceleration_structure_types.insert(w[1]); break;
       case OpTypeRayQueryKHR: result.ray_queries = true; break;
       case OpTypeArray: arrays[w[1]] = {w[2], w[3]}; break;
-      case OpTypePointer: pointers[w[1]] = {w[2], w[3]}; break;
+      case OpTypePointer:
+        pointers[w[1]] = {w[2], w[3]};
+        // Memory read by device address is a storage resource, read or written (--data device-addresses).
+        if (w[2] == PhysicalStorageBuffer && address_pointer_types.insert(w[1]).second) ++result.storage_resources;
+        break;
       case OpConstant: if (count >= 4) constants[w[2]] = w[3]; break;
       case OpDecorate:
         if (w[2] == BufferBlock) buffer_blocks.insert(w[1]);
@@ -60,7 +69,15 @@ ShaderInterface reflect_spirv(std::span<const uint32_t> words) {
         break;
       case OpVariable: variables.push_back({w[2], w[1], w[3]}); break;
       case OpAccessChain:
-        if (storage_pointers.count(w[3])) storage_pointers.insert(w[2]);
+      case OpInBoundsAccessChain:
+      case OpPtrAccessChain:
+      case OpCopyObject:
+      case OpBitcast:
+      case OpConvertUToPtr:
+        // A pointer into a storage buffer, or any pointer into memory by device address.
+        if ((op != OpBitcast && op != OpConvertUToPtr && storage_pointers.count(w[3])) || address_pointer_types.count(w[1])) {
+          storage_pointers.insert(w[2]);
+        }
         break;
       case OpStore:
         if (storage_pointers.count(w[1])) ++result.storage_writes;

@@ -15,7 +15,7 @@ namespace mobirt {
 struct ShaderInterface {
   int color_outputs = 0;        // Output variables with a Location
   int sampled_textures = 0;     // combined image samplers and sampled images, arrays counted whole
-  int storage_resources = 0;    // storage buffers and storage images
+  int storage_resources = 0;    // storage buffers, storage images, pointer types into memory by device address
   int storage_writes = 0;       // OpImageWrite, OpAtomic*, stores through StorageBuffer pointers
   int acceleration_structures = 0;  // VK_KHR_acceleration_structure variables
   bool ray_queries = false;     // the module declares a ray query object (SPV_KHR_ray_query)

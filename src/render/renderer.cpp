@@ -55,10 +55,12 @@ glm::vec3 light_where(const Light& light) {
 
 // A pass's shader for how it reads its data: one SPIR-V module per kind (a binding's type cannot
 // be specialised).
-ShaderId by_data_kind(TextureKind kind, ShaderId images, ShaderId texel_buffers, ShaderId storage_buffers) {
+ShaderId by_data_kind(TextureKind kind, ShaderId images, ShaderId texel_buffers, ShaderId storage_buffers,
+                      ShaderId device_addresses) {
   switch (kind) {
     case TextureKind::TexelBuffer: return texel_buffers;
     case TextureKind::StorageBuffer: return storage_buffers;
+    case TextureKind::DeviceAddress: return device_addresses;
     case TextureKind::Image2D: break;
   }
   return images;
@@ -194,6 +196,7 @@ Renderer::Renderer(Backend& backend, const RenderSettings& settings)
   const DeviceInfo info = backend_.device_info();
   if (settings_.data == DataReads::TexelBuffers && info.texel_buffers) data_kind_ = TextureKind::TexelBuffer;
   if (settings_.data == DataReads::StorageBuffers && info.storage_buffers) data_kind_ = TextureKind::StorageBuffer;
+  if (settings_.data == DataReads::DeviceAddresses && info.device_addresses) data_kind_ = TextureKind::DeviceAddress;
   if (settings_.stack_depth < 0 || settings_.stack_depth > MOBIRT_MAX_STACK_DEPTH) {
     throw Error(ErrorKind::BadInput, "--stack " + std::to_string(settings_.stack_depth) +
                                          ": the short stack holds 0 to " +
@@ -227,7 +230,8 @@ TextureHandle Renderer::ensure_texture(TextureHandle& handle, uint32_t& capacity
   // A buffer holds the same rows end to end: DATA_TEXEL's index is the texel's.
   switch (kind) {
     case TextureKind::TexelBuffer: handle = backend_.create_texel_buffer(width * grown, format); break;
-    case TextureKind::StorageBuffer: handle = backend_.create_storage_buffer(width * grown, format); break;
+    case TextureKind::StorageBuffer:
+    case TextureKind::DeviceAddress: handle = backend_.create_storage_buffer(width * grown, format); break;
     case TextureKind::Image2D: handle = backend_.create_texture(width, grown, format); break;
   }
   capacity_rows = grown;
@@ -240,7 +244,7 @@ PassHandle Renderer::trace_pass(int lights, Packing packing, bool analytic) {
   if (it != data_->trace_passes.end()) return it->second;
   PassDesc desc;
   desc.shader = by_data_kind(data_kind_, ShaderId::Traverse, ShaderId::TraverseTexelBuffers,
-                             ShaderId::TraverseStorageBuffers);
+                             ShaderId::TraverseStorageBuffers, ShaderId::TraverseDeviceAddresses);
   desc.specialization = {{MOBIRT_SPEC_LIGHT_COUNT, lights},
                          {MOBIRT_SPEC_STACK_DEPTH, settings_.stack_depth},
                          {MOBIRT_SPEC_MAX_STEPS, settings_.max_steps},
@@ -263,7 +267,8 @@ PassHandle Renderer::shade_pass(int lights, int textures, int pages, int colour)
   auto it = data_->shade_passes.find(key);
   if (it != data_->shade_passes.end()) return it->second;
   PassDesc desc;
-  desc.shader = by_data_kind(data_kind_, ShaderId::Shade, ShaderId::ShadeTexelBuffers, ShaderId::ShadeStorageBuffers);
+  desc.shader = by_data_kind(data_kind_, ShaderId::Shade, ShaderId::ShadeTexelBuffers, ShaderId::ShadeStorageBuffers,
+                             ShaderId::ShadeDeviceAddresses);
   desc.specialization = {{MOBIRT_SPEC_LIGHT_COUNT, lights},
                          {MOBIRT_SPEC_TEXTURE_COUNT, textures},
                          {MOBIRT_SPEC_ATLAS_PAGES, pages},

@@ -26,8 +26,10 @@ namespace mobirt {
 // How the traversal pass reads the scene data (nodes, primitive lists, triangles): uniform texel
 // buffers where the backend has them (Vulkan), else 2D images; images always on OpenGL ES 2.0.
 // StorageBuffers (Vulkan; else images): read-only storage buffers, a measurement variant that
-// breaks the ES 2.0 model by name (shader_constraints.h: kEs2StorageReads).
-enum class DataReads { TexelBuffers, Images, StorageBuffers };
+// breaks the ES 2.0 model by name (shader_constraints.h: kEs2StorageReads). DeviceAddresses (Vulkan
+// with VK_KHR_buffer_device_address; else images): the same buffers read through their addresses,
+// the same kind of measurement variant (what llvmpipe's texture-function calls cost).
+enum class DataReads { TexelBuffers, Images, StorageBuffers, DeviceAddresses };
 
 struct RenderSettings {
   int width = 400;

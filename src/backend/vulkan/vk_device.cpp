@@ -219,6 +219,16 @@ void Device::pick_physical_device(const std::string& wanted) {
   // What a ray-query engine needs (lavapipe has both from Mesa 25, neither in 22.3).
   ray_query_ = has_extension(VK_KHR_RAY_QUERY_EXTENSION_NAME) &&
                has_extension(VK_KHR_ACCELERATION_STRUCTURE_EXTENSION_NAME);
+  // Buffer device addresses, for --data device-addresses (a measurement variant outside the ES 2.0
+  // model: llvmpipe reads through a pointer with an inline gather, where every texel fetch is a call).
+  if (has_extension(VK_KHR_BUFFER_DEVICE_ADDRESS_EXTENSION_NAME)) {
+    VkPhysicalDeviceBufferDeviceAddressFeaturesKHR address{
+        VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_BUFFER_DEVICE_ADDRESS_FEATURES_KHR};
+    VkPhysicalDeviceFeatures2 features{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2};
+    features.pNext = &address;
+    vkGetPhysicalDeviceFeatures2(physical_, &features);
+    device_addresses_ = address.bufferDeviceAddress == VK_TRUE;
+  }
   driver_ = "driver version " + std::to_string(properties_.driverVersion);
   driver_version_ = std::to_string(properties_.driverVersion);
   if (has_extension(VK_KHR_DRIVER_PROPERTIES_EXTENSION_NAME)) {
@@ -283,8 +293,29 @@ void Device::create_device() {
   VkDeviceCreateInfo info{VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO};
   info.queueCreateInfoCount = 1;
   info.pQueueCreateInfos = &queue_info;
+  VkPhysicalDeviceBufferDeviceAddressFeaturesKHR address{
+      VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_BUFFER_DEVICE_ADDRESS_FEATURES_KHR};
+  const char* address_extension = VK_KHR_BUFFER_DEVICE_ADDRESS_EXTENSION_NAME;
+  if (device_addresses_) {
+    address.bufferDeviceAddress = VK_TRUE;
+    info.pNext = &address;
+    info.enabledExtensionCount = 1;
+    info.ppEnabledExtensionNames = &address_extension;
+  }
   VK_CHECK(vkCreateDevice(physical_, &info, nullptr, &device_.device));
   vkGetDeviceQueue(device_.device, queue_family_, 0, &queue_);
+  if (device_addresses_) {
+    get_buffer_address_ = reinterpret_cast<PFN_vkGetBufferDeviceAddressKHR>(
+        vkGetDeviceProcAddr(device_.device, "vkGetBufferDeviceAddressKHR"));
+    if (!get_buffer_address_) device_addresses_ = false;
+  }
+}
+
+VkDeviceAddress Device::buffer_address(VkBuffer buffer) const {
+  if (!device_addresses_) throw Error(ErrorKind::Internal, "buffer_address: the device has no buffer device addresses");
+  VkBufferDeviceAddressInfoKHR info{VK_STRUCTURE_TYPE_BUFFER_DEVICE_ADDRESS_INFO_KHR};
+  info.buffer = buffer;
+  return get_buffer_address_(device_.device, &info);
 }
 
 void Device::throw_validation_errors() {
@@ -316,6 +347,7 @@ DeviceInfo Device::info() const {
   info.driver_version = driver_version_;
   info.ray_query = ray_query_;
   info.texel_buffers = true;  // uniform texel buffers of RGBA32F and R32F are core Vulkan 1.0
+  info.device_addresses = device_addresses_;
   info.storage_buffers = true;  // and storage buffers, read from a fragment shader
   info.srgb_textures = true;    // R8G8B8A8_SRGB, checked with linear filtering at device creation
   info.is_software = properties_.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;

@@ -70,6 +70,9 @@ class Device {
   const VkPhysicalDeviceMemoryProperties& memory_properties() const { return memory_properties_; }
 
   DeviceInfo info() const;
+  // VK_KHR_buffer_device_address enabled (buffers of TextureKind::DeviceAddress are then possible).
+  bool device_addresses() const { return device_addresses_; }
+  VkDeviceAddress buffer_address(VkBuffer buffer) const;
   // Throws the first validation error that no call has reported yet.
   void throw_validation_errors();
   std::vector<std::string> take_debug_messages();
@@ -88,6 +91,8 @@ class Device {
   std::string driver_;          // "llvmpipe / Mesa 25.0.7 (LLVM 15.0.6)"
   std::string driver_version_;  // "Mesa 25.0.7"
   bool ray_query_ = false;      // VK_KHR_ray_query + VK_KHR_acceleration_structure
+  bool device_addresses_ = false;  // VK_KHR_buffer_device_address with bufferDeviceAddress
+  PFN_vkGetBufferDeviceAddressKHR get_buffer_address_ = nullptr;
   uint32_t queue_family_ = 0;
   uint32_t timestamp_bits_ = 0;
   DeviceOwner device_;

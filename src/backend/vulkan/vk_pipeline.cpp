@@ -24,7 +24,8 @@ namespace mobirt::vk {
 VkDescriptorType descriptor_type(TextureKind kind) {
   switch (kind) {
     case TextureKind::TexelBuffer: return VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER;
-    case TextureKind::StorageBuffer: return VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+    case TextureKind::StorageBuffer:
+    case TextureKind::DeviceAddress: return VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
     case TextureKind::Image2D: break;
   }
   return VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
@@ -270,6 +271,7 @@ Pass Pipelines::create_pass(const PassDesc& desc) const {
   }
   for (size_t i = 0; i < desc.texture_bindings.size(); ++i) {
     const TextureKind kind = desc.kind(i);
+    if (kind == TextureKind::DeviceAddress) continue;  // no descriptor: its address is a push constant
     bindings.push_back({desc.texture_bindings[i], descriptor_type(kind), 1, VK_SHADER_STAGE_FRAGMENT_BIT,
                         kind != TextureKind::Image2D                  ? nullptr
                         : desc.linear(desc.texture_bindings[i]) ? &linear_sampler
@@ -283,7 +285,7 @@ Pass Pipelines::create_pass(const PassDesc& desc) const {
   pass.set_layout = DescriptorSetLayout(vk_device, set_layout);
 
   // Every pass gets its width as a push constant: a shader that reads per-ray texel buffers
-  // (prelude_vk.glsl's ray_index) needs it; others ignore it.
+  // (prelude_vk.glsl's ray_index) needs it; others ignore it. Then the device addresses.
   const VkPushConstantRange push_range{VK_SHADER_STAGE_FRAGMENT_BIT, 0, kPassConstantBytes};
   VkPipelineLayoutCreateInfo layout_info{VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO};
   layout_info.setLayoutCount = 1;

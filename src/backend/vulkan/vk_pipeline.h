@@ -13,6 +13,7 @@
 #include "backend/backend.h"
 #include "backend/vulkan/vk_device.h"
 #include "backend/vulkan/vk_util.h"
+#include "layout.h"
 
 namespace mobirt::vk {
 
@@ -54,7 +55,9 @@ VkPipeline create_compute_pipeline(VkDevice device, VkPipelineLayout layout, VkS
                                    const VkSpecializationInfo* specialization, VkPipelineCache cache);
 
 // The push constants of every fragment pass: the pass's width (int u_ray_width, prelude_vk.glsl).
-constexpr uint32_t kPassConstantBytes = 4;
+// Then the device addresses of the bindings a pass reads as TextureKind::DeviceAddress
+// (glsl/layout.h, MOBIRT_PASS_ADDRESSES).
+constexpr uint32_t kPassConstantBytes = MOBIRT_PASS_ADDRESSES + 8 * MOBIRT_PASS_ADDRESS_SLOTS;
 
 struct Pass {
   PassDesc desc;

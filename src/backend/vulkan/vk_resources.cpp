@@ -42,6 +42,7 @@ void DeviceImage::reset() {
 
 void TexelBuffer::reset() {
   mapped = nullptr;
+  address = 0;
   view.reset();
   buffer.reset();
   memory.reset();
@@ -77,8 +78,13 @@ uint32_t memory_type(const VkPhysicalDeviceMemoryProperties& properties, uint32_
 }
 
 Memory allocate(const Device& device, const VkMemoryRequirements& requirements, VkMemoryPropertyFlags required,
-                VkMemoryPropertyFlags preferred, bool* coherent) {
+                VkMemoryPropertyFlags preferred, bool* coherent, bool addressable) {
   VkMemoryAllocateInfo info{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
+  VkMemoryAllocateFlagsInfo flags{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_FLAGS_INFO};
+  if (addressable) {
+    flags.flags = VK_MEMORY_ALLOCATE_DEVICE_ADDRESS_BIT_KHR;
+    info.pNext = &flags;
+  }
   info.allocationSize = requirements.size;
   info.memoryTypeIndex =
       memory_type(device.memory_properties(), requirements.memoryTypeBits, required, preferred, coherent);
@@ -103,7 +109,8 @@ void create_bound_buffer(const Device& device, VkDeviceSize size, VkBufferUsageF
   buffer_out = Buffer(vk_device, buffer);
   VkMemoryRequirements requirements{};
   vkGetBufferMemoryRequirements(vk_device, buffer, &requirements);
-  memory_out = allocate(device, requirements, required, preferred, coherent);
+  memory_out = allocate(device, requirements, required, preferred, coherent,
+                        (usage & VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT_KHR) != 0);
   VK_CHECK(vkBindBufferMemory(vk_device, buffer, memory_out.get(), 0));
 }
 
@@ -251,7 +258,11 @@ TexelBuffer create_texel_buffer(const Device& device, uint32_t texels, VkFormat 
 
 TexelBuffer create_storage_buffer(const Device& device, uint32_t texels, size_t texel_bytes) {
   TexelBuffer result;
-  create_mapped_buffer(device, VkDeviceSize(texels) * texel_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, result);
+  // Also read through its address (TextureKind::DeviceAddress) where the device has them.
+  const VkBufferUsageFlags address =
+      device.device_addresses() ? VkBufferUsageFlags(VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT_KHR) : 0;
+  create_mapped_buffer(device, VkDeviceSize(texels) * texel_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | address, result);
+  if (address) result.address = device.buffer_address(result.buffer.get());
   return result;
 }
 

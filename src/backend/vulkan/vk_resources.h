@@ -54,6 +54,7 @@ struct TexelBuffer {
   BufferView view;
   void* mapped = nullptr;
   bool coherent = true;
+  VkDeviceAddress address = 0;  // storage buffers on a device with buffer device addresses, else 0
 
   void reset();
 };
@@ -84,8 +85,9 @@ std::optional<uint32_t> find_memory_type(const VkPhysicalDeviceMemoryProperties&
                                          bool* coherent = nullptr);
 uint32_t memory_type(const VkPhysicalDeviceMemoryProperties& properties, uint32_t type_bits,
                      VkMemoryPropertyFlags required, VkMemoryPropertyFlags preferred, bool* coherent = nullptr);
+// addressable: the memory of a buffer read through its device address (VK_KHR_buffer_device_address).
 Memory allocate(const Device& device, const VkMemoryRequirements& requirements, VkMemoryPropertyFlags required,
-                VkMemoryPropertyFlags preferred, bool* coherent = nullptr);
+                VkMemoryPropertyFlags preferred, bool* coherent = nullptr, bool addressable = false);
 
 // A host-visible buffer, mapped; host-cached memory first when prefer_cached (read-back).
 HostBuffer create_host_buffer(const Device& device, VkDeviceSize size, VkBufferUsageFlags usage, bool prefer_cached);

@@ -441,8 +441,24 @@ PassHandle Impl::create_pass(const PassDesc& desc) {
   // Vulkan object exists.
   // A pass whose description binds storage buffers may read them (the --data storage-buffers
   // measurement variant), and nothing else is waived.
-  const bool storage_reads = std::any_of(desc.texture_kinds.begin(), desc.texture_kinds.end(),
-                                         [](TextureKind k) { return k == TextureKind::StorageBuffer; });
+  // So may one that binds buffers by their device addresses (--data device-addresses).
+  const bool storage_reads = std::any_of(desc.texture_kinds.begin(), desc.texture_kinds.end(), [](TextureKind k) {
+    return k == TextureKind::StorageBuffer || k == TextureKind::DeviceAddress;
+  });
+  if (std::find(desc.texture_kinds.begin(), desc.texture_kinds.end(), TextureKind::DeviceAddress) !=
+      desc.texture_kinds.end()) {
+    if (!device_.device_addresses()) {
+      throw Error(ErrorKind::Unsupported, "pass " + std::string(desc.shader.name()) +
+                                              " reads buffers by device address, which this Vulkan device lacks "
+                                              "(VK_KHR_buffer_device_address): use --data texel-buffers");
+    }
+    for (uint32_t binding : desc.texture_bindings) {
+      if (binding >= MOBIRT_PASS_ADDRESS_SLOTS) {
+        throw Error(ErrorKind::Internal, "pass " + std::string(desc.shader.name()) + ": binding " +
+                                             std::to_string(binding) + " has no device-address slot");
+      }
+    }
+  }
   check_es2_constraints(desc.shader.name(), desc.shader.source().spirv, storage_reads);
   usable();
   check_pass_desc(desc);
@@ -480,35 +496,49 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
     std::memcpy(pass.uniforms, uniforms.data(), uniforms.size_bytes());
     std::memset(pass.uniforms + uniforms.size(), 0, size_t(MOBIRT_MAX_PARAM_VEC4S) * 16 - uniforms.size_bytes());
   }
+  // The push constants: the width, then the addresses of the buffers read by device address.
+  uint8_t constants[vk::kPassConstantBytes] = {};
+  const int32_t ray_width = int32_t(width);
+  std::memcpy(constants, &ray_width, sizeof(ray_width));
   if (!bound.empty()) {
     std::vector<VkDescriptorImageInfo> image_infos(bound.size());
     std::vector<VkBufferView> buffer_views(bound.size());
     std::vector<VkDescriptorBufferInfo> buffer_infos(bound.size());
     std::vector<VkWriteDescriptorSet> writes(bound.size());
+    size_t written = 0;
     for (size_t i = 0; i < bound.size(); ++i) {
       const TextureKind kind = pass.desc.kind(i);
-      if (bound[i]->kind != kind) {
+      // A buffer read by its address is a storage buffer.
+      const TextureKind resource = kind == TextureKind::DeviceAddress ? TextureKind::StorageBuffer : kind;
+      if (bound[i]->kind != resource) {
         throw Error(ErrorKind::Internal, "pass " + name + ": texture " + std::to_string(i) + " is a " +
                                              texture_kind_name(bound[i]->kind) + " where the pass reads a " +
                                              texture_kind_name(kind));
       }
-      writes[i] = {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
-      writes[i].dstSet = pass.descriptor_set;
-      writes[i].dstBinding = pass.desc.texture_bindings[i];
-      writes[i].descriptorCount = 1;
-      writes[i].descriptorType = vk::descriptor_type(kind);
+      if (kind == TextureKind::DeviceAddress) {
+        const VkDeviceAddress address = bound[i]->buffer.address;
+        if (address == 0) throw Error(ErrorKind::Internal, "pass " + name + ": texture " + std::to_string(i) + " has no device address");
+        std::memcpy(constants + MOBIRT_PASS_ADDRESSES + 8 * pass.desc.texture_bindings[i], &address, sizeof(address));
+        continue;
+      }
+      const size_t w = written++;
+      writes[w] = {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
+      writes[w].dstSet = pass.descriptor_set;
+      writes[w].dstBinding = pass.desc.texture_bindings[i];
+      writes[w].descriptorCount = 1;
+      writes[w].descriptorType = vk::descriptor_type(kind);
       if (kind == TextureKind::TexelBuffer) {
-        buffer_views[i] = bound[i]->buffer.view.get();
-        writes[i].pTexelBufferView = &buffer_views[i];
+        buffer_views[w] = bound[i]->buffer.view.get();
+        writes[w].pTexelBufferView = &buffer_views[w];
       } else if (kind == TextureKind::StorageBuffer) {
-        buffer_infos[i] = {bound[i]->buffer.buffer.get(), 0, VK_WHOLE_SIZE};
-        writes[i].pBufferInfo = &buffer_infos[i];
+        buffer_infos[w] = {bound[i]->buffer.buffer.get(), 0, VK_WHOLE_SIZE};
+        writes[w].pBufferInfo = &buffer_infos[w];
       } else {
-        image_infos[i] = {VK_NULL_HANDLE, bound[i]->image.view.get(), read_layout(*bound[i])};
-        writes[i].pImageInfo = &image_infos[i];
+        image_infos[w] = {VK_NULL_HANDLE, bound[i]->image.view.get(), read_layout(*bound[i])};
+        writes[w].pImageInfo = &image_infos[w];
       }
     }
-    vkUpdateDescriptorSets(device_.handle(), uint32_t(writes.size()), writes.data(), 0, nullptr);
+    if (written > 0) vkUpdateDescriptorSets(device_.handle(), uint32_t(written), writes.data(), 0, nullptr);
   }
 
   begin_commands();
@@ -547,9 +577,8 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
     vkCmdBindDescriptorSets(commands_, VK_PIPELINE_BIND_POINT_GRAPHICS, pass.pipeline_layout.get(), 0, 1,
                             &pass.descriptor_set, 0, nullptr);
   }
-  const int32_t ray_width = int32_t(width);
   vkCmdPushConstants(commands_, pass.pipeline_layout.get(), VK_SHADER_STAGE_FRAGMENT_BIT, 0, vk::kPassConstantBytes,
-                     &ray_width);
+                     constants);
   const VkViewport viewport{0.0f, 0.0f, float(width), float(height), 0.0f, 1.0f};
   const VkRect2D scissor{{0, 0}, {width, height}};
   vkCmdSetViewport(commands_, 0, 1, &viewport);
