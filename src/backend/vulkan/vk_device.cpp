@@ -364,6 +364,7 @@ DeviceInfo Device::info() const {
   add("timestampPeriod", std::to_string(l.timestampPeriod) + " ns");
   add("timestampComputeAndGraphics", l.timestampComputeAndGraphics ? "true" : "false");
   add("timestampValidBits", std::to_string(timestamp_bits_));
+  add("bufferDeviceAddress", device_addresses_ ? "true (--data device-addresses)" : "false");
   return info;
 }
 
