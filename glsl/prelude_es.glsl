@@ -16,7 +16,7 @@ precision highp sampler2D;
 #define LIGHT_COUNT 0
 #endif
 #ifndef STACK_DEPTH
-#define STACK_DEPTH 4
+#define STACK_DEPTH 6
 #endif
 #ifndef MAX_STEPS
 #define MAX_STEPS 4096

@@ -8,7 +8,7 @@
 // Scene specialisation: specialization constants, so that one SPIR-V module serves every scene
 // and the driver folds the constants when it builds the pipeline.
 layout(constant_id = MOBIRT_SPEC_LIGHT_COUNT) const int LIGHT_COUNT = 0;
-layout(constant_id = MOBIRT_SPEC_STACK_DEPTH) const int STACK_DEPTH = 4;
+layout(constant_id = MOBIRT_SPEC_STACK_DEPTH) const int STACK_DEPTH = 6;
 layout(constant_id = MOBIRT_SPEC_MAX_STEPS) const int MAX_STEPS = 4096;
 layout(constant_id = MOBIRT_SPEC_PACKING) const int PACKING = MOBIRT_PACKING_24_8;
 layout(constant_id = MOBIRT_SPEC_TEXTURE_COUNT) const int TEXTURE_COUNT = 0;

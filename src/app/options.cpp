@@ -80,7 +80,7 @@ const Setting kSettings[] = {
      [](CommonOptions& o, const Value& v) { o.settings.secondary.min_weight = v.real(0.0f, 1.0f); }},
     {"--stack", "N", kFrames,
      "short-stack entries of the traversal shader, 0 = pure kd-restart\n"
-     "(default 4, at most 32)",
+     "(default 6, at most 32)",
      [](CommonOptions& o, const Value& v) { o.settings.stack_depth = v.integer(0, MOBIRT_MAX_STACK_DEPTH); }},
     {"--max-steps", "N", kFrames,
      "loop cap of one traversal in the shader; rays that reach it are traced\n"

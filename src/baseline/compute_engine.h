@@ -43,7 +43,7 @@ struct ComputeTimings {
 
 // How the pass walks the tree: the fragment pass's settings (RenderSettings), so both trace alike.
 struct ComputeTraversal {
-  int stack_depth = 4;   // short-stack entries, 0 = pure kd-restart
+  int stack_depth = 6;   // short-stack entries, 0 = pure kd-restart (RenderSettings::stack_depth)
   int max_steps = 2048;  // the loop cap; a capped ray comes back with MOBIRT_HIT_CAPPED
 };
 
