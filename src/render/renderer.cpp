@@ -6,6 +6,7 @@
 #include <cstring>
 #include <iterator>
 #include <map>
+#include <memory>
 #include <tuple>
 #include <type_traits>
 #include <utility>
@@ -403,11 +404,13 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
                                        std::span<const SurfaceHit> hits, GenerationTimings& timings) {
   // The shading pass's inputs, one texel per ray in the ray layout.
   auto stage = Clock::now();
-  // On all cores, like the decoding that made the hits (a serial loop here cost 0.5 ms a generation).
+  // On all cores, like the decoding that made the hits (a serial loop here cost 0.5 ms a generation),
+  // into arrays not zeroed first: every texel is written below.
   constexpr uint32_t kChunk = 1024;
-  std::vector<HitPositionTexel> position(rays.count());
-  std::vector<HitNormalTexel> normal(rays.count());
-  parallel_for(rays.count(), 0, [&](uint32_t i) {
+  const uint32_t n = rays.count();
+  const std::unique_ptr<HitPositionTexel[]> position = std::make_unique_for_overwrite<HitPositionTexel[]>(n);
+  const std::unique_ptr<HitNormalTexel[]> normal = std::make_unique_for_overwrite<HitNormalTexel[]>(n);
+  parallel_for(n, 0, [&](uint32_t i) {
     const SurfaceHit& h = hits[i];
     if (!h.valid()) {
       position[i] = HitPositionTexel::miss();
@@ -423,20 +426,20 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   prepare_atlas(scene);
   ensure_texture(d.hit_position.handle, d.hit_position.rows, rays.width, rays.rows(), TexelFormat::RGBA32F, data_kind_);
   ensure_texture(d.hit_normal.handle, d.hit_normal.rows, rays.width, rays.rows(), TexelFormat::RGBA32F, data_kind_);
-  backend_.upload(d.hit_position.handle, position.data(), position.size() * sizeof(HitPositionTexel));
-  backend_.upload(d.hit_normal.handle, normal.data(), normal.size() * sizeof(HitNormalTexel));
+  backend_.upload(d.hit_position.handle, position.get(), size_t(n) * sizeof(HitPositionTexel));
+  backend_.upload(d.hit_normal.handle, normal.get(), size_t(n) * sizeof(HitNormalTexel));
   // Texture coordinates only where the scene has textures (the CPU computed them in decoding).
   TextureHandle texcoords = d.hit_position.handle;
   if (d.has_atlas) {
     stage = Clock::now();
-    std::vector<HitTexcoordTexel> uv(rays.count());
-    parallel_for(rays.count(), 0, [&](uint32_t i) {
+    const std::unique_ptr<HitTexcoordTexel[]> uv = std::make_unique_for_overwrite<HitTexcoordTexel[]>(n);
+    parallel_for(n, 0, [&](uint32_t i) {
       uv[i] = HitTexcoordTexel{hits[i].valid() ? hits[i].texcoord : glm::vec2(0.0f), glm::vec2(0.0f)};
     }, kChunk);
     timings.decode_ms += elapsed_ms(stage);
     ensure_texture(d.hit_texcoord.handle, d.hit_texcoord.rows, rays.width, rays.rows(), TexelFormat::RGBA32F,
                    data_kind_);
-    backend_.upload(d.hit_texcoord.handle, uv.data(), uv.size() * sizeof(HitTexcoordTexel));
+    backend_.upload(d.hit_texcoord.handle, uv.get(), size_t(n) * sizeof(HitTexcoordTexel));
     texcoords = d.hit_texcoord.handle;
   }
 
