@@ -90,9 +90,9 @@ const Setting kSettings[] = {
      [](CommonOptions& o, const Value& v) { o.settings.kd.bins = v.integer(2, 1024); }},
     {"--build", "MODE", kFrames,
      "kd-tree build: fast (straddling triangles split by the plane, their\n"
-     "parts' boxes cut to the node's; nodes of up to 3 references split only\n"
-     "when that saves 15 % of the leaf's cost) or quality (exact split\n"
-     "clipping, pbrt's SAH) (default fast)",
+     "parts' boxes cut to the node's; nodes of up to 3 references stay\n"
+     "leaves) or quality (exact split clipping, pbrt's SAH, leaves of 1)\n"
+     "(default fast)",
      [](CommonOptions& o, const Value& v) {
        static constexpr std::pair<const char*, KdBuildMode> modes[] = {{"fast", KdBuildMode::Fast},
                                                                        {"quality", KdBuildMode::Quality}};
