@@ -15,17 +15,6 @@ CameraBasis::CameraBasis(const Camera& camera, int width_px, int height_px)
       height(float(height_px)),
       znear(camera.znear) {}
 
-Ray CameraBasis::ray(float x, float y) const {
-  // The operations of the per-ray formula this replaced, so every primary ray keeps its floats.
-  const float sx = (2.0f * x / width - 1.0f) * tan_half * aspect;
-  const float sy = (1.0f - 2.0f * y / height) * tan_half;
-  Ray r;
-  r.origin = eye;
-  r.direction = glm::normalize(forward + sx * right + sy * up);
-  r.tmin = znear;
-  return r;
-}
-
 Ray camera_ray(const Camera& camera, int width, int height, float x, float y) {
   return CameraBasis(camera, width, height).ray(x, y);
 }
