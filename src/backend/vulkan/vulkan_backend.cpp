@@ -442,11 +442,12 @@ PassHandle Impl::create_pass(const PassDesc& desc) {
   // A pass whose description binds storage buffers may read them (the --data storage-buffers
   // measurement variant), and nothing else is waived.
   // So may one that binds buffers by their device addresses (--data device-addresses).
-  const bool storage_reads = std::any_of(desc.texture_kinds.begin(), desc.texture_kinds.end(), [](TextureKind k) {
-    return k == TextureKind::StorageBuffer || k == TextureKind::DeviceAddress;
-  });
-  if (std::find(desc.texture_kinds.begin(), desc.texture_kinds.end(), TextureKind::DeviceAddress) !=
-      desc.texture_kinds.end()) {
+  const auto reads = [&](TextureKind kind) {
+    return std::find(desc.texture_kinds.begin(), desc.texture_kinds.end(), kind) != desc.texture_kinds.end();
+  };
+  const bool address_reads = reads(TextureKind::DeviceAddress);
+  const bool storage_reads = address_reads || reads(TextureKind::StorageBuffer);
+  if (address_reads) {
     if (!device_.device_addresses()) {
       throw Error(ErrorKind::Unsupported, "pass " + std::string(desc.shader.name()) +
                                               " reads buffers by device address, which this Vulkan device lacks "
