@@ -70,10 +70,10 @@ struct KdBuildOptions {
 
 // The leaf size a build uses: options.max_leaf_prims when >= 0, else the build mode's: quality 1
 // (pbrt's rule); fast 3: pbrt's SAH, which prices a triangle test at 80 node steps, splits nodes of
-// 2 and 3 references that the traversal pass walks no faster for. Measured on the project's
-// meshes: 28-44 % fewer nodes, 28-38 % less build time, fewer loop steps per ray and the
-// traversal passes' JIT instructions per frame within 1 %, for an SAH cost (pbrt's costs) 27-33 %
-// higher (README, "The kd-tree build").
+// 2 and 3 references that the traversal pass walks no faster for. Measured on fish, marbles, the
+// toaster and the Utah toasters: 29-44 % fewer nodes, 5-35 % less build time, the traversal
+// passes' JIT instructions per frame within 1 %, for an SAH cost (pbrt's costs) 12-33 % higher
+// (README, "The kd-tree build").
 int kd_leaf_size(const KdBuildOptions& options);
 
 // Every index that reaches a shader is an exact float below 2^24: node indices, prim-list entries,
