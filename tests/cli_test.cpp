@@ -86,6 +86,7 @@ TEST(Cli, BadInputIsRefusedWithoutOutput) {
   expect_refused("render " + scene + " --offset huge", out, "expected one of fixed, scaled, normal-ulp");
   expect_refused("render " + scene + " --colour 10", out, "expected one of 8, 16");
   expect_refused("render " + scene + " --build sah", out, "expected one of fast, quality");
+  expect_refused("render " + scene + " --pin-threads maybe", out, "expected one of on, off");
   expect_refused("render " + scene + " --device no-such-device", out, "no-such-device");
   expect_refused("render " + scene + " --light 'point pos=0,5,0' --light 'point pos=1,5,0' "
                  "--light 'point pos=2,5,0' --light 'point pos=3,5,0' --light 'point pos=4,5,0' "

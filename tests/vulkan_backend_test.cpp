@@ -4,12 +4,17 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <string>
+#include <thread>
+#include <utility>
 #include <vector>
 
 #include "backend/backend.h"
+#include "backend/driver_threads.h"
 #include "backend/shader_constraints.h"
 #include "backend/vulkan/vk_util.h"
 #include "backend/vulkan/vulkan_backend.h"
@@ -102,6 +107,42 @@ TEST_F(VulkanBackendTest, DeviceInfoListsLavapipe) {
 }
 
 // A failed Vulkan call names itself, where it was made and the VkResult.
+#if defined(__linux__)
+// Mesa's rasterizer threads of this process ("llvmpipe-N") and the CPUs each may run on, from
+// /proc/self/task/*/status.
+std::vector<std::pair<std::string, std::string>> driver_thread_cpus() {
+  std::vector<std::pair<std::string, std::string>> threads;
+  for (const auto& task : std::filesystem::directory_iterator("/proc/self/task")) {
+    std::ifstream status(task.path() / "status");
+    std::string line, name, cpus;
+    while (std::getline(status, line)) {
+      if (line.rfind("Name:", 0) == 0) name = line.substr(line.find_first_not_of(" \t", 5));
+      if (line.rfind("Cpus_allowed_list:", 0) == 0) cpus = line.substr(line.find_first_not_of(" \t", 18));
+    }
+    if (name.rfind("llvmpipe-", 0) == 0) threads.emplace_back(name, cpus);
+  }
+  return threads;
+}
+
+// pin_driver_threads puts each rasterizer thread on one CPU of its own (N mod the CPU count), and
+// a pass still runs right afterwards.
+TEST_F(VulkanBackendTest, DriverThreadsArePinnedOnePerCpu) {
+  if (!backend->device_info().is_software) GTEST_SKIP() << "not lavapipe: no llvmpipe threads";
+  if (std::thread::hardware_concurrency() < 2) GTEST_SKIP() << "one CPU: nothing to spread";
+  const int pinned = pin_driver_threads();
+  const auto threads = driver_thread_cpus();
+  ASSERT_GE(threads.size(), 2u) << "lavapipe made fewer than 2 rasterizer threads (LP_NUM_THREADS?)";
+  EXPECT_EQ(pinned, int(threads.size()));
+  std::map<std::string, std::string> cpu_of;
+  for (const auto& [name, cpus] : threads) {
+    EXPECT_EQ(cpus.find_first_of(",-"), std::string::npos) << name << " may run on CPUs " << cpus;
+    cpu_of[name] = cpus;  // each device has its own llvmpipe-0, -1, ...: the same number, the same CPU
+  }
+  EXPECT_NE(cpu_of["llvmpipe-0"], cpu_of["llvmpipe-1"]);
+  copy_round_trip(400, 96000);
+}
+#endif
+
 TEST(VkCheck, NamesTheCallThePlaceAndTheResult) {
   try {
     vk::check(VK_ERROR_OUT_OF_DEVICE_MEMORY, "vkAllocateMemory(device, &info, nullptr, &memory)",

@@ -116,7 +116,7 @@ int cmd_accuracy(const std::vector<std::string>& args) {
   const Scene& scene = posed.scene;
 
   // The GPU frame: a warm-up frame (shader compilation), then the median of `repeat`.
-  auto backend = create_vulkan_backend(common.backend);
+  auto backend = create_backend("vulkan", common.backend);
   Renderer renderer(*backend, settings);
   Image gpu = renderer.render(scene, view);
   std::vector<double> times;

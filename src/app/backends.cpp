@@ -3,6 +3,7 @@
 
 #include "app/commands.h"
 #include "app/options.h"
+#include "backend/driver_threads.h"
 
 namespace mobirt {
 
@@ -15,10 +16,19 @@ std::string default_pipeline_cache_dir() {
 
 std::unique_ptr<Backend> create_backend(const std::string& name, const VulkanOptions& options,
                                         const std::string& help) {
-  if (name == "gles") return create_gles_backend(options);
-  if (name == "vulkan") return create_vulkan_backend(options);
-  cli::usage_error("--backend " + name + ": expected gles or vulkan", help);
+  std::unique_ptr<Backend> backend;
+  if (name == "gles") {
+    backend = create_gles_backend(options);
+  } else if (name == "vulkan") {
+    backend = create_vulkan_backend(options);
+  } else {
+    cli::usage_error("--backend " + name + ": expected gles or vulkan", help);
+  }
+  pin_driver_threads(options);
+  return backend;
 }
+
+int pin_driver_threads(const BackendOptions& options) { return options.pin_threads ? pin_driver_threads() : 0; }
 
 std::unique_ptr<Backend> create_backend(const std::string& name, const BackendOptions& options,
                                         const std::string& help) {

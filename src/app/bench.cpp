@@ -708,6 +708,8 @@ int cmd_bench(const std::vector<std::string>& args) {
     }
     if (peers.rq || peers.compute) peers.shading = create_vulkan_backend(o.backend_options);
   }
+  // Every device made: all their rasterizer threads pinned (create_backend pinned the columns').
+  const int pinned = pin_driver_threads(o.backend_options);
   const DeviceInfo info = columns[0].backend->device_info();
   const char* lp = std::getenv("LP_NUM_THREADS");
   nlohmann::json result;
@@ -732,7 +734,8 @@ int cmd_bench(const std::vector<std::string>& args) {
                         {"compute_data", compute_data_name(o.compute_data)},
                         {"kd_rebuilt_every_frame", true},
                         {"pipelined", o.pipelined},
-                        {"build_threads", o.settings.kd.threads}};
+                        {"build_threads", o.settings.kd.threads},
+                        {"driver_threads_pinned", pinned}};
   std::printf("mobirt bench: %d frames per cell after %d warm-up frames, animation playing, kd-tree rebuilt every frame\n",
               o.frames, o.warmup);
   std::printf("%s; kd-tree build on %d threads\n",
@@ -740,9 +743,10 @@ int cmd_bench(const std::vector<std::string>& args) {
                             "frame N renders (--serial: one after the other)"
                           : "mobirt's frames serial (--serial): pose, build, passes, one after the other",
               o.settings.kd.threads);
-  std::printf("machine: %u cores; %s, %s, %s, LP_NUM_THREADS=%s; %s on %u threads\n",
+  std::printf("machine: %u cores; %s, %s, %s, LP_NUM_THREADS=%s, %d rasterizer threads pinned one per CPU%s; %s on %u threads\n",
               std::thread::hardware_concurrency(), info.api.c_str(), info.device.c_str(), info.driver.c_str(),
-              lp ? lp : "(all cores)", EmbreeEngine::version().c_str(), o.threads);
+              lp ? lp : "(all cores)", pinned, o.backend_options.pin_threads ? "" : " (--pin-threads off)",
+              EmbreeEngine::version().c_str(), o.threads);
   std::fflush(stdout);
 
   nlohmann::json cells = nlohmann::json::array();

@@ -21,6 +21,10 @@ std::unique_ptr<Backend> create_backend(const std::string& name, const VulkanOpt
                                         const std::string& help = "mobirt --help");
 std::unique_ptr<Backend> create_backend(const std::string& name, const BackendOptions& options,
                                         const std::string& help = "mobirt --help");
+// --pin-threads: pin_driver_threads() (backend/driver_threads.h) unless options.pin_threads is off;
+// create_backend calls it, and a command that makes other devices too calls it after them.
+// Returns how many threads it pinned.
+int pin_driver_threads(const BackendOptions& options);
 
 // mobirt render SCENE -o OUT [options]: one frame or a sequence of frames to image files.
 int cmd_render(const std::vector<std::string>& args);

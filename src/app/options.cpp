@@ -194,6 +194,13 @@ const Setting kSettings[] = {
      [](CommonOptions& o, const Value& v) { o.backend.device = v.text; }},
     {"--validation", nullptr, kDevice, "enable the Khronos validation layer; any message is an error",
      [](CommonOptions& o, const Value&) { o.backend.validation = true; }},
+    {"--pin-threads", "on|off", kDevice,
+     "pin Mesa's rasterizer threads (llvmpipe-N) one per CPU, so that a\n"
+     "pass never runs two of them on one CPU while another idles (default on)",
+     [](CommonOptions& o, const Value& v) {
+       static constexpr std::pair<const char*, bool> modes[] = {{"on", true}, {"off", false}};
+       o.backend.pin_threads = v.choice(modes);
+     }},
 };
 
 // --help as mobirt has always printed it: the usage line and text, then each group of options

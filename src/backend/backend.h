@@ -202,6 +202,9 @@ PassTiming empty_pass_timing(double& pending_upload_ms, std::chrono::steady_cloc
 struct BackendOptions {
   std::string device;        // Vulkan: index or a substring of the device name; empty = lavapipe
   bool validation = false;   // Vulkan: Khronos validation layer (messages make it throw); GLES: KHR_debug
+  // Mesa's rasterizer threads pinned one per CPU once the device or context exists
+  // (backend/driver_threads.h); the app does it, after every device it makes.
+  bool pin_threads = true;
 };
 
 // Vulkan with the default Vulkan-only settings (VulkanOptions for the others).
