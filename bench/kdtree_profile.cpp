@@ -6,7 +6,7 @@
 // driver for profilers, which need one process per mesh rather than Google Benchmark's loop over
 // all of them: valgrind --tool=callgrind --toggle-collect='mobirt::build_kdtree(*Shape*' with THREADS 1
 // (callgrind counts only the threads that enter build_kdtree). Environment knobs for experiments
-// are read below (MOBIRT_KD_ISECT, _LEAF, _DEPTH, _GAIN, _SMALL, _FRAMES, _COLD, _PAUSE_MS).
+// are read below (MOBIRT_KD_ISECT, _LEAF, _BINS, _DEPTH, _GAIN, _SMALL, _FRAMES, _COLD, _PAUSE_MS).
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -43,6 +43,7 @@ int main(int argc, char** argv) {
   // MOBIRT_KD_LEAF (max_leaf_prims), MOBIRT_KD_DEPTH (max_depth).
   if (const char* isect = std::getenv("MOBIRT_KD_ISECT")) options.intersection_cost = std::strtof(isect, nullptr);
   if (const char* leaf = std::getenv("MOBIRT_KD_LEAF")) options.max_leaf_prims = std::atoi(leaf);
+  if (const char* bins = std::getenv("MOBIRT_KD_BINS")) options.bins = std::atoi(bins);
   if (const char* depth = std::getenv("MOBIRT_KD_DEPTH")) options.max_depth = std::atoi(depth);
   // MOBIRT_KD_GAIN (small_split_gain), MOBIRT_KD_SMALL (small_node_refs).
   if (const char* gain = std::getenv("MOBIRT_KD_GAIN")) options.small_split_gain = std::strtof(gain, nullptr);

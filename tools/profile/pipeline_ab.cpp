@@ -7,10 +7,10 @@
 // fill idle cores), and checks that both modes give the same images.
 //
 //   mobirt_pipeline_ab SCENE [--frames N] [--warmup N] [--depth N] [--no-shadows] [--size WxH] [--build-threads N]
-//                      [--backend vulkan|gles] [--nice N]
+//                      [--backend vulkan|gles] [--nice N] [--pin-threads on|off]
 // LP_NUM_THREADS sets lavapipe's threads, as for mobirt. --nice N lowers the worker thread's
 // priority (Linux: nice is per thread), so that the build yields the cores to lavapipe's threads;
-// with --build-threads 1 the whole build runs on that thread.
+// with --build-threads 1 the whole build runs on that thread. --pin-threads as mobirt's (default on).
 #include <sys/resource.h>
 #include <sys/syscall.h>
 #include <unistd.h>
@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "backend/backend.h"
+#include "backend/driver_threads.h"
 #include "core/cpu_time.h"
 #include "core/error.h"
 #include "core/memory.h"
@@ -63,6 +64,7 @@ int main(int argc, char** argv) {
   }
   retain_freed_memory();
   int frames = 12, warmup = 2, build_threads = 0, nice = 0;
+  bool pin = true;
   std::string backend_name = "vulkan";
   RenderSettings settings;
   settings.always_rebuild = true;  // as the bench: a new tree every frame
@@ -89,6 +91,8 @@ int main(int argc, char** argv) {
       backend_name = value;
     } else if (key == "--nice") {
       nice = std::atoi(value);
+    } else if (key == "--pin-threads") {
+      pin = std::string(value) != "off";
     } else if (key == "--size") {
       std::sscanf(value, "%dx%d", &settings.width, &settings.height);
     } else {
@@ -106,6 +110,7 @@ int main(int argc, char** argv) {
       return backend_name == "gles" ? create_gles_backend(BackendOptions{}) : create_vulkan_backend(BackendOptions{});
     };
     std::unique_ptr<Backend> serial_backend = make_backend(), pipelined_backend = make_backend();
+    if (pin) pin_driver_threads();  // as mobirt does (--pin-threads on)
     Renderer serial(*serial_backend, settings), pipelined(*pipelined_backend, settings);
     Scene serial_scene, slots[2];
     const size_t total = size_t(warmup + frames);
