@@ -60,7 +60,7 @@ void hit_decoding(benchmark::State& state) {
   }
   DecodeStats stats;
   for (auto _ : state) {
-    std::vector<SurfaceHit> hits = decode_hits(scene, tree, rays, texels, packing, scene.lights, shadows, &stats);
+    SurfaceHits hits = decode_hits(scene, tree, rays, texels, packing, scene.lights, shadows, &stats);
     benchmark::DoNotOptimize(hits.data());
   }
   state.counters["rays"] = double(rays.count());

@@ -77,7 +77,7 @@ void expect_decode_matches_reference(const Case& c, const ShadowSettings& shadow
     SCOPED_TRACE(c.name + " generation " + std::to_string(generation));
     std::vector<uint32_t> texels = pass_texels(scene, tree, rays, packing, shadows);
     DecodeStats stats;
-    const std::vector<SurfaceHit> hits = decode_hits(scene, tree, rays, texels, packing, scene.lights, shadows, &stats);
+    const SurfaceHits hits = decode_hits(scene, tree, rays, texels, packing, scene.lights, shadows, &stats);
     ASSERT_EQ(hits.size(), rays.count());
     uint32_t ref_hits = 0, ref_capped = 0, mismatches = 0;
     uint64_t ref_shadow = 0;  // shadow_ray_count(): the CPU's facing test for every light
@@ -129,6 +129,33 @@ void expect_decode_matches_reference(const Case& c, const ShadowSettings& shadow
 
     rays = next_generation(scene, tree.bounds, rays, hits, SecondarySettings{shadows.offset});
   }
+}
+
+// decode_hits() makes its records in memory it does not clear first (SurfaceHits): every record
+// must be written, a miss as SurfaceHit{}. Decoding a batch of hits and then the same batch as
+// misses hands the second call the first one's freed block (the same size, just freed): a miss
+// left unwritten would still hold a hit.
+TEST(DecodeHits, EveryMissIsWrittenAsAMiss) {
+  const Scene scene = load_scene(std::string(MOBIRT_SOURCE_DIR) + "/scenes/toaster.gltf");
+  const FlatKdTree tree = build_kdtree(scene.mesh.positions, scene.shapes);
+  const Packing packing = choose_packing(scene.primitive_count(), int(scene.lights.size()), scene.source);
+  const int w = 120, h = 72;
+  const Camera camera = scene.camera ? *scene.camera : frame_box(scene.bounds(), 0.7854f, float(w) / float(h));
+  const RayBatch rays = primary_rays(camera, w, h);
+  const ShadowSettings shadows;
+  std::vector<uint32_t> texels = pass_texels(scene, tree, rays, packing, shadows);
+  size_t hit_count = 0;
+  {
+    const SurfaceHits hits = decode_hits(scene, tree, rays, texels, packing, scene.lights, shadows);
+    for (const SurfaceHit& hit : hits) hit_count += hit.valid();
+  }
+  ASSERT_GT(hit_count, rays.count() / 4) << "the camera must see the toaster";
+  for (uint32_t& t : texels) t = pack_trace(packing, 0, 0);
+  const SurfaceHits misses = decode_hits(scene, tree, rays, texels, packing, scene.lights, shadows);
+  ASSERT_EQ(misses.size(), rays.count());
+  size_t wrong = 0;
+  for (const SurfaceHit& miss : misses) wrong += !same(miss, SurfaceHit{});
+  EXPECT_EQ(wrong, 0u);
 }
 
 TEST(DecodeHits, MatchesPerRayReferenceBitForBit) {

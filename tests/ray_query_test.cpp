@@ -164,7 +164,7 @@ TEST(RayQuery, TexelsEqualTheCpuTraversalOnRandomRays) {
     std::vector<uint32_t> texels(rays.count());
     const Packing packing = engine->trace(rays, scene.lights, ShadowSettings{}, texels);
     DecodeStats stats;
-    const std::vector<SurfaceHit> hits =
+    const SurfaceHits hits =
         decode_hits(scene, engine->triangles(), rays, texels, packing, scene.lights, ShadowSettings{}, &stats);
     EXPECT_EQ(stats.capped, 0u);
     EXPECT_GE(stats.hits, a.hits - a.prim_differs);

@@ -41,7 +41,7 @@ class Stability : public test::VulkanTest {
   }
 
   // The GPU's primary hits (triangle and shadow mask per pixel).
-  std::vector<SurfaceHit> primary_hits(const Scene& scene, const Camera& camera, const RenderSettings& s) {
+  SurfaceHits primary_hits(const Scene& scene, const Camera& camera, const RenderSettings& s) {
     Renderer renderer(*backend, s);
     const FlatKdTree tree = build_kdtree(scene.mesh.positions, scene.shapes, s.kd);
     const RayBatch rays = primary_rays(camera, s.width, s.height);
@@ -129,7 +129,7 @@ TEST_F(Stability, NoShadowAcneOnALitPlaneAtAnyScale) {
       const Scene t = transformed(s, scale, glm::dvec3(shift * 200.0 * scale, 0.0, shift * 100.0 * scale));
       RenderSettings rs = settings(80, 48);
       rs.shadow_rays.offset.mode = mode;
-      const std::vector<SurfaceHit> hits = primary_hits(t, *t.camera, rs);
+      const SurfaceHits hits = primary_hits(t, *t.camera, rs);
       size_t lit = 0, hit = 0;
       for (const SurfaceHit& h : hits) {
         if (!h.valid()) continue;
@@ -151,7 +151,7 @@ TEST_F(Stability, AxisAlignedAndGrazingRays) {
                             Camera{{-12, 1.0f, 0.0f}, {12, 1.0f, 0.0f}, {0, 1, 0}, 0.6f, 0.0f}}) {
     const RenderSettings rs = settings(65, 33);
     const Ray centre = camera_ray(cam, rs.width, rs.height, 32.5f, 16.5f);
-    const std::vector<SurfaceHit> hits = primary_hits(s, cam, rs);
+    const SurfaceHits hits = primary_hits(s, cam, rs);
     render(s, cam, rs);
     const ReferenceResult ref = render_reference(s, cam, reference_settings(rs));
     // A different triangle at the same distance (a shared edge met exactly, a tie) is no mismatch.
@@ -205,7 +205,7 @@ TEST_F(Stability, GrazingAndInsideTheSphereRays) {
   }
   Renderer renderer(*backend, settings());
   const TraceResult traced = renderer.trace(s, tree, grazing);
-  const std::vector<SurfaceHit> gpu =
+  const SurfaceHits gpu =
       decode_hits(s, tree, grazing, traced.texels, traced.packing, {}, ShadowSettings{});
   size_t wrong_cpu = 0, wrong_gpu = 0, off_surface = 0;
   for (uint32_t i = 0; i < grazing.count(); ++i) {
@@ -225,7 +225,7 @@ TEST_F(Stability, GrazingAndInsideTheSphereRays) {
     from_inside.push(Ray{o, test::random_direction(rng), 0.0f, kInfinity}, uint32_t(i), glm::vec3(1.0f));
   }
   const TraceResult t2 = renderer.trace(s, tree, from_inside);
-  const std::vector<SurfaceHit> hits =
+  const SurfaceHits hits =
       decode_hits(s, tree, from_inside, t2.texels, t2.packing, {}, ShadowSettings{});
   size_t missed = 0, off = 0, entering = 0;
   for (const SurfaceHit& h : hits) {
@@ -371,7 +371,7 @@ TEST_F(Stability, SharedEdgesAndVerticesLeakRate) {
   // On the GPU: the camera looks down at the pole; pixels well inside the silhouette must hit.
   const Camera cam{{0, 4, 0}, {0, 0, 0}, {0, 0, -1}, 0.6f, 0.0f};
   const RenderSettings rs = settings(81, 81);
-  const std::vector<SurfaceHit> hits = primary_hits(s, cam, rs);
+  const SurfaceHits hits = primary_hits(s, cam, rs);
   const ReferenceResult ref = render_reference(s, cam, reference_settings(rs));
   size_t gpu_cracks = 0, ref_cracks = 0, inside = 0;
   const double inner = inscribed;
@@ -404,7 +404,7 @@ TEST_F(Stability, DegenerateAndCoplanarTriangles) {
   test::add_triangle(s, {-3, 0.0f, 3}, {3, 0.0f, 3}, {0, 0.0f, -3}, 1);  // coplanar with the floor
   test::add_triangle(s, {-2, 0.0f, 2}, {2, 0.0f, 2.5f}, {0, 0.0f, -2}, 0);
   const RenderSettings rs = settings();
-  const std::vector<SurfaceHit> hits = primary_hits(s, *s.camera, rs);
+  const SurfaceHits hits = primary_hits(s, *s.camera, rs);
   for (const SurfaceHit& h : hits) {
     EXPECT_TRUE(h.prim < int32_t(first_bad) || h.prim >= int32_t(first_bad + 3)) << "hit a degenerate triangle";
   }
@@ -439,7 +439,7 @@ TEST_F(Stability, ManyTrianglesOnOneSplitPlane) {
   const Camera cameras[] = {edge_on, head_on, oblique};
   for (int c = 0; c < 3; ++c) {
     const Camera& camera = cameras[c];
-    const std::vector<SurfaceHit> hits = primary_hits(s, camera, rs);
+    const SurfaceHits hits = primary_hits(s, camera, rs);
     const ReferenceResult ref = render_reference(s, camera, reference_settings(rs));
     size_t mismatch = 0, true_misses = 0, in_view = 0;
     for (size_t i = 0; i < hits.size(); ++i) {
@@ -532,7 +532,7 @@ TEST_F(Stability, PrimitiveCountsAtThePackingLimits) {
   ASSERT_EQ(s.mesh.triangle_count(), size_t(MOBIRT_MAX_PRIMS_16_16));
   const Camera cam{{0, 6, 6}, {0, 0, 0}, {0, 1, 0}, 0.5f, 0.0f};
   const RenderSettings rs = settings(24, 16, 0);
-  const std::vector<SurfaceHit> hits = primary_hits(s, cam, rs);
+  const SurfaceHits hits = primary_hits(s, cam, rs);
   size_t last = 0, lit = 0;
   for (const SurfaceHit& h : hits) {
     last += h.prim == MOBIRT_MAX_PRIMS_16_16 - 1;

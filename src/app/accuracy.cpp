@@ -137,7 +137,7 @@ int cmd_accuracy(const std::vector<std::string>& args) {
   const TraceResult traced = renderer.trace(scene, tree, primary);
   const std::span<const Light> shadow_lights =
       settings.shadows ? std::span<const Light>(scene.lights) : std::span<const Light>();
-  const std::vector<SurfaceHit> hits =
+  const SurfaceHits hits =
       decode_hits(scene, tree, primary, traced.texels, traced.packing, shadow_lights, settings.shadow_rays);
   for (const std::string& message : backend->take_debug_messages()) {
     throw Error(ErrorKind::Internal, "validation: " + message);

@@ -968,7 +968,7 @@ Packing RayQueryEngine::Impl::trace(const RayBatch& rays, std::span<const Light>
   const VkDeviceSize ray_bytes = VkDeviceSize(width) * rows * sizeof(glm::vec4);
   ensure_host(staging, 2 * ray_bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT);
   char* at = static_cast<char*>(staging.mapped);
-  for (const std::vector<glm::vec4>* v : {&rays.origin, &rays.direction}) {
+  for (const RayArray<glm::vec4>* v : {&rays.origin, &rays.direction}) {
     std::memcpy(at, v->data(), size_t(count) * sizeof(glm::vec4));
     std::memset(at + size_t(count) * sizeof(glm::vec4), 0, ray_bytes - size_t(count) * sizeof(glm::vec4));
     at += ray_bytes;

@@ -526,9 +526,9 @@ __attribute__((target("avx2"))) uint32_t decode_triangles_avx2(const Scene& scen
     h.geometric = glm::vec3(lane[9][k], lane[10][k], lane[11][k]);
     h.entering = std::bit_cast<uint32_t>(lane[12][k]) != 0;
     h.material = mesh.material_ids[size_t(prim[k])];
-    if (textured) {
-      h.texcoord = transform_texcoord(scene.materials[h.material].texture_transform, glm::vec2(lane[13][k], lane[14][k]));
-    }
+    h.texcoord = textured ? transform_texcoord(scene.materials[h.material].texture_transform,
+                                               glm::vec2(lane[13][k], lane[14][k]))
+                          : glm::vec2(0.0f);  // every field written: hits is not initialised
   }
   return done;
 }
@@ -536,14 +536,13 @@ __attribute__((target("avx2"))) uint32_t decode_triangles_avx2(const Scene& scen
 
 }  // namespace
 
-std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays,
-                                    std::span<const uint32_t> texels, Packing packing,
-                                    std::span<const Light> lights, const ShadowSettings& shadows,
-                                    DecodeStats* stats) {
+SurfaceHits decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays,
+                        std::span<const uint32_t> texels, Packing packing, std::span<const Light> lights,
+                        const ShadowSettings& shadows, DecodeStats* stats) {
   const uint32_t n = rays.count();
   if (texels.size() < n) throw Error(ErrorKind::Internal, "decode_hits: fewer texels than rays");
   const uint32_t prims = uint32_t(scene.primitive_count());
-  std::vector<SurfaceHit> hits(n);
+  SurfaceHits hits(n);  // every record written below, in parallel (a miss: SurfaceHit{})
   std::atomic<uint32_t> hit_count{0}, capped_count{0};
   std::atomic<uint64_t> shadow_count{0};
   // Rays are independent: decoded on all cores in chunks (a capped ray's CPU retrace is the slow
@@ -610,7 +609,10 @@ std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, 
         if (hits[i].valid()) ++chunk_hits;
         continue;
       }
-      if (!texel.hit()) continue;
+      if (!texel.hit()) {
+        hits[i] = SurfaceHit{};
+        continue;
+      }
       const int32_t prim = texel.prim();
       if (uint32_t(prim) >= prims) {
         throw Error(ErrorKind::Internal, "traversal pass returned primitive " + std::to_string(prim) +

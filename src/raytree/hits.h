@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "accel/kdtree.h"
+#include "core/memory.h"
 #include "layout.h"
 #include "raytree/packing.h"
 #include "raytree/rays.h"
@@ -108,13 +109,17 @@ struct DecodeStats {
   uint32_t capped = 0;   // rays the GPU loop cap stopped, traced on the CPU instead
 };
 
+// One surface record per ray, made on all cores. Its size constructor and resize() write nothing
+// (core/memory.h, UnwrittenAllocator): whoever fills it writes every record, SurfaceHit{} for a
+// miss.
+using SurfaceHits = std::vector<SurfaceHit, UnwrittenAllocator<SurfaceHit>>;
+
 // Decodes the read-back texels of one pass. Capped rays are traced on the CPU (closest hit and
 // shadow mask), so a loop cap never changes the image.
 // `lights`: the lights the pass cast shadow rays to (none when shadows are off).
-std::vector<SurfaceHit> decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays,
-                                    std::span<const uint32_t> texels, Packing packing,
-                                    std::span<const Light> lights, const ShadowSettings& shadows,
-                                    DecodeStats* stats = nullptr);
+SurfaceHits decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays,
+                        std::span<const uint32_t> texels, Packing packing, std::span<const Light> lights,
+                        const ShadowSettings& shadows, DecodeStats* stats = nullptr);
 
 // A ray the GPU's loop cap stopped, traced on the CPU instead: the full-stack walk, the surface
 // record and the shadow mask (a miss: prim -1). Throws Error(Internal) on a corrupt tree.

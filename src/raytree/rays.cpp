@@ -22,10 +22,10 @@ RayBatch primary_rays(const Camera& camera, int width, int height) {
   RayBatch batch;
   batch.width = uint32_t(width);
   const uint32_t n = uint32_t(width) * uint32_t(height);
-  batch.origin.resize(n);
+  batch.origin.resize(n);  // unwritten (RayArray): every ray is written below, on all cores
   batch.direction.resize(n);
   batch.pixel.resize(n);
-  batch.weight.assign(n, glm::vec3(1.0f));
+  batch.weight.resize(n);
   const CameraBasis basis(camera, width, height);
   parallel_for(uint32_t(height), 0, [&](uint32_t y) {
     for (uint32_t x = 0, i = y * uint32_t(width); x < uint32_t(width); ++x, ++i) {
@@ -33,6 +33,7 @@ RayBatch primary_rays(const Camera& camera, int width, int height) {
       batch.origin[i] = glm::vec4(ray.origin, ray.tmin);
       batch.direction[i] = glm::vec4(ray.direction, ray.tmax);
       batch.pixel[i] = i;
+      batch.weight[i] = glm::vec3(1.0f);
     }
   }, 16);
   return batch;

@@ -9,15 +9,21 @@
 
 #include "core/camera.h"
 #include "core/geometry.h"
+#include "core/memory.h"
 
 namespace mobirt {
 
+// The arrays of a batch: resize() writes nothing (core/memory.h, UnwrittenAllocator), whoever
+// makes a batch that way writes every ray.
+template <class T>
+using RayArray = std::vector<T, UnwrittenAllocator<T>>;
+
 struct RayBatch {
-  uint32_t width = 0;                 // texels per row of the ray textures and the pass output
-  std::vector<glm::vec4> origin;      // xyz, tmin
-  std::vector<glm::vec4> direction;   // xyz, tmax
-  std::vector<uint32_t> pixel;        // the image pixel each ray adds to
-  std::vector<glm::vec3> weight;      // the ray's weight in that pixel
+  uint32_t width = 0;             // texels per row of the ray textures and the pass output
+  RayArray<glm::vec4> origin;     // xyz, tmin
+  RayArray<glm::vec4> direction;  // xyz, tmax
+  RayArray<uint32_t> pixel;       // the image pixel each ray adds to
+  RayArray<glm::vec3> weight;     // the ray's weight in that pixel
 
   uint32_t count() const { return uint32_t(origin.size()); }
   uint32_t rows() const { return width == 0 ? 0 : (count() + width - 1) / width; }

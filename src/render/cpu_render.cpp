@@ -55,15 +55,18 @@ TracedGeneration CpuRayEngine::trace(const Scene& scene, const RayBatch& rays, G
 
   TracedGeneration traced;
   traced.form = TracedGeneration::Form::Surfaces;
-  traced.surfaces.resize(n);
+  traced.surfaces.resize(n);  // unwritten: every record is written below
   const FlatKdTree& texels = triangles();
   const std::span<const Light> lights(scene.lights);
   std::atomic<uint64_t> shadow_rays{0};
   start = std::chrono::steady_clock::now();
   parallel_for(n, threads_, [&](uint32_t i) {
-    if (!closest_hits[i].valid()) return;
-    const Ray ray = rays.ray(i);
     SurfaceHit& h = traced.surfaces[i];
+    if (!closest_hits[i].valid()) {
+      h = SurfaceHit{};
+      return;
+    }
+    const Ray ray = rays.ray(i);
     h = surface(scene, ray, closest_hits[i]);
     if (!shadows_) return;  // the frame loop lights the hit by every light
     uint64_t cast = 0;

@@ -78,7 +78,7 @@ struct TracedGeneration {
   std::vector<Hit> hits;         // Hits
   std::vector<uint32_t> masks;   // Hits: shadow bits per ray
   std::vector<uint32_t> capped;  // Hits: rays the loop cap stopped, traced on the CPU against tree()
-  std::vector<SurfaceHit> surfaces;  // Surfaces
+  SurfaceHits surfaces;          // Surfaces: every record written by the engine (a miss: SurfaceHit{})
   uint64_t shadow_rays = 0;      // Hits and Surfaces: shadow rays the engine cast
 };
 

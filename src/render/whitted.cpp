@@ -35,12 +35,12 @@ uint32_t all_lights_mask(const Scene& scene) {
   return scene.lights.empty() ? 0u : (2u << (scene.lights.size() - 1)) - 1u;
 }
 
-std::vector<SurfaceHit> decode_generation(const Scene& scene, const RenderSettings& settings,
+SurfaceHits decode_generation(const Scene& scene, const RenderSettings& settings,
                                           const FlatKdTree& tree, const RayBatch& rays,
                                           TracedGeneration&& traced, GenerationTimings& g) {
   const std::span<const Light> lights = settings.shadows ? std::span<const Light>(scene.lights)
                                                          : std::span<const Light>();
-  std::vector<SurfaceHit> hits;
+  SurfaceHits hits;
   switch (traced.form) {
     case TracedGeneration::Form::PackedTexels: {
       DecodeStats stats;
@@ -51,10 +51,13 @@ std::vector<SurfaceHit> decode_generation(const Scene& scene, const RenderSettin
       break;
     }
     case TracedGeneration::Form::Hits:
-      hits.resize(rays.count());
+      hits.resize(rays.count());  // unwritten: every record is written here
       // On all cores, as decode_hits() decodes the packed texels.
       parallel_for(rays.count(), 0, [&](uint32_t i) {
-        if (!traced.hits[i].valid()) return;
+        if (!traced.hits[i].valid()) {
+          hits[i] = SurfaceHit{};
+          return;
+        }
         hits[i] = surface_from_hit(scene, rays.ray(i), traced.hits[i]);
         hits[i].mask = traced.masks[i];
       }, 256);
@@ -104,7 +107,7 @@ Image render_whitted(const Scene& scene, const Camera& camera, const RenderSetti
     TracedGeneration traced = engine.trace(scene, rays, g);
 
     stage = std::chrono::steady_clock::now();
-    const std::vector<SurfaceHit> hits = decode_generation(scene, settings, tree, rays, std::move(traced), g);
+    const SurfaceHits hits = decode_generation(scene, settings, tree, rays, std::move(traced), g);
     g.decode_ms += elapsed_ms(stage);
 
     const std::vector<glm::vec3> colors = engine.shade(scene, rays, hits, g);

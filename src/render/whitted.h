@@ -16,7 +16,7 @@ uint32_t all_lights_mask(const Scene& scene);
 
 // The surface records of one traced generation, whatever form the engine returned them in; with
 // settings.shadows off every hit gets all_lights_mask(). Fills g.hits, g.capped, g.shadow_rays.
-std::vector<SurfaceHit> decode_generation(const Scene& scene, const RenderSettings& settings,
+SurfaceHits decode_generation(const Scene& scene, const RenderSettings& settings,
                                           const FlatKdTree& tree, const RayBatch& rays,
                                           TracedGeneration&& traced, GenerationTimings& g);
 
