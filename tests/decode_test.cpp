@@ -158,6 +158,38 @@ TEST(DecodeHits, EveryMissIsWrittenAsAMiss) {
   EXPECT_EQ(wrong, 0u);
 }
 
+// Without shadows (no lights passed, every mask 0) mask_or makes the given lights visible on every
+// hit, capped ones included, and leaves misses alone: what the frame loop once did in a pass of
+// its own.
+TEST(DecodeHits, MaskOrLightsEveryHit) {
+  const Scene scene = load_scene(std::string(MOBIRT_SOURCE_DIR) + "/scenes/toaster.gltf");
+  const FlatKdTree tree = build_kdtree(scene.mesh.positions, scene.shapes);
+  const Packing packing = choose_packing(scene.primitive_count(), int(scene.lights.size()), scene.source);
+  const Camera camera = scene.camera ? *scene.camera : frame_box(scene.bounds(), 0.7854f, 120.0f / 72.0f);
+  const RayBatch rays = primary_rays(camera, 120, 72);
+  ShadowSettings shadows;
+  std::vector<uint32_t> texels(rays.count());
+  for (uint32_t i = 0; i < rays.count(); ++i) {
+    const Hit h = traverse(tree, rays.ray(i), -1, shadows.ray_test);
+    texels[i] = i % 61 == 7 ? pack_capped(packing) : pack_trace(packing, uint32_t(h.prim + 1), 0u);
+  }
+  DecodeStats stats;
+  const SurfaceHits hits = decode_hits(scene, tree, rays, texels, packing, {}, shadows, &stats, 0b101u);
+  ASSERT_GT(stats.hits, 0u);
+  ASSERT_GT(stats.capped, 0u);
+  EXPECT_EQ(stats.shadow_rays, 0u);
+  uint32_t lit = 0;
+  for (uint32_t i = 0; i < rays.count(); ++i) {
+    if (!hits[i].valid()) {
+      EXPECT_EQ(hits[i].mask, 0u) << "ray " << i;
+      continue;
+    }
+    EXPECT_EQ(hits[i].mask, 0b101u) << "ray " << i;
+    ++lit;
+  }
+  EXPECT_EQ(lit, stats.hits);
+}
+
 TEST(DecodeHits, MatchesPerRayReferenceBitForBit) {
   for (const Case& c : cases()) expect_decode_matches_reference(c, ShadowSettings{});
 }

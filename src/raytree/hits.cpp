@@ -538,7 +538,7 @@ __attribute__((target("avx2"))) uint32_t decode_triangles_avx2(const Scene& scen
 
 SurfaceHits decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays,
                         std::span<const uint32_t> texels, Packing packing, std::span<const Light> lights,
-                        const ShadowSettings& shadows, DecodeStats* stats) {
+                        const ShadowSettings& shadows, DecodeStats* stats, uint32_t mask_or) {
   const uint32_t n = rays.count();
   if (texels.size() < n) throw Error(ErrorKind::Internal, "decode_hits: fewer texels than rays");
   const uint32_t prims = uint32_t(scene.primitive_count());
@@ -564,7 +564,7 @@ SurfaceHits decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBat
     // The last steps of a hit whose surface record is made: its mask and shadow-ray count.
     const auto finish = [&](uint32_t i, uint32_t mask) {
       SurfaceHit& hit = hits[i];
-      hit.mask = mask;
+      hit.mask = mask | mask_or;
       // Every light visible (the common case): one ray each, what shadow_rays_cast() returns
       // without its call.
       if ((mask & all_lights) == all_lights) {
@@ -589,7 +589,7 @@ SurfaceHits decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBat
       for (int k = 0; k < batch_size; ++k) {
         if ((done >> k) & 1u) {
           if (batch_counts) {
-            hits[batch_ray[k]].mask = batch_mask[k];
+            hits[batch_ray[k]].mask = batch_mask[k] | mask_or;
           } else {
             finish(batch_ray[k], batch_mask[k]);
           }
@@ -606,7 +606,10 @@ SurfaceHits decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBat
       if (texel.capped) {
         ++chunk_capped;
         hits[i] = retrace_capped(scene, tree, rays.ray(i), lights, shadows);
-        if (hits[i].valid()) ++chunk_hits;
+        if (hits[i].valid()) {
+          hits[i].mask |= mask_or;
+          ++chunk_hits;
+        }
         continue;
       }
       if (!texel.hit()) {

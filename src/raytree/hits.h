@@ -116,10 +116,12 @@ using SurfaceHits = std::vector<SurfaceHit, UnwrittenAllocator<SurfaceHit>>;
 
 // Decodes the read-back texels of one pass. Capped rays are traced on the CPU (closest hit and
 // shadow mask), so a loop cap never changes the image.
-// `lights`: the lights the pass cast shadow rays to (none when shadows are off).
+// `lights`: the lights the pass cast shadow rays to (none when shadows are off). `mask_or` is
+// OR-ed into every hit's shadow mask: the scene's lights when shadows are off, so that every light
+// lights every surface facing it.
 SurfaceHits decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays,
                         std::span<const uint32_t> texels, Packing packing, std::span<const Light> lights,
-                        const ShadowSettings& shadows, DecodeStats* stats = nullptr);
+                        const ShadowSettings& shadows, DecodeStats* stats = nullptr, uint32_t mask_or = 0);
 
 // A ray the GPU's loop cap stopped, traced on the CPU instead: the full-stack walk, the surface
 // record and the shadow mask (a miss: prim -1). Throws Error(Internal) on a corrupt tree.
