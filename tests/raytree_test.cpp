@@ -3,11 +3,19 @@
 // beyond the critical angle; and the GPU frame with bounces matches the CPU expectation.
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <sstream>
+#include <thread>
+#include <vector>
+
+#if defined(__linux__)
+#include <sched.h>
+#endif
 
 #include "accel/kdtree.h"
+#include "core/parallel.h"
 #include "backend/backend.h"
 #include "raytree/hits.h"
 #include "raytree/secondary.h"
@@ -213,4 +221,40 @@ TEST_F(VulkanRayTree, BouncesMatchTheCpuExpectation) {
 }
 
 }  // namespace
+#if defined(__linux__)
+// parallel_for's threads start on a CPU other than the caller's (detail::start_on): the thread is
+// moved there, and may then run on every CPU of the process again.
+TEST(ParallelFor, WorkersStartOnAnotherCpuAndAreNotPinned) {
+  cpu_set_t allowed;
+  CPU_ZERO(&allowed);
+  ASSERT_EQ(sched_getaffinity(0, sizeof allowed, &allowed), 0);
+  if (CPU_COUNT(&allowed) < 2) GTEST_SKIP() << "one CPU: no other to start on";
+  const int target = detail::worker_cpu(1);
+  ASSERT_GE(target, 0);
+  EXPECT_TRUE(CPU_ISSET(target, &allowed));
+  int ran_on = -1;
+  cpu_set_t after;
+  CPU_ZERO(&after);
+  std::thread worker([&] {
+    detail::start_on(target);
+    ran_on = sched_getcpu();
+    sched_getaffinity(0, sizeof after, &after);
+  });
+  worker.join();
+  EXPECT_EQ(ran_on, target);
+  EXPECT_TRUE(CPU_EQUAL(&after, &allowed)) << "the worker must not stay pinned";
+}
+#endif
+
+// Every index exactly once, whatever the thread count and chunk.
+TEST(ParallelFor, VisitsEveryIndexOnce) {
+  for (unsigned threads : {1u, 2u, 3u, 0u}) {
+    for (uint32_t chunk : {1u, 7u, 64u}) {
+      std::vector<std::atomic<int>> seen(1000);
+      parallel_for(uint32_t(seen.size()), threads, [&](uint32_t i) { seen[i].fetch_add(1); }, chunk);
+      for (size_t i = 0; i < seen.size(); ++i) ASSERT_EQ(seen[i].load(), 1) << i << ", " << threads << " threads";
+    }
+  }
+}
+
 }  // namespace mobirt
