@@ -7,12 +7,8 @@
 #include <cmath>
 #include <cstring>
 #include <sstream>
-#include <thread>
 #include <vector>
 
-#if defined(__linux__)
-#include <sched.h>
-#endif
 
 #include "accel/kdtree.h"
 #include "core/parallel.h"
@@ -221,31 +217,6 @@ TEST_F(VulkanRayTree, BouncesMatchTheCpuExpectation) {
 }
 
 }  // namespace
-#if defined(__linux__)
-// parallel_for's threads start on a CPU other than the caller's (detail::start_on): the thread is
-// moved there, and may then run on every CPU of the process again.
-TEST(ParallelFor, WorkersStartOnAnotherCpuAndAreNotPinned) {
-  cpu_set_t allowed;
-  CPU_ZERO(&allowed);
-  ASSERT_EQ(sched_getaffinity(0, sizeof allowed, &allowed), 0);
-  if (CPU_COUNT(&allowed) < 2) GTEST_SKIP() << "one CPU: no other to start on";
-  const int target = detail::worker_cpu(1);
-  ASSERT_GE(target, 0);
-  EXPECT_TRUE(CPU_ISSET(target, &allowed));
-  int ran_on = -1;
-  cpu_set_t after;
-  CPU_ZERO(&after);
-  std::thread worker([&] {
-    detail::start_on(target);
-    ran_on = sched_getcpu();
-    sched_getaffinity(0, sizeof after, &after);
-  });
-  worker.join();
-  EXPECT_EQ(ran_on, target);
-  EXPECT_TRUE(CPU_EQUAL(&after, &allowed)) << "the worker must not stay pinned";
-}
-#endif
-
 // Every index exactly once, whatever the thread count and chunk.
 TEST(ParallelFor, VisitsEveryIndexOnce) {
   for (unsigned threads : {1u, 2u, 3u, 0u}) {
