@@ -19,6 +19,7 @@
 #include "backend/backend.h"
 #include "core/error.h"
 #include "layout.h"
+#include "scene/animation.h"
 #include "scene/atlas.h"
 #include "scene/loader.h"
 #include "scene/texture_images.h"
@@ -124,6 +125,25 @@ int pages_used(const std::vector<AtlasTile>& tiles) {
 float lin(uint32_t byte) { return srgb_to_linear(float(byte) / 255.0f); }
 
 // ---- packing -----------------------------------------------------------------------------------
+
+// The atlas is kept from frame to frame while atlas_key stays the same: the key of an animated
+// scene must not change as it plays, and must change with its textures.
+TEST(AtlasKey, SameWhileTheAnimationPlaysOtherForOtherTextures) {
+  const AnimatedScene animation = load_animated_scene(std::string(MOBIRT_SOURCE_DIR) + "/scenes/toaster.gltf");
+  ASSERT_TRUE(animation.animated());
+  Scene a, b;
+  animation.evaluate(0.0, a);
+  animation.evaluate(1.5, b);
+  ASSERT_FALSE(a.textures.empty());
+  EXPECT_NE(a.mesh.positions, b.mesh.positions) << "the frames must differ for the test to mean anything";
+  EXPECT_EQ(atlas_key(a), atlas_key(b));
+  Scene c = a;
+  c.textures.pop_back();
+  EXPECT_NE(atlas_key(a), atlas_key(c));
+  Scene d = a;
+  d.textures[0].wrap_s = d.textures[0].wrap_s == TextureWrap::Repeat ? TextureWrap::ClampToEdge : TextureWrap::Repeat;
+  EXPECT_NE(atlas_key(a), atlas_key(d));
+}
 
 TEST(AtlasPacking, OneTile) {
   const std::vector<glm::ivec2> sizes = {{300, 200}};

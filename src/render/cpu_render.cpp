@@ -43,7 +43,13 @@ void CpuRayEngine::begin_frame(const Scene& scene, const RenderSettings& setting
   build(scene);
   frame.build_ms = elapsed_ms(start);
   frame.tree_rebuilt = true;
-  atlas_ = build_atlas(scene);
+  // Once per set of textures, as the GPU renderer keeps its atlas pages (atlas_key).
+  std::string key = atlas_key(scene);
+  if (!atlas_built_ || key != atlas_key_) {
+    atlas_ = build_atlas(scene);
+    atlas_key_ = std::move(key);
+    atlas_built_ = true;
+  }
 }
 
 TracedGeneration CpuRayEngine::trace(const Scene& scene, const RayBatch& rays, GenerationTimings& g) {

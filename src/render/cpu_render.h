@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
 
 #include "accel/kdtree.h"
 #include "core/camera.h"
@@ -55,7 +56,9 @@ class CpuRayEngine : public WhittedEngine {
   bool shadows_ = true;
   ShadowSettings shadow_rays_;
   ColourDepth colour_ = ColourDepth::Bits8;
-  Atlas atlas_;  // the frame's textures
+  Atlas atlas_;             // the scene's textures, built for atlas_key_
+  std::string atlas_key_;
+  bool atlas_built_ = false;
 };
 
 // mobirt's binned-SAH kd-tree, traversed with a full stack (src/accel) with the renderer's

@@ -293,11 +293,7 @@ PassHandle Renderer::shade_pass(int lights, int textures, int pages, int colour)
 void Renderer::prepare_atlas(const Scene& scene) {
   Data& d = *data_;
   // Textures never change during an animation: rebuild only for another set of textures.
-  std::string key = scene.source;
-  for (const TextureRef& t : scene.textures) {
-    key.append("|").append(t.name).append(":").append(t.path).append(":").append(std::to_string(t.data.size()));
-    key.append(":").append(std::to_string(int(t.wrap_s))).append(std::to_string(int(t.wrap_t)));
-  }
+  std::string key = atlas_key(scene);
   if (!d.atlas_pages.empty() && key == d.atlas_scene) return;
   for (TextureHandle page : d.atlas_pages) backend_.destroy(page);
   d.atlas_pages.clear();

@@ -183,6 +183,15 @@ Atlas assemble_atlas(const std::vector<AtlasTexture>& textures) {
   return atlas;
 }
 
+std::string atlas_key(const Scene& scene) {
+  std::string key = scene.source;
+  for (const TextureRef& t : scene.textures) {
+    key.append("|").append(t.name).append(":").append(t.path).append(":").append(std::to_string(t.data.size()));
+    key.append(":").append(std::to_string(int(t.wrap_s))).append(std::to_string(int(t.wrap_t)));
+  }
+  return key;
+}
+
 Atlas build_atlas(const Scene& scene) {
   check_texture_count(scene.textures.size(), scene.source);
   std::vector<AtlasTexture> textures(scene.textures.size());
