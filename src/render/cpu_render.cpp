@@ -45,10 +45,9 @@ void CpuRayEngine::begin_frame(const Scene& scene, const RenderSettings& setting
   frame.tree_rebuilt = true;
   // Once per set of textures, as the GPU renderer keeps its atlas pages (atlas_key).
   std::string key = atlas_key(scene);
-  if (!atlas_built_ || key != atlas_key_) {
+  if (key != atlas_key_) {
     atlas_ = build_atlas(scene);
     atlas_key_ = std::move(key);
-    atlas_built_ = true;
   }
 }
 

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 
 #include "accel/kdtree.h"
@@ -56,9 +57,8 @@ class CpuRayEngine : public WhittedEngine {
   bool shadows_ = true;
   ShadowSettings shadow_rays_;
   ColourDepth colour_ = ColourDepth::Bits8;
-  Atlas atlas_;             // the scene's textures, built for atlas_key_
-  std::string atlas_key_;
-  bool atlas_built_ = false;
+  Atlas atlas_;                          // the scene's textures
+  std::optional<std::string> atlas_key_;  // atlas_key() of the scene atlas_ was built for; none yet
 };
 
 // mobirt's binned-SAH kd-tree, traversed with a full stack (src/accel) with the renderer's

@@ -37,9 +37,8 @@ uint32_t all_lights_mask(const Scene& scene) {
   return scene.lights.empty() ? 0u : (2u << (scene.lights.size() - 1)) - 1u;
 }
 
-SurfaceHits decode_generation(const Scene& scene, const RenderSettings& settings,
-                                          const FlatKdTree& tree, const RayBatch& rays,
-                                          TracedGeneration&& traced, GenerationTimings& g) {
+SurfaceHits decode_generation(const Scene& scene, const RenderSettings& settings, const FlatKdTree& tree,
+                              const RayBatch& rays, TracedGeneration&& traced, GenerationTimings& g) {
   const std::span<const Light> lights = settings.shadows ? std::span<const Light>(scene.lights)
                                                          : std::span<const Light>();
   const uint32_t all_lights = all_lights_mask(scene);

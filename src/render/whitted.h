@@ -16,9 +16,8 @@ uint32_t all_lights_mask(const Scene& scene);
 
 // The surface records of one traced generation, whatever form the engine returned them in; with
 // settings.shadows off every hit gets all_lights_mask(). Fills g.hits, g.capped, g.shadow_rays.
-SurfaceHits decode_generation(const Scene& scene, const RenderSettings& settings,
-                                          const FlatKdTree& tree, const RayBatch& rays,
-                                          TracedGeneration&& traced, GenerationTimings& g);
+SurfaceHits decode_generation(const Scene& scene, const RenderSettings& settings, const FlatKdTree& tree,
+                              const RayBatch& rays, TracedGeneration&& traced, GenerationTimings& g);
 
 // One frame of width x height with `engine`.
 Image render_whitted(const Scene& scene, const Camera& camera, const RenderSettings& settings,
