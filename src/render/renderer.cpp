@@ -483,10 +483,9 @@ void Renderer::check_shades_like(const RenderSettings& frame, const char* who) c
 std::vector<glm::vec3> Renderer::shade_traced_elsewhere(const Scene& scene, const RayBatch& rays,
                                                         std::span<const SurfaceHit> hits, GenerationTimings& timings) {
   // mobirt's own frame shares the traversal pass's ray textures with the shading pass; an engine
-  // that traced elsewhere uploads them here as well.
-  const auto start = Clock::now();
+  // that traced elsewhere uploads them here as well. The backend times them, in the shading pass's
+  // PassTiming::upload_ms: timing the call here as well counted them twice.
   upload_rays(rays);
-  timings.upload_ms += elapsed_ms(start);
   return shade(scene, rays, hits, timings);
 }
 
