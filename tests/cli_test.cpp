@@ -115,7 +115,8 @@ TEST(Cli, HelpAndInfo) {
 // --help comes from the option table: every command lists the shared render settings it takes,
 // with their values, beside its own options.
 TEST(Cli, HelpListsTheSharedSettings) {
-  const std::vector<std::string> frame_settings = {"--stack N", "--max-steps N", "--bins N", "--leaf-size N",
+  const std::vector<std::string> frame_settings = {"--stack N",        "--max-steps N", "--bins N",
+                                                   "--leaf-size N",    "--cluster-refs N",
                                                    "--max-depth N", "--offset MODE", "--epsilon E",
                                                    "--intersect TEST", "--precision P", "--colour 8|16",
                                                    "--min-weight W", "--general", "--device D", "--validation"};

@@ -136,6 +136,23 @@ Positions duplicates(unsigned seed) {
 
 Positions one_triangle() { return {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}; }
 
+// A height field of n x n quads, two triangles each, every inner vertex shared by 6 triangles as
+// in most real meshes (a vertex's fan is what cluster_refs keeps together).
+Positions terrain(int n) {
+  const auto vertex = [n](int i, int j) {
+    const float x = float(i) / float(n) * 10.0f, z = float(j) / float(n) * 10.0f;
+    return glm::vec3(x, std::sin(x) * std::cos(0.7f * z) + 0.3f * std::sin(2.3f * x + z), z);
+  };
+  Positions p;
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < n; ++j) {
+      add_triangle(p, vertex(i, j), vertex(i + 1, j), vertex(i + 1, j + 1));
+      add_triangle(p, vertex(i, j), vertex(i + 1, j + 1), vertex(i, j + 1));
+    }
+  }
+  return p;
+}
+
 struct NamedScene {
   std::string name;
   Positions positions;
@@ -748,10 +765,12 @@ TEST(KdTree, EveryBuildModeTraversesCorrectly) {
     quality.build = KdBuildMode::Quality;
     KdBuildOptions fast = quality;
     fast.build = KdBuildMode::Fast;
-    // The looser clip alone (fast's leaf size and small-node gain raise the cost of these small
-    // scenes' trees further, by design: FastLeafSize... and SmallSplitGain... below).
+    // The looser clip alone (fast's leaf size, small-node gain and cluster rule raise the cost of
+    // these small scenes' trees further, by design: FastLeafSize..., SmallSplitGain... and
+    // ClusterRule... below).
     fast.small_split_gain = 0.0f;
     fast.max_leaf_prims = 1;
+    fast.cluster_refs = 0;
     const FlatKdTree quality_tree = build_kdtree(scene.positions, quality);
     const FlatKdTree fast_tree = build_kdtree(scene.positions, fast);
     EXPECT_LE(fast_tree.stats.sah_cost, 1.10 * quality_tree.stats.sah_cost + 1e-6);
@@ -834,6 +853,25 @@ TEST(KdTree, NegativeThreadCountIsBadInput) {
   test::expect_bad_input([&] { build_kdtree(random_soup(10, 3), o); }, {"threads", "-1"});
 }
 
+// The same nodes and prim lists, byte for byte.
+void expect_same_nodes(const FlatKdTree& a, const FlatKdTree& b) {
+  ASSERT_EQ(a.nodes.size(), b.nodes.size());
+  ASSERT_EQ(a.prim_list.size(), b.prim_list.size());
+  EXPECT_EQ(std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(glm::vec4)), 0);
+  EXPECT_EQ(std::memcmp(a.prim_list.data(), b.prim_list.data(), a.prim_list.size() * sizeof(float)), 0);
+}
+
+// The traversal statistics of all the rays (stack 4), summed.
+TraversalStats traversal_totals(const FlatKdTree& tree, const std::vector<Ray>& rays) {
+  TraversalStats total;
+  for (const Ray& ray : rays) {
+    TraversalStats s;
+    traverse(tree, ray, 4, s);
+    total += s;
+  }
+  return total;
+}
+
 // Fast's leaf size (kd_leaf_size): nodes of up to 3 references stay leaves. On every generated
 // scene: the same hits as brute force, fewer nodes than with leaves of 1, and at most 10 % more
 // steps of the GPU's loop per ray (one per node, one per triangle test; measured: fewer on every
@@ -857,19 +895,85 @@ TEST(KdTree, FastLeafSizeMakesFewerNodesAndStaysExact) {
     EXPECT_LE(tree.stats.nodes, small.stats.nodes);
     const std::vector<Ray> rays = make_rays(small, scene.positions, 2000 / test::sanitizer_stride(4), seed++);
     ASSERT_EQ(check_rays(tree, rays, scene.name), 0);
-    TraversalStats with_small, with_fast;
-    for (const Ray& ray : rays) {
-      TraversalStats s;
-      traverse(small, ray, 4, s);
-      with_small += s;
-      traverse(tree, ray, 4, s);
-      with_fast += s;
-    }
+    const TraversalStats with_small = traversal_totals(small, rays);
+    const TraversalStats with_fast = traversal_totals(tree, rays);
     std::printf("%s: nodes %zu -> %zu, steps per ray %.2f -> %.2f, triangle tests %.2f -> %.2f\n",
                 scene.name.c_str(), small.stats.nodes, tree.stats.nodes, double(with_small.steps) / rays.size(),
                 double(with_fast.steps) / rays.size(), double(with_small.triangles_tested) / rays.size(),
                 double(with_fast.triangles_tested) / rays.size());
     EXPECT_LE(double(with_fast.steps), 1.10 * double(with_small.steps));
+  }
+}
+
+// The cluster rule: fast's default keeps vertex fans together, for far fewer nodes and leaf
+// references on a mesh and steps per ray within a few percent; every setting traverses as brute
+// force does; quality's default is the first builder's rule (none) bit for bit.
+TEST(KdTree, ClusterRuleKeepsVertexFansTogetherAndStaysExact) {
+  KdBuildOptions fast, quality, none;
+  quality.build = KdBuildMode::Quality;
+  none.cluster_refs = 0;
+  EXPECT_EQ(std::vector<int>({kd_cluster_refs(fast), kd_cluster_refs(quality), kd_cluster_refs(none)}),
+            std::vector<int>({6, 0, 0}));
+
+  const Positions mesh = terrain(48);
+  const FlatKdTree plain = build_kdtree(mesh, none);
+  const FlatKdTree tree = build_kdtree(mesh, fast);
+  check_layout(tree, mesh, fast);
+  // (this smooth height field: 10 % and 8 % fewer; the toaster's meshes: 33 % and 27 %)
+  EXPECT_LT(double(tree.stats.nodes), 0.95 * double(plain.stats.nodes));
+  EXPECT_LT(double(tree.stats.prim_references), 0.95 * double(plain.stats.prim_references));
+  const std::vector<Ray> rays = make_rays(plain, mesh, 2000 / test::sanitizer_stride(4), 31);
+  const TraversalStats with_plain = traversal_totals(plain, rays);
+  const TraversalStats with_rule = traversal_totals(tree, rays);
+  std::printf("terrain: nodes %zu -> %zu, references %zu -> %zu, steps per ray %.2f -> %.2f\n",
+              plain.stats.nodes, tree.stats.nodes, plain.stats.prim_references, tree.stats.prim_references,
+              double(with_plain.steps) / rays.size(), double(with_rule.steps) / rays.size());
+  EXPECT_LE(double(with_rule.steps), 1.05 * double(with_plain.steps));
+
+  const Positions soup = random_soup(1500, 32);
+  const std::vector<Ray> soup_rays = make_rays(build_kdtree(soup, none), soup, 800, 33);
+  for (int refs : {0, 4, 6, 12, 64}) {
+    for (KdBuildMode mode : {KdBuildMode::Fast, KdBuildMode::Quality}) {
+      KdBuildOptions o;
+      o.build = mode;
+      o.cluster_refs = refs;
+      const std::string what = std::string(kd_build_mode_name(mode)) + " cluster " + std::to_string(refs);
+      SCOPED_TRACE(what);
+      const FlatKdTree t = build_kdtree(mesh, o);
+      check_layout(t, mesh, o);
+      ASSERT_EQ(check_rays(t, rays, what), 0);
+      const FlatKdTree u = build_kdtree(soup, o);
+      check_layout(u, soup, o);
+      ASSERT_EQ(check_rays(u, soup_rays, what), 0);
+    }
+  }
+  KdBuildOptions quality_none = quality;
+  quality_none.cluster_refs = 0;
+  expect_same_nodes(build_kdtree(mesh, quality), build_kdtree(mesh, quality_none));
+  test::expect_bad_input(
+      [&] {
+        KdBuildOptions o;
+        o.cluster_refs = -2;
+        build_kdtree(soup, o);
+      },
+      {"cluster_refs"});
+}
+
+// The plane sweeps (SSE2, and AVX2 where the CPU has it; the sparse sweep of small nodes, which
+// SSE2 takes for more of them) choose the same planes: the same tree on any CPU.
+TEST(KdTree, SameTreeForEverySweep) {
+  const std::vector<NamedScene> scenes = {{"soup 3000", random_soup(3000, 42)}, {"terrain", terrain(40)},
+                                          {"grid_boxes", grid_with_boxes()},    {"duplicates", duplicates(43)},
+                                          {"planar", planar(44)}};
+  for (const NamedScene& scene : scenes) {
+    for (KdBuildMode mode : {KdBuildMode::Quality, KdBuildMode::Fast}) {
+      SCOPED_TRACE(scene.name + " " + kd_build_mode_name(mode));
+      KdBuildOptions best;
+      best.build = mode;
+      KdBuildOptions sse2 = best;
+      sse2.sweep_simd = KdSweepSimd::Sse2;
+      expect_same_nodes(build_kdtree(scene.positions, best), build_kdtree(scene.positions, sse2));
+    }
   }
 }
 
@@ -911,10 +1015,7 @@ TEST(KdTree, SmallSplitGainMakesFewerNodesAndStaysExact) {
   quality.build = KdBuildMode::Quality;
   KdBuildOptions quality_none = quality;
   quality_none.small_split_gain = 0.0f;
-  const FlatKdTree q = build_kdtree(soup, quality);
-  const FlatKdTree q_none = build_kdtree(soup, quality_none);
-  ASSERT_EQ(q.nodes.size(), q_none.nodes.size());
-  EXPECT_EQ(std::memcmp(q.nodes.data(), q_none.nodes.data(), q.nodes.size() * sizeof(glm::vec4)), 0);
+  expect_same_nodes(build_kdtree(soup, quality), build_kdtree(soup, quality_none));
 }
 
 TEST(KdTree, NonFiniteAndMalformedInputIsBadInput) {

@@ -25,14 +25,21 @@ constexpr int kKdMaxBins = 1024;
 // fast (the default): the triangle is only split by the plane and its parts' bounds cut to the
 //   reference's box, a looser but conservative clip, and nodes of up to 3 references stay leaves
 //   (kd_leaf_size; with leaves of 1 they split only when that saves 15 % of the leaf's cost,
-//   small_split_gain): about half quality's build instructions on fish and the toaster (13.8M
-//   against 31.0M, 92.4M against 190.0M), the traversal passes as fast, for an SAH cost (pbrt's)
-//   16-35 % above quality's (README, "The kd-tree build").
+//   small_split_gain), and nodes of up to 6 keep vertex fans together (kd_cluster_refs): about
+//   half quality's build instructions on fish and the toaster before the cluster rule (13.8M
+//   against 31.0M, 92.4M against 190.0M), which then took another 22-27 % of the build off, the
+//   traversal passes as fast, for an SAH cost (pbrt's) well above quality's (README, "The kd-tree
+//   build").
 enum class KdBuildMode { Quality, Fast };
 
 // "quality" / "fast"; parse_kd_build_mode returns false for any other text.
 const char* kd_build_mode_name(KdBuildMode mode);
 bool parse_kd_build_mode(std::string_view text, KdBuildMode& mode);
+
+// The widest SIMD the build's plane sweep may use: the best the CPU has (Auto: AVX2 or SSE2), or
+// at most SSE2. Both choose the same planes, so the tree is the same byte for byte (tested); the
+// cap is for that test.
+enum class KdSweepSimd { Auto, Sse2 };
 
 // SAH parameters, named as in pbrt's KdTreeAggregate.
 struct KdBuildOptions {
@@ -57,6 +64,14 @@ struct KdBuildOptions {
   // -1: the build mode's (fast 0.15; quality 0, the first builder's rule).
   float small_split_gain = -1.0f;
   int small_node_refs = 3;
+  // A node of at most cluster_refs references takes no split that keeps all of them on one side
+  // and sends some to the other side as well. Such a node is typically the fan of triangles
+  // around a mesh vertex (6 of them in a regular mesh), which no plane near the vertex separates:
+  // pbrt's SAH peels 2 or 3 of them off again and again, each split duplicating the whole fan,
+  // down to the depth limit (on the toaster, 4,600 of its 7,100 splits of 6-reference nodes).
+  // Cuts of empty space stay. -1: the build mode's (kd_cluster_refs: fast 6, quality 0, the first
+  // builder's rule).
+  int cluster_refs = -1;
   int max_depth = -1;            // -1: 8 + 1.3 log2(N), pbrt's rule
   bool split_clipping = true;    // clip each triangle to the child boxes (tighter references)
   // Split clipping clips the triangle polygon against the child boxes (Sutherland-Hodgman, in
@@ -64,6 +79,7 @@ struct KdBuildOptions {
   // box that its bounding box overlaps. Off: references keep the triangle's bounding box (clipping
   // only the box to the child box would build the very same tree, since the binning clamps to the
   // node box anyway).
+  KdSweepSimd sweep_simd = KdSweepSimd::Auto;  // the widest plane sweep (the same tree for each)
   int threads = 0;               // build threads: 0 = all hardware threads, 1 = serial. The tree
                                  // is the same, byte for byte, for any count.
 };
@@ -75,6 +91,10 @@ struct KdBuildOptions {
 // passes' JIT instructions per frame within 1 %, for an SAH cost (pbrt's costs) 12-33 % higher
 // (README, "The kd-tree build").
 int kd_leaf_size(const KdBuildOptions& options);
+
+// The cluster rule a build uses (KdBuildOptions::cluster_refs): options.cluster_refs when >= 0,
+// else the build mode's: fast 6 (measured: kdtree_build.cpp, kFastClusterRefs), quality 0 (none).
+int kd_cluster_refs(const KdBuildOptions& options);
 
 // Every index that reaches a shader is an exact float below 2^24: node indices, prim-list entries,
 // triangle texels. build_kdtree throws Error(BadInput) when a tree would need more.

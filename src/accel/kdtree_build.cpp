@@ -148,6 +148,18 @@ constexpr float kFastSmallSplitGain = 0.15f;
 // limit, within 2 %. The traversal passes' JIT instructions per frame and Mrays/s: README.
 // With 3, fast's small_split_gain no longer applies (it is for nodes of up to 3 references).
 constexpr int kFastLeafSize = 3;
+// KdBuildOptions::cluster_refs of --build fast (kd_cluster_refs). Measured (mobirt_kdprofile, one
+// thread; cluster 0 -> 6: nodes, references per triangle, build ms, CPU steps per ray):
+//   fish          6,675 -> 4,393    5.61 -> 3.97   1.22 -> 0.89   14.25 -> 14.47
+//   toaster      40,071 -> 26,915   4.98 -> 3.65   8.30 -> 6.44   23.48 -> 23.60
+//   marbles      23,225 -> 17,949   3.96 -> 3.26   4.82 -> 4.09   20.25 -> 20.38
+//   Utah toasters 54,477 -> 40,977  5.83 -> 4.79   12.8 -> 9.3    29.03 -> 28.97
+// the tori (their trees stop at the depth limit) within 5 %; SAH cost (pbrt's) +11 to +17 %. The
+// traversal passes' JIT instructions per frame (200x120, depth 2): toaster +1.9 %, marbles
+// +3.1 %, fish -1.7 %, Utah toasters -2.4 %; mobirt bench, three alternated runs: fps x0.97 to
+// x1.06 per cell, median x1.014. 4 and 5 leave most chains (a fan has 6 triangles: toaster 39,043
+// and 38,681 nodes); 8 to 16 take a little more build time off for more steps per ray.
+constexpr int kFastClusterRefs = 6;
 
 Box to_box(const Aabb& a) { return Box{{a.lo.x, a.lo.y, a.lo.z}, {a.hi.x, a.hi.y, a.hi.z}}; }
 
@@ -478,13 +490,14 @@ class Builder {
       : positions_(positions), shapes_(shapes), options_(options), bins_(std::max(2, options.bins)),
         triangle_count_(positions.size() / 3 + shapes.size()) {
 #if defined(MOBIRT_KD_AVX2)
-    avx2_ = __builtin_cpu_supports("avx2");
+    avx2_ = options.sweep_simd != KdSweepSimd::Sse2 && __builtin_cpu_supports("avx2");
     if (avx2_) sparse_refs_ = kSparseSweepRefsAvx2;
 #endif
     small_split_gain_ = options.small_split_gain >= 0.0f ? options.small_split_gain
                         : options.build == KdBuildMode::Fast ? kFastSmallSplitGain
                                                              : 0.0f;
     max_leaf_prims_ = size_t(kd_leaf_size(options));
+    cluster_refs_ = size_t(kd_cluster_refs(options));
   }
 
   FlatKdTree build() {
@@ -855,7 +868,10 @@ class Builder {
           box.lo[a], box.hi[a], step,
           // Planes computed as lo + i * step are monotone in i; every plane must keep
           // min_width_ from the node's faces (checked one by one only when the bins are that thin).
-          step >= min_step};
+          step >= min_step,
+          // Nodes of few references (all binned): no plane that keeps them all on one side and
+          // duplicates some into the other (KdBuildOptions::cluster_refs).
+          n <= cluster_refs_ && binned == n};
       if (sparse) {
         sweep_sparse(axis, hist.tracked() ? hist.occupied(a) : occupied_bins(axis), a, best_cost, best);
       } else {
@@ -880,6 +896,7 @@ class Builder {
     float g;
     float lo, hi, step;    // plane i at lo + i * step
     bool all_valid;        // every plane keeps min_width_ from the faces
+    bool whole_fans;       // no plane with `total` references on one side and any on the other
   };
 
   // Plane i of an axis, with `below` and `above` references on its sides: the plane becomes the
@@ -887,6 +904,7 @@ class Builder {
   void consider_plane(const SweepAxis& s, int i, uint32_t below, uint32_t above, int axis, float& best_cost,
                       Split& best) const {
     const int k = s.bins;
+    if (s.whole_fans && ((below == s.total && above != 0) || (above == s.total && below != 0))) return;
     const float empty_min_bins = options_.empty_bonus_min_width * float(k);
     const float pb = s.c + s.g * float(i);
     const float pa = s.c + s.g * float(k - i);
@@ -1022,6 +1040,11 @@ class Builder {
         candidate = _mm_and_ps(candidate, _mm_and_ps(_mm_cmpge_ps(_mm_sub_ps(position, lo), min_width),
                                                      _mm_cmpge_ps(_mm_sub_ps(hi, position), min_width)));
       }
+      if (s.whole_fans) {
+        const __m128i keeps_below = _mm_andnot_si128(_mm_cmpeq_epi32(above, zero), _mm_cmpeq_epi32(below, total));
+        const __m128i keeps_above = _mm_andnot_si128(_mm_cmpeq_epi32(below, zero), _mm_cmpeq_epi32(above, total));
+        candidate = _mm_andnot_ps(_mm_castsi128_ps(_mm_or_si128(keeps_below, keeps_above)), candidate);
+      }
       const __m128 better = _mm_and_ps(candidate, _mm_cmplt_ps(cost, lane_best));
       lane_best = _mm_or_ps(_mm_and_ps(better, cost), _mm_andnot_ps(better, lane_best));
       lane_plane = _mm_or_ps(_mm_and_ps(better, fi), _mm_andnot_ps(better, lane_plane));
@@ -1130,6 +1153,11 @@ class Builder {
         candidate = _mm256_and_ps(
             candidate, _mm256_and_ps(_mm256_cmp_ps(_mm256_sub_ps(position, lo), min_width, _CMP_GE_OQ),
                                      _mm256_cmp_ps(_mm256_sub_ps(hi, position), min_width, _CMP_GE_OQ)));
+      }
+      if (s.whole_fans) {
+        const __m256i keeps_below = _mm256_andnot_si256(_mm256_cmpeq_epi32(above, zero), _mm256_cmpeq_epi32(below, total));
+        const __m256i keeps_above = _mm256_andnot_si256(_mm256_cmpeq_epi32(below, zero), _mm256_cmpeq_epi32(above, total));
+        candidate = _mm256_andnot_ps(_mm256_castsi256_ps(_mm256_or_si256(keeps_below, keeps_above)), candidate);
       }
       const __m256 better = _mm256_and_ps(candidate, _mm256_cmp_ps(cost, lane_best, _CMP_LT_OQ));
       lane_best = _mm256_blendv_ps(lane_best, cost, better);
@@ -1334,6 +1362,7 @@ class Builder {
   size_t sparse_refs_ = kSparseSweepRefs;
   float small_split_gain_ = 0.0f;  // options_.small_split_gain, the mode's when -1
   size_t max_leaf_prims_ = 1;      // kd_leaf_size(options_)
+  size_t cluster_refs_ = 0;        // kd_cluster_refs(options_)
   BufferPool pool_;
   tbb::enumerable_thread_specific<SubtreeScratch> scratch_;
 };
@@ -1343,6 +1372,11 @@ class Builder {
 int kd_leaf_size(const KdBuildOptions& options) {
   if (options.max_leaf_prims >= 0) return options.max_leaf_prims;
   return options.build == KdBuildMode::Fast ? kFastLeafSize : 1;
+}
+
+int kd_cluster_refs(const KdBuildOptions& options) {
+  if (options.cluster_refs >= 0) return options.cluster_refs;
+  return options.build == KdBuildMode::Fast ? kFastClusterRefs : 0;
 }
 
 const char* kd_build_mode_name(KdBuildMode mode) { return mode == KdBuildMode::Fast ? "fast" : "quality"; }
@@ -1398,6 +1432,10 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, std::span<const Sh
   if (options.max_leaf_prims < -1) {
     throw Error(ErrorKind::BadInput, "kd-tree: max_leaf_prims must be -1 (the build mode's) or more (got " +
                                          std::to_string(options.max_leaf_prims) + ")");
+  }
+  if (options.cluster_refs < -1) {
+    throw Error(ErrorKind::BadInput, "kd-tree: cluster_refs must be -1 (the build mode's) or more (got " +
+                                         std::to_string(options.cluster_refs) + ")");
   }
   if (options.threads < 0) {
     throw Error(ErrorKind::BadInput, "kd-tree: threads must be 0 (all) or more (got " +

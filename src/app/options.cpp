@@ -102,6 +102,12 @@ const Setting kSettings[] = {
      "largest leaf the build makes without trying to split (default: the\n"
      "build's: fast 3, quality 1)",
      [](CommonOptions& o, const Value& v) { o.settings.kd.max_leaf_prims = v.integer(1, 1 << 20); }},
+    {"--cluster-refs", "N", kFrames,
+     "nodes of at most N references take no split that keeps them all on\n"
+     "one side and duplicates some into the other (a vertex's fan of\n"
+     "triangles); 0 = pbrt's SAH alone (default: the build's: fast 6,\n"
+     "quality 0)",
+     [](CommonOptions& o, const Value& v) { o.settings.kd.cluster_refs = v.integer(0, 1 << 20); }},
     {"--max-depth", "N", kFrames, "kd-tree depth limit, -1 = 8 + 1.3 log2(triangles) (default -1)",
      [](CommonOptions& o, const Value& v) { o.settings.kd.max_depth = v.integer(-1, 128); }},
     {"--offset", "MODE", kFrames,
