@@ -6,8 +6,8 @@
 // driver for profilers, which need one process per mesh rather than Google Benchmark's loop over
 // all of them: valgrind --tool=callgrind --toggle-collect='mobirt::build_kdtree(*Shape*' with THREADS 1
 // (callgrind counts only the threads that enter build_kdtree). Environment knobs for experiments
-// are read below (MOBIRT_KD_ISECT, _LEAF, _BINS, _DEPTH, _GAIN, _SMALL, _CLUSTER, _SSE2, _FRAMES, _COLD,
-// _PAUSE_MS).
+// are read below (MOBIRT_KD_ISECT, _LEAF, _BINS, _DEPTH, _GAIN, _SMALL, _CLUSTER, _EMPTY, _SSE2,
+// _FRAMES, _COLD, _PAUSE_MS).
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -49,9 +49,10 @@ int main(int argc, char** argv) {
   // MOBIRT_KD_GAIN (small_split_gain), MOBIRT_KD_SMALL (small_node_refs).
   if (const char* gain = std::getenv("MOBIRT_KD_GAIN")) options.small_split_gain = std::strtof(gain, nullptr);
   if (const char* small = std::getenv("MOBIRT_KD_SMALL")) options.small_node_refs = std::atoi(small);
-  // MOBIRT_KD_CLUSTER (cluster_refs); MOBIRT_KD_SSE2=1: the SSE2 sweep only (the same tree: the
-  // hash says so).
+  // MOBIRT_KD_CLUSTER (cluster_refs), MOBIRT_KD_EMPTY (empty_bonus); MOBIRT_KD_SSE2=1: the SSE2
+  // sweep only (the same tree: the hash says so).
   if (const char* cluster = std::getenv("MOBIRT_KD_CLUSTER")) options.cluster_refs = std::atoi(cluster);
+  if (const char* empty = std::getenv("MOBIRT_KD_EMPTY")) options.empty_bonus = std::strtof(empty, nullptr);
   if (const char* sse2 = std::getenv("MOBIRT_KD_SSE2"); sse2 && std::atoi(sse2) != 0) {
     options.sweep_simd = KdSweepSimd::Sse2;
   }

@@ -116,7 +116,7 @@ TEST(Cli, HelpAndInfo) {
 // with their values, beside its own options.
 TEST(Cli, HelpListsTheSharedSettings) {
   const std::vector<std::string> frame_settings = {"--stack N",        "--max-steps N", "--bins N",
-                                                   "--leaf-size N",    "--cluster-refs N",
+                                                   "--leaf-size N",    "--cluster-refs N", "--empty-bonus B",
                                                    "--max-depth N", "--offset MODE", "--epsilon E",
                                                    "--intersect TEST", "--precision P", "--colour 8|16",
                                                    "--min-weight W", "--general", "--device D", "--validation"};

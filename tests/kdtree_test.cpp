@@ -515,7 +515,7 @@ TEST(KdTree, CostOptionsStillTraverseCorrectly) {
   const FlatKdTree reference = build_kdtree(soup);
   const std::vector<Ray> rays = make_rays(reference, soup, 1000, 12);
   for (float isect : {1.0f, 5.0f, 80.0f, 1000.0f}) {
-    for (float bonus : {0.0f, 0.5f, 0.9f}) {
+    for (float bonus : {0.0f, 0.3f, 0.5f, 0.9f}) {
       KdBuildOptions o;
       o.intersection_cost = isect;
       o.empty_bonus = bonus;
@@ -957,6 +957,11 @@ TEST(KdTree, ClusterRuleKeepsVertexFansTogetherAndStaysExact) {
         build_kdtree(soup, o);
       },
       {"cluster_refs"});
+  for (float bonus : {-0.1f, 1.0f, std::numeric_limits<float>::quiet_NaN()}) {
+    KdBuildOptions o;
+    o.empty_bonus = bonus;
+    test::expect_bad_input([&] { build_kdtree(soup, o); }, {"empty_bonus"});
+  }
 }
 
 // The plane sweeps (SSE2, and AVX2 where the CPU has it; the sparse sweep of small nodes, which

@@ -1433,6 +1433,10 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, std::span<const Sh
     throw Error(ErrorKind::BadInput, "kd-tree: max_leaf_prims must be -1 (the build mode's) or more (got " +
                                          std::to_string(options.max_leaf_prims) + ")");
   }
+  if (!(options.empty_bonus >= 0.0f && options.empty_bonus < 1.0f)) {
+    throw Error(ErrorKind::BadInput, "kd-tree: empty_bonus must be in [0, 1) (got " +
+                                         std::to_string(options.empty_bonus) + ")");
+  }
   if (options.cluster_refs < -1) {
     throw Error(ErrorKind::BadInput, "kd-tree: cluster_refs must be -1 (the build mode's) or more (got " +
                                          std::to_string(options.cluster_refs) + ")");

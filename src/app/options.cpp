@@ -108,6 +108,11 @@ const Setting kSettings[] = {
      "triangles); 0 = pbrt's SAH alone (default: the build's: fast 6,\n"
      "quality 0)",
      [](CommonOptions& o, const Value& v) { o.settings.kd.cluster_refs = v.integer(0, 1 << 20); }},
+    {"--empty-bonus", "B", kFrames,
+     "SAH discount of a split that cuts off empty space (pbrt's 0.5); 0.3\n"
+     "walks 5-7 % fewer traversal instructions for a slower build: the\n"
+     "frames with bounces gain, ray casting loses (default 0.5)",
+     [](CommonOptions& o, const Value& v) { o.settings.kd.empty_bonus = v.real(0.0f, 0.9f); }},
     {"--max-depth", "N", kFrames, "kd-tree depth limit, -1 = 8 + 1.3 log2(triangles) (default -1)",
      [](CommonOptions& o, const Value& v) { o.settings.kd.max_depth = v.integer(-1, 128); }},
     {"--offset", "MODE", kFrames,
