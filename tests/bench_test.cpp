@@ -136,6 +136,11 @@ TEST(Bench, NoBaselineSkipsEveryPeer) {
   for (const char* peer : {"embree", "cpu_kd", "ray_query", "compute", "ratios"}) EXPECT_FALSE(c.contains(peer)) << peer;
   EXPECT_EQ(j["machine"]["compute"]["skipped"], "--no-baseline");
   EXPECT_EQ(j["settings"]["compute_data"], "storage-buffers");
+  // The tree's settings, so that a run with the build's knobs says which (the defaults here).
+  EXPECT_EQ(j["settings"]["build"], "fast");
+  EXPECT_EQ(j["settings"]["leaf_size"].get<int>(), 3);
+  EXPECT_EQ(j["settings"]["cluster_refs"].get<int>(), 6);
+  EXPECT_EQ(j["settings"]["empty_bonus"].get<double>(), 0.5);
 }
 
 // mobirt's frames are pipelined unless --serial, and the table and the JSON say which; pipelined,

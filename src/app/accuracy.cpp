@@ -194,6 +194,8 @@ int cmd_accuracy(const std::vector<std::string>& args) {
                    {"max_steps", settings.max_steps},
                    {"bins", settings.kd.bins},
                    {"leaf_size", kd_leaf_size(settings.kd)},
+                   {"cluster_refs", kd_cluster_refs(settings.kd)},
+                   {"empty_bonus", settings.kd.empty_bonus},
                    {"max_depth", settings.kd.max_depth},
                    {"epsilon", settings.shadow_rays.offset.epsilon},
                    {"offset", offset_name(settings.shadow_rays.offset.mode)},
