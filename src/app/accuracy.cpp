@@ -192,17 +192,13 @@ int cmd_accuracy(const std::vector<std::string>& args) {
                    {"min_weight", settings.secondary.min_weight},
                    {"stack", settings.stack_depth},
                    {"max_steps", settings.max_steps},
-                   {"bins", settings.kd.bins},
-                   {"leaf_size", kd_leaf_size(settings.kd)},
-                   {"cluster_refs", kd_cluster_refs(settings.kd)},
-                   {"empty_bonus", settings.kd.empty_bonus},
-                   {"max_depth", settings.kd.max_depth},
                    {"epsilon", settings.shadow_rays.offset.epsilon},
                    {"offset", offset_name(settings.shadow_rays.offset.mode)},
                    {"intersect", intersect_name(settings.shadow_rays.ray_test.test)},
                    {"precision", precision_name(settings.shadow_rays.ray_test.precision)},
                    {"colour", int(settings.colour)},
                    {"ref_epsilon", ref_epsilon}};
+  j["settings"].update(cli::kd_settings_json(settings.kd));
   j["psnr_db"] = std::isfinite(diff.psnr) ? nlohmann::json(diff.psnr) : nlohmann::json("inf");
   j["max_error"] = diff.max_error;
   j["share_over_2"] = diff.share_over;

@@ -727,11 +727,6 @@ int cmd_bench(const std::vector<std::string>& args) {
                        {"threads", o.threads}};
   result["settings"] = {{"frames", o.frames},
                         {"warmup", o.warmup},
-                        {"bins", o.settings.kd.bins},
-                        {"build", kd_build_mode_name(o.settings.kd.build)},
-                        {"leaf_size", kd_leaf_size(o.settings.kd)},
-                        {"cluster_refs", kd_cluster_refs(o.settings.kd)},
-                        {"empty_bonus", o.settings.kd.empty_bonus},
                         {"stack", o.settings.stack_depth},
                         {"max_steps", o.settings.max_steps},
                         {"compute_data", compute_data_name(o.compute_data)},
@@ -739,6 +734,7 @@ int cmd_bench(const std::vector<std::string>& args) {
                         {"pipelined", o.pipelined},
                         {"build_threads", o.settings.kd.threads},
                         {"driver_threads_pinned", pinned}};
+  result["settings"].update(cli::kd_settings_json(o.settings.kd));
   std::printf("mobirt bench: %d frames per cell after %d warm-up frames, animation playing, kd-tree rebuilt every frame\n",
               o.frames, o.warmup);
   std::printf("%s; kd-tree build on %d threads\n",

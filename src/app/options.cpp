@@ -9,6 +9,7 @@
 #include <type_traits>
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 
 #include "core/error.h"
 #include "scene/overrides.h"
@@ -370,6 +371,15 @@ bool CommandLine::parse(const std::vector<std::string>& args) {
     positionals_.push_back(a);
   }
   return true;
+}
+
+nlohmann::json kd_settings_json(const KdBuildOptions& kd) {
+  return {{"bins", kd.bins},
+          {"build", kd_build_mode_name(kd.build)},
+          {"leaf_size", kd_leaf_size(kd)},
+          {"cluster_refs", kd_cluster_refs(kd)},
+          {"empty_bonus", kd.empty_bonus},
+          {"max_depth", kd.max_depth}};
 }
 
 }  // namespace mobirt::cli

@@ -11,6 +11,8 @@
 #include <utility>
 #include <vector>
 
+#include <nlohmann/json_fwd.hpp>
+
 #include "app/scene_setup.h"
 #include "backend/backend.h"
 #include "backend/vulkan/vulkan_backend.h"
@@ -69,6 +71,10 @@ struct CommonOptions {
   bool analytic = true;                 // --primitives: NFF spheres and cones analytic or tessellated
   bool size_given = false;              // --size given: it wins over the file's own image size
 };
+
+// The kd-tree build's settings as the commands' JSON records them (bins, build mode, the leaf size,
+// cluster rule and depth limit in force, the empty bonus), so that a run says which tree it made.
+nlohmann::json kd_settings_json(const KdBuildOptions& kd);
 
 // One command's command line: its own options (listed first, under "Options") and the shared
 // settings of the table that `command` takes (under "Render options").

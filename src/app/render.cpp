@@ -375,15 +375,11 @@ int cmd_render(const std::vector<std::string>& args) {
                        {"depth", settings.depth},
                        {"stack", settings.stack_depth},
                        {"max_steps", settings.max_steps},
-                       {"bins", settings.kd.bins},
-                       {"build", kd_build_mode_name(settings.kd.build)},
-                       {"leaf_size", kd_leaf_size(settings.kd)},
-                       {"cluster_refs", kd_cluster_refs(settings.kd)},
-                       {"empty_bonus", settings.kd.empty_bonus},
                        {"device", backend->device_info().device},
                        {"backend", common.backend_name},
                        {"frames", measured.size()},
                        {"median", timings_json(median)}};
+      j.update(cli::kd_settings_json(settings.kd));
       if (frames) {
         j["pipelined"] = !serial;
         j["median"]["period_ms"] = period;
