@@ -102,7 +102,7 @@ int main(int argc, char** argv) {
     for (size_t i = 0; i < bytes; ++i) hash = (hash ^ static_cast<const unsigned char*>(data)[i]) * 1099511628211ull;
   };
   mix(tree.nodes.data(), tree.nodes.size() * sizeof(glm::vec4));
-  mix(tree.prim_list.data(), tree.prim_list.size() * sizeof(float));
+  mix(tree.leaf_prims.data(), tree.leaf_prims.size() * sizeof(glm::vec4));
   std::sort(ms.begin(), ms.end());
   // The tree's traversal cost on the same rays for every build: 20,000 rays from points around
   // the box through points inside it, the CPU twin of the traversal pass (short stack of 4).

@@ -10,9 +10,9 @@
 #define MOBIRT_LAYOUT_H
 
 // ---- Data textures ---------------------------------------------------------------------------
-// Every data array lives in a 2D RGBA32F texture (prim lists: R32F) of width MOBIRT_DATA_WIDTH:
+// Every data array lives in a 2D RGBA32F texture of width MOBIRT_DATA_WIDTH:
 // element i sits at texel (i mod W, i div W). 4096 x 4096 texels hold 16.7M elements, enough for
-// the triangles of 5.5M primitives; the layout is exact in float arithmetic because 4096^2 = 2^24.
+// the triangles of 5.5M primitives, or as many leaf references; the layout is exact in float arithmetic because 4096^2 = 2^24.
 #define MOBIRT_DATA_WIDTH_LOG2 12
 #define MOBIRT_DATA_WIDTH 4096
 
@@ -21,8 +21,8 @@
 //             node), b = split axis (0, 1, 2), a = empty-child flags: MOBIRT_NODE_BELOW_EMPTY
 //             (the below child is a leaf without primitives) + MOBIRT_NODE_ABOVE_EMPTY (the above
 //             child is); traversal closes such a child without fetching it. 0 = no flags.
-//   leaf:     r = first entry in the prim-list texture, or the primitive index itself when the
-//             leaf holds exactly one primitive, g = primitive count, b = MOBIRT_NODE_LEAF, a = 0
+//   leaf:     r = its first entry in the leaf-primitive texture (every leaf with primitives, one
+//             alike), g = primitive count, b = MOBIRT_NODE_LEAF, a = 0
 #define MOBIRT_NODE_LEAF 3.0
 #define MOBIRT_NODE_BELOW_EMPTY 1.0
 #define MOBIRT_NODE_ABOVE_EMPTY 2.0
@@ -32,12 +32,19 @@
 #define MOBIRT_NODE_ABOVE_CHILD 1  // interior: index of the above child
 #define MOBIRT_NODE_AXIS 2         // interior: split axis; leaf: MOBIRT_NODE_LEAF
 #define MOBIRT_NODE_EMPTY_FLAGS 3  // interior: empty-child flags; leaf: 0
-#define MOBIRT_LEAF_FIRST 0        // leaf: first prim-list entry, or the one primitive
+#define MOBIRT_LEAF_FIRST 0        // leaf: first leaf-primitive entry
 #define MOBIRT_LEAF_COUNT 1        // leaf: primitive count
 
-// Prim-list texture: one R32F texel per entry, a primitive index.
 // Triangle texture: three RGBA32F texels per primitive: v0, v1, v2 (xyz; w unused = 0).
 #define MOBIRT_TEXELS_PER_TRIANGLE 3
+// Leaf-primitive texture: the leaves' primitives in leaf order, MOBIRT_TEXELS_PER_TRIANGLE RGBA32F
+// texels per entry: a copy of the primitive's texels in the triangle texture, with the primitive's
+// index in the third texel's w (exact float). A triangle test reads its three texels straight
+// from the leaf, without a fetch of its index first (a quarter of the test's texture calls, and the
+// triangles of a leaf side by side in memory). The triangle texture stays for what starts from a
+// primitive index (the shadow rays' hit normal, the compute pass's barycentrics).
+#define MOBIRT_LEAF_PRIM_INDEX_TEXEL 2  // the texel of an entry that holds the index ...
+#define MOBIRT_LEAF_PRIM_INDEX 3        // ... in this component (unused in every primitive kind)
 // Analytic primitives (src/core/shapes.h) take the same three texels in the same array and the
 // same index space; the w of the first texel says the kind (0 for a triangle):
 //   sphere: [0] xyz = centre, w = MOBIRT_PRIM_SPHERE; [1] x = radius; [2] unused
@@ -104,7 +111,7 @@
 // Traversal pass
 #define MOBIRT_BIND_TRACE_PARAMS 0    // uniform block
 #define MOBIRT_BIND_NODES 1
-#define MOBIRT_BIND_PRIM_LIST 2
+#define MOBIRT_BIND_LEAF_PRIMS 2
 #define MOBIRT_BIND_TRIANGLES 3
 #define MOBIRT_BIND_RAY_ORIGIN 4
 #define MOBIRT_BIND_RAY_DIRECTION 5

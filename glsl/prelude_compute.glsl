@@ -1,5 +1,5 @@
 // GLSL 450 compute dialect of mobirt's traversal (glsl/trace_compute.comp): prelude_vk.glsl's
-// specialization constants, uniforms and numerics, with the scene data (nodes, primitive lists,
+// specialization constants, uniforms and numerics, with the scene data (nodes, leaf entries,
 // triangles) in read-only storage buffers instead of textures, so that traverse.glsl and
 // offset.glsl run unchanged. A compute shader has no fragment coordinate or colour output: its
 // entry point reads its ray and writes its hit record itself.

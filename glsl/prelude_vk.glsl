@@ -71,7 +71,7 @@ int data_index(float index) {
 #elif defined(MOBIRT_DATA_STORAGE_BUFFERS) || defined(MOBIRT_DATA_DEVICE_ADDRESSES)
 // Each array's element type, by the name traverse.glsl gives it.
 #define MOBIRT_ELEMENT_u_nodes vec4
-#define MOBIRT_ELEMENT_u_prim_list float
+#define MOBIRT_ELEMENT_u_leaf_prims vec4
 #define MOBIRT_ELEMENT_u_triangles vec4
 #define MOBIRT_ELEMENT_u_ray_origin vec4
 #define MOBIRT_ELEMENT_u_ray_direction vec4
@@ -91,7 +91,6 @@ int data_index(float index) {
 // out as the storage buffers are, each reached by the address the backend pushes for its binding
 // (layout.h, MOBIRT_PASS_ADDRESSES). A name declares its slot; a read makes the reference.
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer MobirtData_vec4 { vec4 e[]; };
-layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer MobirtData_float { float e[]; };
 #define MOBIRT_REFERENCE_TYPE2(element) MobirtData_##element
 #define MOBIRT_REFERENCE_TYPE(element) MOBIRT_REFERENCE_TYPE2(element)
 #define DATA_SAMPLER(slot, name) const int mobirt_slot_##name = slot

@@ -51,7 +51,7 @@ inline glm::vec4 interior(float split_position, float above_child_index, float s
   return n;
 }
 
-// Leaves: `first` is the first prim-list entry, or the primitive itself when count == 1.
+// Leaves: `first` is the leaf's first entry in the leaf-primitive array (leaf_prim_texel).
 inline float leaf_first(const glm::vec4& n) { return n[MOBIRT_LEAF_FIRST]; }
 inline float& leaf_first(glm::vec4& n) { return n[MOBIRT_LEAF_FIRST]; }
 inline float leaf_count(const glm::vec4& n) { return n[MOBIRT_LEAF_COUNT]; }
@@ -81,6 +81,25 @@ inline glm::vec3 vertex(std::span<const glm::vec4> triangles, int32_t prim, int 
 inline float kind(const glm::vec4* texels) { return texels[0][MOBIRT_PRIM_KIND]; }
 
 }  // namespace triangle_texel
+
+// ---- Leaf primitives (MOBIRT_BIND_LEAF_PRIMS): MOBIRT_TEXELS_PER_TRIANGLE texels per entry ---
+namespace leaf_prim_texel {
+
+// The first of entry `entry`'s texels: a copy of its primitive's triangle texels.
+inline const glm::vec4* of(std::span<const glm::vec4> leaf_prims, size_t entry) {
+  return leaf_prims.data() + entry * MOBIRT_TEXELS_PER_TRIANGLE;
+}
+// The entry's primitive index (an exact float in the texels).
+inline float prim(const glm::vec4* texels) {
+  return texels[MOBIRT_LEAF_PRIM_INDEX_TEXEL][MOBIRT_LEAF_PRIM_INDEX];
+}
+// Writes the entry: the primitive's texels, then its index.
+inline void write(glm::vec4* out, const glm::vec4* triangle_texels, int32_t prim_index) {
+  for (int k = 0; k < MOBIRT_TEXELS_PER_TRIANGLE; ++k) out[k] = triangle_texels[k];
+  out[MOBIRT_LEAF_PRIM_INDEX_TEXEL][MOBIRT_LEAF_PRIM_INDEX] = static_cast<float>(prim_index);
+}
+
+}  // namespace leaf_prim_texel
 
 // ---- Materials (MOBIRT_BIND_MATERIALS) ----------------------------------------------------------
 struct MaterialTexels {

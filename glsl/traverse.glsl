@@ -14,7 +14,7 @@
 #define DATA_SAMPLER(slot, name) SAMPLER(slot, name)
 #endif
 DATA_SAMPLER(MOBIRT_BIND_NODES, u_nodes);
-DATA_SAMPLER(MOBIRT_BIND_PRIM_LIST, u_prim_list);
+DATA_SAMPLER(MOBIRT_BIND_LEAF_PRIMS, u_leaf_prims);
 DATA_SAMPLER(MOBIRT_BIND_TRIANGLES, u_triangles);
 
 // traverse()'s short stack is 16 vec4 of two entries each (s0 .. s15): the C++ refuses deeper
@@ -31,11 +31,10 @@ DATA_SAMPLER(MOBIRT_BIND_TRIANGLES, u_triangles);
 // traversal reads t alone (the rest folds away), the compute pass's wide hit record all three.
 
 // Möller-Trumbore (1997).
-vec3 intersect_mt(float prim, vec3 o, vec3 d, float tmin, float tmax) {
-  float base = prim * float(MOBIRT_TEXELS_PER_TRIANGLE);
-  vec3 v0 = mp(DATA_TEXEL(u_triangles, base).xyz);
-  vec3 e1 = mp(mp(DATA_TEXEL(u_triangles, base + 1.0).xyz) - v0);
-  vec3 e2 = mp(mp(DATA_TEXEL(u_triangles, base + 2.0).xyz) - v0);
+vec3 intersect_mt(vec3 a, vec3 b, vec3 c, vec3 o, vec3 d, float tmin, float tmax) {
+  vec3 v0 = mp(a);
+  vec3 e1 = mp(mp(b) - v0);
+  vec3 e2 = mp(mp(c) - v0);
   vec3 p = mp(mp_cross(d, e2));
   float det = mp(mp_dot(e1, p));
   if (!(det != 0.0)) return vec3(-1.0);
@@ -72,17 +71,16 @@ vec3 watertight_permute(vec3 v, vec3 d) {
 // shared edge computes exactly its negation, so a ray through an edge or a vertex meets at least
 // one triangle there. The paper's retry in double for edge functions of exactly 0 is left out: 0 is accepted on both
 // sides instead.
-vec3 intersect_watertight(float prim, vec3 o, vec3 d, float tmin, float tmax) {
-  float base = prim * float(MOBIRT_TEXELS_PER_TRIANGLE);
+vec3 intersect_watertight(vec3 v0, vec3 v1, vec3 v2, vec3 o, vec3 d, float tmin, float tmax) {
   vec3 pd = watertight_permute(d, d);
   bool flip = pd.z < 0.0;
   if (flip) pd = pd.yxz;
   float sx = mp(pd.x / pd.z);
   float sy = mp(pd.y / pd.z);
   float sz = mp(1.0 / pd.z);
-  vec3 a = watertight_permute(mp(mp(DATA_TEXEL(u_triangles, base).xyz) - o), d);
-  vec3 b = watertight_permute(mp(mp(DATA_TEXEL(u_triangles, base + 1.0).xyz) - o), d);
-  vec3 c = watertight_permute(mp(mp(DATA_TEXEL(u_triangles, base + 2.0).xyz) - o), d);
+  vec3 a = watertight_permute(mp(mp(v0) - o), d);
+  vec3 b = watertight_permute(mp(mp(v1) - o), d);
+  vec3 c = watertight_permute(mp(mp(v2) - o), d);
   if (flip) {
     a = a.yxz;
     b = b.yxz;
@@ -110,13 +108,16 @@ vec3 intersect_watertight(float prim, vec3 o, vec3 d, float tmin, float tmax) {
 }
 
 // (t, u, v) of a hit in [tmin, tmax], else t = -1.
-vec3 intersect_triangle_tuv(float prim, vec3 o, vec3 d, float tmin, float tmax) {
-  if (INTERSECT == MOBIRT_INTERSECT_WATERTIGHT) return intersect_watertight(prim, o, d, tmin, tmax);
-  return intersect_mt(prim, o, d, tmin, tmax);
+vec3 intersect_triangle_texels(vec3 v0, vec3 v1, vec3 v2, vec3 o, vec3 d, float tmin, float tmax) {
+  if (INTERSECT == MOBIRT_INTERSECT_WATERTIGHT) return intersect_watertight(v0, v1, v2, o, d, tmin, tmax);
+  return intersect_mt(v0, v1, v2, o, d, tmin, tmax);
 }
 
-float intersect_triangle(float prim, vec3 o, vec3 d, float tmin, float tmax) {
-  return intersect_triangle_tuv(prim, o, d, tmin, tmax).x;
+// The same for primitive `prim` of the triangle array.
+vec3 intersect_triangle_tuv(float prim, vec3 o, vec3 d, float tmin, float tmax) {
+  float base = prim * float(MOBIRT_TEXELS_PER_TRIANGLE);
+  return intersect_triangle_texels(DATA_TEXEL(u_triangles, base).xyz, DATA_TEXEL(u_triangles, base + 1.0).xyz,
+                                   DATA_TEXEL(u_triangles, base + 2.0).xyz, o, d, tmin, tmax);
 }
 
 // Analytic primitives (glsl/layout.h, MOBIRT_PRIM_*; src/core/shapes.h), compiled only for scenes
@@ -179,17 +180,12 @@ float intersect_cone(vec4 t0, vec4 t1, vec4 t2, vec3 o, vec3 d, float tmin, floa
 }
 
 // Any primitive: a triangle, or (ANALYTIC) a sphere or a cone, by the kind in its first texel.
-float intersect_primitive(float prim, vec3 o, vec3 d, float tmin, float tmax) {
+float intersect_primitive(vec4 t0, vec4 t1, vec4 t2, vec3 o, vec3 d, float tmin, float tmax) {
   if (ANALYTIC != 0) {
-    float base = prim * float(MOBIRT_TEXELS_PER_TRIANGLE);
-    vec4 t0 = DATA_TEXEL(u_triangles, base);
-    if (t0.w == MOBIRT_PRIM_SPHERE) return intersect_sphere(t0, DATA_TEXEL(u_triangles, base + 1.0), o, d, tmin, tmax);
-    if (t0.w == MOBIRT_PRIM_CONE) {
-      return intersect_cone(t0, DATA_TEXEL(u_triangles, base + 1.0), DATA_TEXEL(u_triangles, base + 2.0), o, d,
-                            tmin, tmax);
-    }
+    if (t0.w == MOBIRT_PRIM_SPHERE) return intersect_sphere(t0, t1, o, d, tmin, tmax);
+    if (t0.w == MOBIRT_PRIM_CONE) return intersect_cone(t0, t1, t2, o, d, tmin, tmax);
   }
-  return intersect_triangle(prim, o, d, tmin, tmax);
+  return intersect_triangle_texels(t0.xyz, t1.xyz, t2.xyz, o, d, tmin, tmax).x;
 }
 
 // The (unnormalised) geometric normal of an analytic primitive at p, outwards: a sphere's p - c;
@@ -374,14 +370,18 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
     // The leaf's triangles, one test per iteration. (Only lanes that reached a leaf: llvmpipe's
     // own loop limit may have ended the node loop early. One iteration more than the cap, so that
     // a leaf that needs more steps than are left ends at the cap check, not at the loop bound.)
-    bool single = leaf_count == 1.0;
     for (int k = 0; k < MAX_STEPS + 1; ++k) {
       float next = float(k);
       if (next >= leaf_count) break;
       if (steps >= MAX_STEPS) return vec3(best_prim, best_t, 1.0);
       steps = steps + 1;
-      float prim = single ? leaf_first : DATA_TEXEL(u_prim_list, leaf_first + next).r;
-      float t = intersect_primitive(prim, o, d, ray_tmin, ray_tmax);
+      // The leaf entry: a copy of the primitive's texels, its index in the third one's w.
+      float base = (leaf_first + next) * float(MOBIRT_TEXELS_PER_TRIANGLE);
+      vec4 t0 = DATA_TEXEL(u_leaf_prims, base);
+      vec4 t1 = DATA_TEXEL(u_leaf_prims, base + 1.0);
+      vec4 t2 = DATA_TEXEL(u_leaf_prims, base + 2.0);
+      float prim = t2[MOBIRT_LEAF_PRIM_INDEX];
+      float t = intersect_primitive(t0, t1, t2, o, d, ray_tmin, ray_tmax);
       // Ties in t go to the lower primitive index, so they do not depend on the test order.
       if (t >= 0.0 && (t < best_t || (t == best_t && prim < best_prim))) {
         best_t = t;

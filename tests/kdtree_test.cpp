@@ -20,6 +20,7 @@
 #include "test_support.h"
 #include "core/error.h"
 #include "layout.h"
+#include "texels.h"
 
 namespace mobirt {
 namespace {
@@ -334,7 +335,8 @@ void check_layout(const FlatKdTree& tree, const Positions& positions,
   }
   ASSERT_FALSE(tree.nodes.empty());
   ASSERT_LE(tree.nodes.size(), kKdIndexLimit);
-  ASSERT_LE(tree.prim_list.size(), kKdIndexLimit);
+  ASSERT_EQ(tree.leaf_prims.size() % MOBIRT_TEXELS_PER_TRIANGLE, 0u);
+  ASSERT_LE(tree.leaf_prims.size(), kKdIndexLimit);
   std::vector<int> visits(tree.nodes.size(), 0);
   std::vector<int> referenced(prims, 0);
   size_t leaves = 0, empty_leaves = 0, references = 0, max_leaf = 0, list_entries = 0;
@@ -367,13 +369,24 @@ void check_layout(const FlatKdTree& tree, const Positions& positions,
         EXPECT_EQ(n.x, 0.0f);
       }
       std::vector<size_t> leaf;
-      if (count == 1) {
-        leaf.push_back(size_t(n.x));
-      } else if (count > 1) {
+      if (count > 0) {
+        // Every leaf's entries: a copy of each primitive's texels with its index in them.
         ASSERT_EQ(float(size_t(n.x)), n.x);
-        ASSERT_LE(size_t(n.x) + count, tree.prim_list.size());
+        ASSERT_LE(size_t(n.x) + count, tree.leaf_entries());
         list_entries += count;
-        for (size_t i = 0; i < count; ++i) leaf.push_back(size_t(tree.prim_list[size_t(n.x) + i]));
+        for (size_t i = 0; i < count; ++i) {
+          const size_t entry = size_t(n.x) + i;
+          const int32_t prim = tree.leaf_prim(entry);
+          ASSERT_GE(prim, 0);
+          ASSERT_LT(size_t(prim), prims);
+          const glm::vec4* copy = leaf_prim_texel::of(tree.leaf_prims, entry);
+          const glm::vec4* original = triangle_texel::of(tree.triangles, prim);
+          for (int k = 0; k < MOBIRT_TEXELS_PER_TRIANGLE; ++k) {
+            ASSERT_EQ(glm::vec3(copy[k]), glm::vec3(original[k])) << "entry " << entry << " texel " << k;
+          }
+          ASSERT_EQ(copy[0].w, original[0].w) << "entry " << entry << ": the primitive's kind";
+          leaf.push_back(size_t(prim));
+        }
       }
       for (size_t i = 0; i < leaf.size(); ++i) {
         ASSERT_LT(leaf[i], prims);
@@ -415,7 +428,7 @@ void check_layout(const FlatKdTree& tree, const Positions& positions,
   EXPECT_EQ(s.max_leaf_size, max_leaf);
   EXPECT_EQ(s.max_depth_reached, max_depth);
   EXPECT_LE(max_depth, tree.max_depth);
-  EXPECT_EQ(tree.prim_list.size(), list_entries);
+  EXPECT_EQ(tree.leaf_entries(), list_entries);  // nothing but the leaves' entries
   const double root_area = tree.bounds.surface_area();
   if (root_area > 0.0) {
     EXPECT_NEAR(s.sah_cost, cost / root_area, 1e-3 * (1.0 + s.sah_cost));
@@ -467,7 +480,7 @@ TEST(KdTree, SampledBinningOfLargeNodesTraversesCorrectly) {
       const FlatKdTree parallel = build_kdtree(scene.positions, o);
       ASSERT_EQ(parallel.nodes.size(), tree.nodes.size());
       EXPECT_EQ(std::memcmp(parallel.nodes.data(), tree.nodes.data(), tree.nodes.size() * sizeof(glm::vec4)), 0);
-      EXPECT_EQ(parallel.prim_list, tree.prim_list);
+      EXPECT_EQ(parallel.leaf_prims, tree.leaf_prims);
     }
   }
 }
@@ -532,7 +545,7 @@ TEST(KdTree, EmptySceneIsOneEmptyLeaf) {
   EXPECT_TRUE(tree.bounds.empty());
   ASSERT_EQ(tree.nodes.size(), 1u);
   EXPECT_EQ(tree.nodes[0], glm::vec4(0.0f, 0.0f, float(MOBIRT_NODE_LEAF), 0.0f));
-  EXPECT_TRUE(tree.prim_list.empty());
+  EXPECT_TRUE(tree.leaf_prims.empty());
   EXPECT_TRUE(tree.triangles.empty());
   EXPECT_EQ(tree.stats.leaves, 1u);
   EXPECT_EQ(tree.stats.empty_leaves, 1u);
@@ -545,11 +558,15 @@ TEST(KdTree, EmptySceneIsOneEmptyLeaf) {
   EXPECT_FALSE(brute_force(tree, ray).valid());
 }
 
-TEST(KdTree, OneTriangleIsASingleLeafWithThePrimIndex) {
+TEST(KdTree, OneTriangleIsASingleLeafWithOneEntry) {
   const FlatKdTree tree = build_kdtree(one_triangle());
   ASSERT_EQ(tree.nodes.size(), 1u);
   EXPECT_EQ(tree.nodes[0], glm::vec4(0.0f, 1.0f, float(MOBIRT_NODE_LEAF), 0.0f));
-  EXPECT_TRUE(tree.prim_list.empty());
+  ASSERT_EQ(tree.leaf_entries(), 1u);
+  EXPECT_EQ(tree.leaf_prim(0), 0);
+  for (int k = 0; k < MOBIRT_TEXELS_PER_TRIANGLE; ++k) {
+    EXPECT_EQ(glm::vec3(tree.leaf_prims[size_t(k)]), glm::vec3(tree.triangles[size_t(k)]));
+  }
   Ray ray;
   ray.origin = glm::vec3(0.25f, 0.25f, 1.0f);
   const Hit hit = traverse(tree, ray);
@@ -822,12 +839,12 @@ TEST(KdTree, SameTreeForAnyThreadCount) {
           for (int repeat = 0; repeat < 2; ++repeat) {  // different schedules
             const FlatKdTree tree = build_kdtree(scene.positions, o);
             ASSERT_EQ(tree.nodes.size(), reference.nodes.size()) << threads << " threads";
-            ASSERT_EQ(tree.prim_list.size(), reference.prim_list.size()) << threads << " threads";
+            ASSERT_EQ(tree.leaf_prims.size(), reference.leaf_prims.size()) << threads << " threads";
             ASSERT_EQ(tree.triangles.size(), reference.triangles.size()) << threads << " threads";
             EXPECT_EQ(std::memcmp(tree.nodes.data(), reference.nodes.data(), tree.nodes.size() * sizeof(glm::vec4)), 0)
                 << threads << " threads";
-            EXPECT_EQ(std::memcmp(tree.prim_list.data(), reference.prim_list.data(),
-                                  tree.prim_list.size() * sizeof(float)),
+            EXPECT_EQ(std::memcmp(tree.leaf_prims.data(), reference.leaf_prims.data(),
+                                  tree.leaf_prims.size() * sizeof(glm::vec4)),
                       0)
                 << threads << " threads";
             EXPECT_EQ(std::memcmp(tree.triangles.data(), reference.triangles.data(),
@@ -853,12 +870,12 @@ TEST(KdTree, NegativeThreadCountIsBadInput) {
   test::expect_bad_input([&] { build_kdtree(random_soup(10, 3), o); }, {"threads", "-1"});
 }
 
-// The same nodes and prim lists, byte for byte.
+// The same nodes and leaf entries, byte for byte.
 void expect_same_nodes(const FlatKdTree& a, const FlatKdTree& b) {
   ASSERT_EQ(a.nodes.size(), b.nodes.size());
-  ASSERT_EQ(a.prim_list.size(), b.prim_list.size());
+  ASSERT_EQ(a.leaf_prims.size(), b.leaf_prims.size());
   EXPECT_EQ(std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(glm::vec4)), 0);
-  EXPECT_EQ(std::memcmp(a.prim_list.data(), b.prim_list.data(), a.prim_list.size() * sizeof(float)), 0);
+  EXPECT_EQ(std::memcmp(a.leaf_prims.data(), b.leaf_prims.data(), a.leaf_prims.size() * sizeof(glm::vec4)), 0);
 }
 
 // The traversal statistics of all the rays (stack 4), summed.

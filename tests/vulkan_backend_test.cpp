@@ -388,7 +388,7 @@ TEST_F(VulkanBackendTest, StorageBufferTraversalBreaksOnlyTheNamedRule) {
   // A pass that declares images at those bindings is refused before any Vulkan object exists.
   PassDesc desc;
   desc.shader = ShaderId::TraverseStorageBuffers;
-  desc.texture_bindings = {MOBIRT_BIND_NODES, MOBIRT_BIND_PRIM_LIST, MOBIRT_BIND_TRIANGLES,
+  desc.texture_bindings = {MOBIRT_BIND_NODES, MOBIRT_BIND_LEAF_PRIMS, MOBIRT_BIND_TRIANGLES,
                            MOBIRT_BIND_RAY_ORIGIN, MOBIRT_BIND_RAY_DIRECTION};
   EXPECT_THROW(backend->create_pass(desc), Error);
   // Declared as storage buffers, the pass is made.
@@ -418,7 +418,7 @@ TEST_F(VulkanBackendTest, DeviceAddressTraversalBreaksOnlyTheNamedRule) {
   PassDesc desc;
   desc.shader = ShaderId::TraverseDeviceAddresses;
   desc.uniform_vec4s = MOBIRT_TP_LIGHTS;
-  desc.texture_bindings = {MOBIRT_BIND_NODES, MOBIRT_BIND_PRIM_LIST, MOBIRT_BIND_TRIANGLES,
+  desc.texture_bindings = {MOBIRT_BIND_NODES, MOBIRT_BIND_LEAF_PRIMS, MOBIRT_BIND_TRIANGLES,
                            MOBIRT_BIND_RAY_ORIGIN, MOBIRT_BIND_RAY_DIRECTION};
   EXPECT_THROW(backend->create_pass(desc), Error);  // declared as images: storage reads refused
   desc.texture_kinds.assign(desc.texture_bindings.size(), TextureKind::DeviceAddress);

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "core/geometry.h"
+#include "core/memory.h"
 #include "core/shapes.h"
 #include "layout.h"
 
@@ -96,11 +97,12 @@ int kd_leaf_size(const KdBuildOptions& options);
 // else the build mode's: fast 6 (measured: kdtree_build.cpp, kFastClusterRefs), quality 0 (none).
 int kd_cluster_refs(const KdBuildOptions& options);
 
-// Every index that reaches a shader is an exact float below 2^24: node indices, prim-list entries,
-// triangle texels. build_kdtree throws Error(BadInput) when a tree would need more.
+// Every index that reaches a shader is an exact float below 2^24: node indices, triangle texels,
+// leaf-primitive texels. build_kdtree throws Error(BadInput) when a tree would need more.
 constexpr size_t kKdIndexLimit = size_t(1) << 24;
-// At most kKdIndexLimit / MOBIRT_TEXELS_PER_TRIANGLE triangles.
-constexpr size_t kKdMaxTriangles = kKdIndexLimit / 3;
+// At most kKdIndexLimit / MOBIRT_TEXELS_PER_TRIANGLE triangles, and as many leaf references.
+constexpr size_t kKdMaxTriangles = kKdIndexLimit / MOBIRT_TEXELS_PER_TRIANGLE;
+constexpr size_t kKdMaxLeafEntries = kKdIndexLimit / MOBIRT_TEXELS_PER_TRIANGLE;
 
 // The depth limit build_kdtree uses: options.max_depth when >= 0, else pbrt's
 // round(8 + 1.3 floor(log2 N)) (8 for N <= 1).
@@ -117,14 +119,28 @@ struct KdBuildStats {
   double sah_cost = 0.0;         // expected cost of the finished tree under the options' costs
 };
 
+// A tree's texel array. Its resize() writes nothing (core/memory.h): the build writes every texel
+// once, in parallel, where a zeroing pass first would be serial (a 1M-triangle tree's leaf
+// entries are about 100 MB).
+using TexelArray = std::vector<glm::vec4, UnwrittenAllocator<glm::vec4>>;
+
 // The tree as flat texel arrays, exactly as uploaded (see glsl/layout.h for each texel's meaning).
 struct FlatKdTree {
   Aabb bounds;                          // the root box, passed to the shaders as a uniform
-  std::vector<glm::vec4> nodes;         // one texel per node, root first
-  std::vector<float> prim_list;         // primitive indices of leaves with two or more prims
-  std::vector<glm::vec4> triangles;     // MOBIRT_TEXELS_PER_TRIANGLE texels per primitive
+  TexelArray nodes;                     // one texel per node, root first
+  TexelArray triangles;                 // MOBIRT_TEXELS_PER_TRIANGLE texels per primitive
+  // The leaves' primitives in leaf order, MOBIRT_TEXELS_PER_TRIANGLE texels per entry: each a copy
+  // of its primitive's texels with the index in it (glsl/layout.h, leaf_prim_texel in texels.h).
+  TexelArray leaf_prims;
   KdBuildStats stats;
   int max_depth = 0;                    // depth limit used; bounds the full traversal stack
+
+  size_t leaf_entries() const { return leaf_prims.size() / MOBIRT_TEXELS_PER_TRIANGLE; }
+  // The primitive of leaf entry `entry` (< leaf_entries()).
+  int32_t leaf_prim(size_t entry) const {
+    return static_cast<int32_t>(leaf_prims[entry * MOBIRT_TEXELS_PER_TRIANGLE + MOBIRT_LEAF_PRIM_INDEX_TEXEL]
+                                          [MOBIRT_LEAF_PRIM_INDEX]);
+  }
 };
 
 FlatKdTree build_kdtree(std::span<const glm::vec3> positions, const KdBuildOptions& options = {});

@@ -57,7 +57,7 @@
 //   partition their references in parallel blocks. A smaller node is built with its whole subtree
 //   by one task, depth first, in one reference arena used as a stack (a split writes the above
 //   child's references in place and the below child's after the node's, the below child is built
-//   next), into nodes and prim lists of its own with indices local to it.
+//   next), into nodes and leaf entries of its own with indices local to it.
 // - A last pass lays the parts out depth first (a node's below child is the next node, its above
 //   child follows the below child's subtree), relocates each part's local indices and sets the
 //   empty-child flags while copying it, the parts in parallel.
@@ -423,16 +423,16 @@ struct Tally {
 };
 
 // A piece of the tree built by one task: a top node with its two children, or a subtree in node
-// and prim-list arrays of its own (indices local to them, relocated when laid out).
+// and leaf-entry arrays of its own (indices local to them, relocated when laid out).
 struct Part {
   int axis = -1;  // a top node: split axis and position, children below and above
   float split = 0.0f;
   std::unique_ptr<Part> below;
   std::unique_ptr<Part> above;
   std::vector<glm::vec4> nodes;  // a subtree
-  std::vector<float> prims;
+  std::vector<int32_t> prims;  // the leaves' primitives, leaf after leaf
   Tally tally;             // this part alone; the whole after total()
-  size_t node_total = 0;   // after total(): nodes and prim-list entries including the children
+  size_t node_total = 0;   // after total(): nodes and leaf entries including the children
   size_t prim_total = 0;
 };
 
@@ -511,9 +511,9 @@ class Builder {
     total(*root);
     const Tally& t = root->tally;
     if (root->node_total > kKdIndexLimit) throw too_many_nodes();
-    if (root->prim_total > kKdIndexLimit) throw too_many_prim_references();
+    if (root->prim_total > kKdMaxLeafEntries) throw too_many_prim_references();
     tree.nodes.resize(root->node_total);
-    tree.prim_list.resize(root->prim_total);
+    tree.leaf_prims.resize(root->prim_total * MOBIRT_TEXELS_PER_TRIANGLE);
     lay_out(*root, 0, 0, tree);
 
     KdBuildStats& s = tree.stats;
@@ -811,13 +811,11 @@ class Builder {
 
   void make_leaf(const Ref* refs, size_t count, int depth, double box_area, Part& out, int64_t parent = -1) const {
     glm::vec4 node(0.0f, static_cast<float>(count), static_cast<float>(MOBIRT_NODE_LEAF), 0.0f);
-    if (count == 1) {
-      node.x = static_cast<float>(refs[0].prim);
-    } else if (count > 1) {
+    if (count > 0) {
       const size_t start = out.prims.size();
-      if (start + count > kKdIndexLimit) throw too_many_prim_references();
+      if (start + count > kKdMaxLeafEntries) throw too_many_prim_references();
       node.x = static_cast<float>(start);
-      for (size_t i = 0; i < count; ++i) out.prims.push_back(static_cast<float>(refs[i].prim));
+      for (size_t i = 0; i < count; ++i) out.prims.push_back(static_cast<int32_t>(refs[i].prim));
     }
     emit(out, node, parent);
     Tally& t = out.tally;
@@ -1317,12 +1315,18 @@ class Builder {
         node_texel::set_empty_flags(node, is_empty_leaf(nodes[i + 1]),
                                     is_empty_leaf(nodes[static_cast<size_t>(node_texel::above_child(node))]));
         node_texel::above_child(node) += node_offset;
-      } else if (node_texel::leaf_count(node) > 1.0f) {
+      } else if (node_texel::leaf_count(node) > 0.0f) {
         node_texel::leaf_first(node) += prim_offset;
       }
       out[i] = node;
     }
-    std::copy(part.prims.begin(), part.prims.end(), tree.prim_list.begin() + static_cast<std::ptrdiff_t>(prim_base));
+    // The leaves' primitives written straight into the texels the shader reads (write_triangles
+    // wrote the triangle texels before the layout began).
+    glm::vec4* entry = tree.leaf_prims.data() + prim_base * MOBIRT_TEXELS_PER_TRIANGLE;
+    for (const int32_t prim : part.prims) {
+      leaf_prim_texel::write(entry, triangle_texel::of(tree.triangles, prim), prim);
+      entry += MOBIRT_TEXELS_PER_TRIANGLE;
+    }
   }
 
   static bool is_finite(const glm::vec3& p) { return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z); }
@@ -1346,9 +1350,10 @@ class Builder {
   Error too_many_prim_references() const {
     return Error(ErrorKind::BadInput,
                  "kd-tree for " + count_text(triangle_count_) + " triangles needs more than " +
-                     count_text(kKdIndexLimit) +
-                     " leaf references (prim-list entries), the limit of exact float indices "
-                     "(2^24); lower max_depth or turn split_clipping on");
+                     count_text(kKdMaxLeafEntries) +
+                     " leaf references, the limit of exact float indices (2^24) in the "
+                     "leaf-primitive texture (" + std::to_string(MOBIRT_TEXELS_PER_TRIANGLE) +
+                     " texels each); lower the depth limit (--max-depth)");
   }
 
   std::span<const glm::vec3> positions_;

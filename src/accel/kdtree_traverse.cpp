@@ -226,6 +226,22 @@ bool intersect_shape(const glm::vec4* texels, int32_t prim, const Ray& ray, Hit&
   return t >= 0.0f && accept(t, 0.0f, 0.0f, prim, ray, hit);
 }
 
+bool intersect_triangle_texels(const glm::vec4* texels, int32_t prim, const Ray& ray, Hit& hit, const RayTest& test) {
+  const bool half = test.precision == Precision::Medium;
+  if (test.test == IntersectTest::Watertight) {
+    return half ? intersect_wt<Half>(texels, prim, ray, hit) : intersect_wt<Exact>(texels, prim, ray, hit);
+  }
+  return half ? intersect_mt<Half>(texels, prim, ray, hit) : intersect_mt<Exact>(texels, prim, ray, hit);
+}
+
+// The test of intersect_primitive on the primitive's texels (from the triangle array, or the copy
+// in a leaf entry).
+bool intersect_texels(const glm::vec4* texels, int32_t prim, const Ray& ray, Hit& hit, const RayTest& test) {
+  if (triangle_texel::kind(texels) == float(MOBIRT_PRIM_TRIANGLE)) return intersect_triangle_texels(texels, prim, ray, hit, test);
+  return test.precision == Precision::Medium ? intersect_shape<Half>(texels, prim, ray, hit)
+                                             : intersect_shape<Exact>(texels, prim, ray, hit);
+}
+
 }  // namespace
 
 bool is_analytic(const FlatKdTree& tree, int32_t prim) {
@@ -233,10 +249,7 @@ bool is_analytic(const FlatKdTree& tree, int32_t prim) {
 }
 
 bool intersect_primitive(const FlatKdTree& tree, int32_t prim, const Ray& ray, Hit& hit, const RayTest& test) {
-  if (!is_analytic(tree, prim)) return intersect_triangle(tree, prim, ray, hit, test);
-  const glm::vec4* texels = triangle_texel::of(tree.triangles, prim);
-  return test.precision == Precision::Medium ? intersect_shape<Half>(texels, prim, ray, hit)
-                                             : intersect_shape<Exact>(texels, prim, ray, hit);
+  return intersect_texels(triangle_texel::of(tree.triangles, prim), prim, ray, hit, test);
 }
 
 glm::vec3 analytic_normal(const FlatKdTree& tree, int32_t prim, const glm::vec3& p) {
@@ -249,12 +262,7 @@ glm::vec3 analytic_normal(const FlatKdTree& tree, int32_t prim, const glm::vec3&
 }
 
 bool intersect_triangle(const FlatKdTree& tree, int32_t prim, const Ray& ray, Hit& hit, const RayTest& test) {
-  const glm::vec4* texels = triangle_texel::of(tree.triangles, prim);
-  const bool half = test.precision == Precision::Medium;
-  if (test.test == IntersectTest::Watertight) {
-    return half ? intersect_wt<Half>(texels, prim, ray, hit) : intersect_wt<Exact>(texels, prim, ray, hit);
-  }
-  return half ? intersect_mt<Half>(texels, prim, ray, hit) : intersect_mt<Exact>(texels, prim, ray, hit);
+  return intersect_triangle_texels(triangle_texel::of(tree.triangles, prim), prim, ray, hit, test);
 }
 
 namespace {
@@ -366,7 +374,8 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
   ShortStack stack(capacity);
   const uint64_t cap = max_steps < 0 ? ~uint64_t(0) : static_cast<uint64_t>(max_steps);
   const glm::vec4* nodes = tree.nodes.data();
-  const float* prim_list = tree.prim_list.data();
+  const size_t entries = tree.leaf_entries();
+  const size_t prim_count = tree.triangles.size() / MOBIRT_TEXELS_PER_TRIANGLE;
 
   int32_t node = 0;
   float restart_t = t0;
@@ -441,7 +450,7 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
     // Leaf: the node fetch shares a step with the first triangle test (an empty leaf: one step).
     ++stats.nodes_visited;
     ++stats.leaves_visited;
-    const int count = checked_index(node_texel::leaf_count(n), tree.prim_list.size() + 2, "leaf count");
+    const int count = checked_index(node_texel::leaf_count(n), entries + 1, "leaf count");
     if (count == 0) {
       if (stats.steps >= cap) {
         stats.capped = 1;
@@ -456,11 +465,11 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
       }
       ++stats.steps;
       ++stats.triangles_tested;
-      const float first = node_texel::leaf_first(n);
-      const int32_t prim = checked_index(
-          count == 1 ? first : prim_list[static_cast<size_t>(checked_index(first + float(i), tree.prim_list.size(), "prim-list entry"))],
-          tree.triangles.size() / MOBIRT_TEXELS_PER_TRIANGLE, "primitive");
-      if (intersect_primitive(tree, prim, ray, best, test) && kAnyHit) {
+      // The shader's three fetches from the leaf entry: the primitive's texels and its index.
+      const size_t entry = size_t(checked_index(node_texel::leaf_first(n) + float(i), entries, "leaf entry"));
+      const glm::vec4* texels = leaf_prim_texel::of(tree.leaf_prims, entry);
+      const int32_t prim = checked_index(leaf_prim_texel::prim(texels), prim_count, "primitive");
+      if (intersect_texels(texels, prim, ray, best, test) && kAnyHit) {
         recorder.leaf(uint32_t(i + 1));
         return best;
       }

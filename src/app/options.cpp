@@ -160,7 +160,7 @@ const Setting kSettings[] = {
        o.settings.colour = v.choice(depths);
      }},
     {"--data", "READS", kFrames,
-     "how the Vulkan traversal pass reads nodes, primitive lists and\n"
+     "how the Vulkan traversal pass reads nodes, leaf entries and\n"
      "triangles: texel-buffers (uniform texel buffers), images (2D\n"
      "textures, as OpenGL ES 2.0 always does), storage-buffers (read-only;\n"
      "breaks the ES 2.0 model, to measure) or device-addresses (the same\n"

@@ -34,8 +34,8 @@ using Clock = std::chrono::steady_clock;
 
 constexpr uint32_t kTimestamps = 2;
 // The storage buffers in binding order after the uniforms (glsl/trace_compute.comp).
-enum Slot { Nodes, PrimList, Triangles, Origins, Directions, Records, kSlots };
-constexpr uint32_t kBindings[kSlots] = {MOBIRT_BIND_NODES,      MOBIRT_BIND_PRIM_LIST,     MOBIRT_BIND_TRIANGLES,
+enum Slot { Nodes, LeafPrims, Triangles, Origins, Directions, Records, kSlots };
+constexpr uint32_t kBindings[kSlots] = {MOBIRT_BIND_NODES,      MOBIRT_BIND_LEAF_PRIMS,    MOBIRT_BIND_TRIANGLES,
                                         MOBIRT_BIND_RAY_ORIGIN, MOBIRT_BIND_RAY_DIRECTION, MOBIRT_BIND_HIT_RECORDS};
 
 double ms_since(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
@@ -45,9 +45,8 @@ const ShaderSource& shader(ComputeData data = ComputeData::StorageBuffers) {
                                                          : ShaderId::TraverseCompute);
 }
 
-// The scene data's texel formats (Nodes, PrimList, Triangles), for their texel-buffer views.
-constexpr VkFormat kDataFormats[3] = {VK_FORMAT_R32G32B32A32_SFLOAT, VK_FORMAT_R32_SFLOAT,
-                                      VK_FORMAT_R32G32B32A32_SFLOAT};
+// The scene data's texel format (Nodes, LeafPrims, Triangles: RGBA32F all), for their texel-buffer views.
+constexpr VkFormat kDataFormat = VK_FORMAT_R32G32B32A32_SFLOAT;
 // data_index() turns an exact float into an int by its bits: below 2^23 (prelude_vk.glsl).
 constexpr size_t kMaxDataElements = size_t(1) << 23;
 
@@ -270,7 +269,7 @@ std::vector<std::string> ComputeEngine::info() const {
 double ComputeEngine::upload_tree(const FlatKdTree& tree) {
   Impl& d = *impl_;
   if (d.hung) throw Error(ErrorKind::Internal, "the compute engine is unusable: an earlier pass never finished");
-  const size_t most = std::max({tree.nodes.size(), tree.prim_list.size(), tree.triangles.size()});
+  const size_t most = std::max({tree.nodes.size(), tree.leaf_prims.size(), tree.triangles.size()});
   if (most > kMaxDataElements) {
     throw Error(ErrorKind::BadInput, "the kd-tree needs " + std::to_string(most) + " texels in one array; the compute "
                                      "pass indexes at most 2^23 (render a smaller scene, or split it)");
@@ -280,12 +279,12 @@ double ComputeEngine::upload_tree(const FlatKdTree& tree) {
   const VkBufferUsageFlags usage = texel ? VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT : VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
   for (vk::BufferView& v : d.views) v.reset();  // before a buffer they view may be replaced
   d.write(d.buffers[Nodes], tree.nodes.data(), tree.nodes.size() * sizeof(glm::vec4), usage);
-  d.write(d.buffers[PrimList], tree.prim_list.data(), tree.prim_list.size() * sizeof(float), usage);
+  d.write(d.buffers[LeafPrims], tree.leaf_prims.data(), tree.leaf_prims.size() * sizeof(glm::vec4), usage);
   d.write(d.buffers[Triangles], tree.triangles.data(), tree.triangles.size() * sizeof(glm::vec4), usage);
   for (int i = 0; texel && i < 3; ++i) {
     VkBufferViewCreateInfo info{VK_STRUCTURE_TYPE_BUFFER_VIEW_CREATE_INFO};
     info.buffer = d.buffers[i].buffer.get();
-    info.format = kDataFormats[i];
+    info.format = kDataFormat;
     info.range = VK_WHOLE_SIZE;
     VkBufferView view = VK_NULL_HANDLE;
     VK_CHECK(vkCreateBufferView(d.device.handle(), &info, nullptr, &view));

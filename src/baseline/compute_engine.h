@@ -47,7 +47,7 @@ struct ComputeTraversal {
   int max_steps = 2048;  // the loop cap; a capped ray comes back with MOBIRT_HIT_CAPPED
 };
 
-// How the pass reads the scene data (nodes, primitive lists, triangles): read-only storage buffers
+// How the pass reads the scene data (nodes, leaf entries, triangles): read-only storage buffers
 // (glsl/trace_compute.comp), or uniform texel buffers as mobirt's fragment pass reads them
 // (trace_compute_texel_buffers.comp), which tells the cost of the stage from the cost of the reads.
 enum class ComputeData { StorageBuffers, TexelBuffers };
@@ -69,7 +69,7 @@ class ComputeEngine {
   // breaks, one per line.
   std::vector<std::string> info() const;
 
-  // The tree's nodes, primitive lists and triangles into the pass's buffers; returns the
+  // The tree's nodes, leaf entries and triangles into the pass's buffers; returns the
   // milliseconds it took (CPU copies into mapped memory). Throws Error(BadInput) for an array over
   // 2^23 elements (the shaders' index conversion, as on the fragment path).
   double upload_tree(const FlatKdTree& tree);

@@ -128,7 +128,7 @@ void for_each_shadow_ray(const FlatKdTree& tree, std::span<const Light> lights, 
 // full-stack walk of a sound tree visits every node at most once and tests every primitive
 // reference at most once, so more steps than this means a cycle (issue 8: never hang).
 int64_t fallback_step_bound(const FlatKdTree& tree) {
-  return 4 * int64_t(tree.nodes.size() + tree.prim_list.size()) + 64;
+  return 4 * int64_t(tree.nodes.size() + tree.leaf_entries()) + 64;
 }
 
 [[noreturn]] void corrupt_tree(int64_t bound) {

@@ -110,7 +110,7 @@ struct Renderer::Data {
     TextureHandle handle;
     uint32_t rows = 0;
   };
-  Texture nodes, prim_list, triangles, materials;
+  Texture nodes, leaf_prims, triangles, materials;
   Texture ray_origin, ray_direction, hit_position, hit_normal, hit_texcoord;
   // The scene's atlas pages, or one 1x1 stand-in without textures (the pass binds every page slot).
   std::vector<TextureHandle> atlas_pages;
@@ -213,7 +213,7 @@ Renderer::Renderer(Backend& backend, const RenderSettings& settings)
 
 Renderer::~Renderer() {
   Data& d = *data_;
-  for (Data::Texture* t : {&d.nodes, &d.prim_list, &d.triangles, &d.materials, &d.ray_origin,
+  for (Data::Texture* t : {&d.nodes, &d.leaf_prims, &d.triangles, &d.materials, &d.ray_origin,
                            &d.ray_direction, &d.hit_position, &d.hit_normal, &d.hit_texcoord}) {
     if (t->handle) backend_.destroy(t->handle);
   }
@@ -255,7 +255,7 @@ PassHandle Renderer::trace_pass(int lights, Packing packing, bool analytic) {
                          {MOBIRT_SPEC_OFFSET, int(settings_.shadow_rays.offset.mode)},
                          {MOBIRT_SPEC_ANALYTIC, int(analytic)}};
   desc.uniform_vec4s = MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * uint32_t(lights);
-  desc.texture_bindings = {MOBIRT_BIND_NODES, MOBIRT_BIND_PRIM_LIST, MOBIRT_BIND_TRIANGLES,
+  desc.texture_bindings = {MOBIRT_BIND_NODES, MOBIRT_BIND_LEAF_PRIMS, MOBIRT_BIND_TRIANGLES,
                            MOBIRT_BIND_RAY_ORIGIN, MOBIRT_BIND_RAY_DIRECTION};
   desc.texture_kinds.assign(desc.texture_bindings.size(), data_kind_);
   PassHandle pass = backend_.create_pass(desc);
@@ -330,7 +330,8 @@ void Renderer::upload_tree(const FlatKdTree& tree) {
     }
   };
   upload_padded(d.nodes, tree.nodes.data(), tree.nodes.size(), sizeof(glm::vec4), TexelFormat::RGBA32F);
-  upload_padded(d.prim_list, tree.prim_list.data(), tree.prim_list.size(), sizeof(float), TexelFormat::R32F);
+  upload_padded(d.leaf_prims, tree.leaf_prims.data(), tree.leaf_prims.size(), sizeof(glm::vec4),
+                TexelFormat::RGBA32F);
   upload_padded(d.triangles, tree.triangles.data(), tree.triangles.size(), sizeof(glm::vec4),
                 TexelFormat::RGBA32F);
 }
@@ -367,7 +368,7 @@ TraceResult Renderer::trace_uploaded(const Scene& scene, const FlatKdTree& tree,
   const PassHandle pass = trace_pass(lights, result.packing, !settings_.specialize || !scene.shapes.empty());
   const std::vector<float> uniforms = trace_uniforms(tree, shadow_lights(scene), settings_.shadow_rays, lights);
   const Data& d = *data_;
-  const TextureHandle textures[] = {d.nodes.handle, d.prim_list.handle, d.triangles.handle,
+  const TextureHandle textures[] = {d.nodes.handle, d.leaf_prims.handle, d.triangles.handle,
                                     d.ray_origin.handle, d.ray_direction.handle};
   result.texels.resize(rays.count());
   result.timing = backend_.run_pass(pass, textures, uniforms, rays.width, rays.count(), result.texels);

@@ -23,7 +23,7 @@
 
 namespace mobirt {
 
-// How the traversal pass reads the scene data (nodes, primitive lists, triangles): uniform texel
+// How the traversal pass reads the scene data (nodes, leaf entries, triangles): uniform texel
 // buffers where the backend has them (Vulkan), else 2D images; images always on OpenGL ES 2.0.
 // StorageBuffers (Vulkan; else images): read-only storage buffers, a measurement variant that
 // breaks the ES 2.0 model by name (shader_constraints.h: kEs2StorageReads). DeviceAddresses (Vulkan
