@@ -51,7 +51,8 @@
 //   nodes hold a handful of references, and a dense sweep over every bin of every axis was the
 //   largest cost of the first builder (perf: 40% of its time on the toaster, 58% on a
 //   100K-triangle soup).
-// - Nodes of at least kSubtreeRefs references are "top nodes": each is a task, its children run
+// - Nodes of at least subtree_refs() references (1,024; a quarter of a small scene, at least 256)
+//   are "top nodes": each is a task, its children run
 //   in parallel (tbb::parallel_invoke), the below child keeps the node's reference buffer (the
 //   partition writes it in place), the above child gets one from a pool, and the largest nodes
 //   partition their references in parallel blocks. A smaller node is built with its whole subtree
@@ -121,6 +122,11 @@ constexpr float kMinWidthRelative = 1e-5f;
 
 // Work split. Fixed numbers, never derived from the thread count: the tree must not depend on it.
 constexpr size_t kSubtreeRefs = 1024;  // a node with fewer references: one task builds its subtree
+// ... or with fewer than a quarter of the scene's primitives, down to this many: a scene of a few
+// thousand triangles otherwise made two or three subtree tasks of uneven size, and the second
+// thread spun in TBB for a third of the build (fish, 1,392 triangles, 2 threads: 0.98 -> 0.75 ms,
+// the tree the same; README, *Smaller tasks for small scenes*).
+constexpr size_t kMinSubtreeRefs = 256;
 constexpr size_t kBlockRefs = 8192;    // top nodes of 2 blocks or more partition blocks in parallel
 // Nodes of up to this many references sweep only the planes next to occupied bins; larger ones
 // (whose bins are mostly occupied) evaluate every plane, four at a time. The AVX2 sweep (eight
@@ -497,6 +503,7 @@ class Builder {
                         : options.build == KdBuildMode::Fast ? kFastSmallSplitGain
                                                              : 0.0f;
     max_leaf_prims_ = size_t(kd_leaf_size(options));
+    subtree_refs_ = std::clamp(triangle_count_ / 4, kMinSubtreeRefs, kSubtreeRefs);
     cluster_refs_ = size_t(kd_cluster_refs(options));
   }
 
@@ -582,7 +589,7 @@ class Builder {
       min_width_ = std::max(kMinWidthRelative * scale, std::numeric_limits<float>::min());
     }
     std::unique_ptr<Histogram> hist;
-    if (n >= kSubtreeRefs && can_split(n, 0, area(root))) {
+    if (n >= subtree_refs_ && can_split(n, 0, area(root))) {
       hist = std::make_unique<Histogram>(bins_);
       std::vector<Histogram> block_hists(blocks, Histogram(bins_));
       const Binner binner(root, bins_);
@@ -611,7 +618,7 @@ class Builder {
   std::unique_ptr<Part> build_part(RefBuffer refs, const Box& box, int depth, std::unique_ptr<Histogram> hist) {
     auto part = std::make_unique<Part>();
     const size_t n = refs.size();
-    if (n < kSubtreeRefs) {
+    if (n < subtree_refs_) {
       // A subtree's nodes need every reference binned: a sample (rare, after a very uneven split
       // of a large node) is binned again by build_subtree.
       if (hist && hist->binned() != n) hist.reset();
@@ -1368,6 +1375,7 @@ class Builder {
   float small_split_gain_ = 0.0f;  // options_.small_split_gain, the mode's when -1
   size_t max_leaf_prims_ = 1;      // kd_leaf_size(options_)
   size_t cluster_refs_ = 0;        // kd_cluster_refs(options_)
+  size_t subtree_refs_ = kSubtreeRefs;  // smaller nodes are built by one task with their subtree
   BufferPool pool_;
   tbb::enumerable_thread_specific<SubtreeScratch> scratch_;
 };
