@@ -21,6 +21,7 @@
 #include "scene/loader.h"
 #include "test_scenes.h"
 #include "test_support.h"
+#include "texels.h"
 #include "vulkan_fixture.h"
 
 namespace mobirt {
@@ -128,6 +129,85 @@ TraceResult trace_corrupt(Backend& backend, const Corruptible& c, const FlatKdTr
   TraceResult result = renderer.trace(c.scene, tree, c.rays);
   EXPECT_LT(elapsed_ms(start), 30000.0) << "the traversal pass did not end within its cap";
   return result;
+}
+
+// The Vulkan backend with a smaller texel-buffer limit, as a device with a smaller
+// maxTexelBufferElements (or the 2^23 texels the shaders index) would have: refuses larger buffers
+// with Error(BadInput), as the real one does, and counts the refusals.
+class LimitedBackend final : public Backend {
+ public:
+  LimitedBackend(Backend& inner, uint32_t limit) : inner_(inner), limit_(limit) {}
+  DeviceInfo device_info() const override { return inner_.device_info(); }
+  TextureHandle create_texture(uint32_t width, uint32_t height, TexelFormat format) override {
+    return inner_.create_texture(width, height, format);
+  }
+  TextureHandle create_texel_buffer(uint32_t texels, TexelFormat format) override {
+    if (texels > limit_) {
+      ++refused;
+      throw Error(ErrorKind::BadInput, "a texel buffer of " + std::to_string(texels) + " texels exceeds the limit");
+    }
+    return inner_.create_texel_buffer(texels, format);
+  }
+  TextureHandle create_storage_buffer(uint32_t texels, TexelFormat format) override {
+    return inner_.create_storage_buffer(texels, format);
+  }
+  void upload(TextureHandle texture, const void* data, size_t bytes) override { inner_.upload(texture, data, bytes); }
+  void destroy(TextureHandle texture) override { inner_.destroy(texture); }
+  PassHandle create_pass(const PassDesc& desc) override { return inner_.create_pass(desc); }
+  void destroy(PassHandle pass) override { inner_.destroy(pass); }
+  PassTiming run_pass(PassHandle pass, std::span<const TextureHandle> textures, std::span<const float> uniforms,
+                      uint32_t width, uint32_t count, std::span<uint32_t> out) override {
+    return inner_.run_pass(pass, textures, uniforms, width, count, out);
+  }
+  std::vector<std::string> take_debug_messages() override { return inner_.take_debug_messages(); }
+  int refused = 0;
+
+ private:
+  Backend& inner_;
+  uint32_t limit_;
+};
+
+// A tree of one leaf of `count` copies of a small triangle (entries and triangles: 3 texels each).
+FlatKdTree one_leaf_tree(uint32_t count) {
+  FlatKdTree tree;
+  tree.bounds = Aabb{glm::vec3(-1.0f), glm::vec3(1.0f)};
+  tree.nodes.push_back(node_texel::leaf(0.0f, float(count)));
+  for (uint32_t i = 0; i < count; ++i) {
+    const glm::vec4 v[3] = {glm::vec4(0.0f, 0.0f, 0.0f, 0.0f), glm::vec4(1e-3f, 0.0f, 0.0f, 0.0f),
+                            glm::vec4(0.0f, 1e-3f, 0.0f, 0.0f)};
+    for (const glm::vec4& t : v) tree.triangles.push_back(t);
+    tree.leaf_prims.resize(tree.leaf_prims.size() + MOBIRT_TEXELS_PER_TRIANGLE);
+    leaf_prim_texel::write(tree.leaf_prims.data() + tree.leaf_prims.size() - MOBIRT_TEXELS_PER_TRIANGLE, v,
+                           int32_t(i));
+  }
+  return tree;
+}
+
+// The renderer grows its data textures with headroom (1.5x) so that an animation whose tree grows
+// does not reallocate every frame. A frame whose tree fits under the backend's limit must not be
+// refused because the headroom would not: the leaf entries of a 1M-triangle tree take about
+// three quarters of the 2^23 texels a texel buffer holds. Here, with a limit of 5 rows of
+// MOBIRT_DATA_WIDTH texels, a tree of 4 rows, then one of 5 (headroom: 6, refused), then one of 6.
+TEST(DataTextures, GrowToTheExactSizeWhereTheHeadroomPassesTheLimit) {
+  const std::unique_ptr<Backend> vulkan = create_vulkan_backend(test::validated_options());
+  LimitedBackend backend(*vulkan, 5 * MOBIRT_DATA_WIDTH);
+  const Scene scene = test::box_grid_scene();
+  const RayBatch rays = primary_rays(*scene.camera, 8, 8);
+  Renderer renderer(backend, RenderSettings{});
+  const uint32_t per_row = MOBIRT_DATA_WIDTH / MOBIRT_TEXELS_PER_TRIANGLE;  // entries in a row of texels
+  EXPECT_EQ(renderer.trace(scene, one_leaf_tree(4 * per_row - 10), rays).texels.size(), rays.count());
+  EXPECT_EQ(backend.refused, 0);
+  EXPECT_EQ(renderer.trace(scene, one_leaf_tree(5 * per_row - 10), rays).texels.size(), rays.count());
+  EXPECT_GE(backend.refused, 1) << "the headroom was refused and the exact size taken";
+  // More than the limit itself stays a clear error.
+  try {
+    (void)renderer.trace(scene, one_leaf_tree(6 * per_row - 10), rays);
+    ADD_FAILURE() << "a tree over the backend's limit was accepted";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::BadInput);
+  }
+  const std::vector<std::string> messages = vulkan->take_debug_messages();
+  EXPECT_TRUE(messages.empty()) << test::join(messages);
 }
 
 class CorruptTree : public test::VulkanTest {};

@@ -344,7 +344,7 @@ TEST_F(VulkanBackendTest, ConstraintShadersAreRefused) {
 TEST_F(VulkanBackendTest, TexelBufferTraversalKeepsTheConstraints) {
   const ShaderInterface s = reflect_spirv(shader_source(ShaderId::TraverseTexelBuffers).spirv);
   ASSERT_TRUE(s.valid);
-  EXPECT_EQ(s.sampled_textures, 5);  // nodes, primitive list, triangles, ray origins and directions
+  EXPECT_EQ(s.sampled_textures, 5);  // nodes, leaf entries, triangles, ray origins and directions
   EXPECT_EQ(s.storage_resources, 0);
   EXPECT_EQ(s.storage_writes, 0);
   EXPECT_TRUE(es2_constraints_broken(shader_source(ShaderId::TraverseTexelBuffers).spirv).empty());
@@ -373,7 +373,7 @@ TEST_F(VulkanBackendTest, StorageBufferTraversalBreaksOnlyTheNamedRule) {
   const std::span<const uint32_t> spirv = shader_source(ShaderId::TraverseStorageBuffers).spirv;
   const ShaderInterface s = reflect_spirv(spirv);
   ASSERT_TRUE(s.valid);
-  EXPECT_EQ(s.storage_resources, 5);  // nodes, primitive list, triangles, ray origins and directions
+  EXPECT_EQ(s.storage_resources, 5);  // nodes, leaf entries, triangles, ray origins and directions
   EXPECT_EQ(s.storage_writes, 0);
   EXPECT_EQ(s.sampled_textures, 0);
   EXPECT_EQ(es2_constraints_broken(spirv), std::vector<std::string>{kEs2StorageReads});

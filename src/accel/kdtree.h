@@ -184,7 +184,7 @@ inline bool closer_hit(float t, int32_t prim, const Hit& best) {
 }
 
 // The ray/triangle test `test` (Möller-Trumbore by default, single precision) on the triangle
-// texels of prim, the same arithmetic as glsl/traverse.glsl's intersect_triangle(). Accepts t in
+// texels of prim, the same arithmetic as glsl/traverse.glsl's intersect_triangle_texels(). Accepts t in
 // [ray.tmin, ray.tmax] that is closer_hit() than hit; then fills hit and returns true.
 // A degenerate triangle (det == 0) or NaN anywhere is never a hit.
 bool intersect_triangle(const FlatKdTree& tree, int32_t prim, const Ray& ray, Hit& hit, const RayTest& test = {});

@@ -51,7 +51,7 @@
 //   nodes hold a handful of references, and a dense sweep over every bin of every axis was the
 //   largest cost of the first builder (perf: 40% of its time on the toaster, 58% on a
 //   100K-triangle soup).
-// - Nodes of at least subtree_refs() references (1,024; a quarter of a small scene, at least 256)
+// - Nodes of at least subtree_refs_ references (1,024; a quarter of a small scene, at least 256)
 //   are "top nodes": each is a task, its children run
 //   in parallel (tbb::parallel_invoke), the below child keeps the node's reference buffer (the
 //   partition writes it in place), the above child gets one from a pool, and the largest nodes

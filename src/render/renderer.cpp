@@ -225,15 +225,29 @@ Renderer::~Renderer() {
 TextureHandle Renderer::ensure_texture(TextureHandle& handle, uint32_t& capacity_rows, uint32_t width,
                                        uint32_t rows, TexelFormat format, TextureKind kind) {
   if (handle && capacity_rows >= rows) return handle;
+  // Grow with headroom so that an animation whose tree changes size does not reallocate often;
+  // where the headroom alone passes the backend's limit (2^23 texels a texel buffer, the largest
+  // 2D texture), the exact size, so that a frame that fits is never refused for its headroom.
+  uint32_t grown = std::max(rows, capacity_rows + capacity_rows / 2);
   if (handle) backend_.destroy(handle);
-  // Grow with headroom so that an animation whose tree changes size does not reallocate often.
-  const uint32_t grown = std::max(rows, capacity_rows + capacity_rows / 2);
+  handle = {};
+  capacity_rows = 0;
   // A buffer holds the same rows end to end: DATA_TEXEL's index is the texel's.
-  switch (kind) {
-    case TextureKind::TexelBuffer: handle = backend_.create_texel_buffer(width * grown, format); break;
-    case TextureKind::StorageBuffer:
-    case TextureKind::DeviceAddress: handle = backend_.create_storage_buffer(width * grown, format); break;
-    case TextureKind::Image2D: handle = backend_.create_texture(width, grown, format); break;
+  const auto create = [&](uint32_t n) {
+    switch (kind) {
+      case TextureKind::TexelBuffer: return backend_.create_texel_buffer(width * n, format);
+      case TextureKind::StorageBuffer:
+      case TextureKind::DeviceAddress: return backend_.create_storage_buffer(width * n, format);
+      case TextureKind::Image2D: break;
+    }
+    return backend_.create_texture(width, n, format);
+  };
+  try {
+    handle = create(grown);
+  } catch (const Error& e) {
+    if (e.kind() != ErrorKind::BadInput || grown == rows) throw;
+    grown = rows;
+    handle = create(grown);
   }
   capacity_rows = grown;
   return handle;

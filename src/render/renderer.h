@@ -122,7 +122,7 @@ class Renderer {
 
   Backend& backend_;
   RenderSettings settings_;
-  // Of the nodes, primitive list and triangles, and of the rays, the shading pass's inputs and the
+  // Of the nodes, leaf entries and triangles, and of the rays, the shading pass's inputs and the
   // materials (a 2D texelFetch per input costs llvmpipe an indirect call with mip-level work).
   TextureKind data_kind_ = TextureKind::Image2D;
   std::unique_ptr<Data> data_;
