@@ -105,24 +105,8 @@ void order_for_traversal(RayBatch& batch, const Aabb& bounds, float sort_above) 
     order_in_simd_tiles(batch);
     return;
   }
-  const std::vector<uint32_t> order = coherent_ray_order(batch, bounds);
-  const uint32_t tiled = simd_tiled_rays(batch);
-  RayBatch out;
-  out.width = batch.width;
-  out.origin.resize(n);
-  out.direction.resize(n);
-  out.pixel.resize(n);
-  out.weight.resize(n);
   // One gather: the k-th ray of the sorted order straight to its texel of the tiled layout.
-  parallel_for(n, 0, [&](uint32_t k) {
-    const uint32_t from = order[k];
-    const uint32_t to = k < tiled ? simd_tile_texel(k, batch.width) : k;
-    out.origin[to] = batch.origin[from];
-    out.direction[to] = batch.direction[from];
-    out.pixel[to] = batch.pixel[from];
-    out.weight[to] = batch.weight[from];
-  }, 4096);
-  batch = std::move(out);
+  order_in_simd_tiles(batch, coherent_ray_order(batch, bounds));
 }
 
 }  // namespace mobirt

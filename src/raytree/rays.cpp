@@ -1,5 +1,6 @@
 #include "raytree/rays.h"
 
+#include "core/error.h"
 #include "core/parallel.h"
 
 namespace mobirt {
@@ -39,23 +40,41 @@ RayBatch primary_rays(const Camera& camera, int width, int height) {
   return batch;
 }
 
-void order_in_simd_tiles(RayBatch& batch) {
+namespace {
+
+// The tiled layout of the batch's rays taken in order `order` (all of them in batch order when
+// empty), written by one parallel gather into arrays not written before (a serial copy of the
+// whole batch, then a serial scatter over it, cost about 0.4 ms a secondary generation).
+void gather_in_simd_tiles(RayBatch& batch, std::span<const uint32_t> order) {
+  const uint32_t n = batch.count();
   const uint32_t tiled = simd_tiled_rays(batch);
-  if (tiled == 0) return;
   RayBatch out;
   out.width = batch.width;
-  out.origin = batch.origin;
-  out.direction = batch.direction;
-  out.pixel = batch.pixel;
-  out.weight = batch.weight;
-  for (uint32_t k = 0; k < tiled; ++k) {
-    const uint32_t i = simd_tile_texel(k, batch.width);
-    out.origin[i] = batch.origin[k];
-    out.direction[i] = batch.direction[k];
-    out.pixel[i] = batch.pixel[k];
-    out.weight[i] = batch.weight[k];
-  }
+  out.origin.resize(n);
+  out.direction.resize(n);
+  out.pixel.resize(n);
+  out.weight.resize(n);
+  parallel_for(n, 0, [&](uint32_t k) {
+    const uint32_t from = order.empty() ? k : order[k];
+    const uint32_t to = k < tiled ? simd_tile_texel(k, batch.width) : k;
+    out.origin[to] = batch.origin[from];
+    out.direction[to] = batch.direction[from];
+    out.pixel[to] = batch.pixel[from];
+    out.weight[to] = batch.weight[from];
+  }, 4096);
   batch = std::move(out);
+}
+
+}  // namespace
+
+void order_in_simd_tiles(RayBatch& batch) {
+  if (simd_tiled_rays(batch) == 0) return;
+  gather_in_simd_tiles(batch, {});
+}
+
+void order_in_simd_tiles(RayBatch& batch, std::span<const uint32_t> order) {
+  if (order.size() != batch.count()) throw Error(ErrorKind::Internal, "order_in_simd_tiles: the order is not the batch's size");
+  gather_in_simd_tiles(batch, order);
 }
 
 }  // namespace mobirt

@@ -5,6 +5,7 @@
 #include <glm/glm.hpp>
 
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "core/camera.h"
@@ -44,6 +45,9 @@ RayBatch primary_rays(const Camera& camera, int width, int height);
 // after the last full pair of rows keep their order. Needs width to be a multiple of 4 (else the
 // batch is left as it is).
 void order_in_simd_tiles(RayBatch& batch);
+// The same layout for the rays taken in the order `order` (a permutation of the batch's indices):
+// the k-th ray of the order goes where order_in_simd_tiles puts the k-th ray. One parallel gather.
+void order_in_simd_tiles(RayBatch& batch, std::span<const uint32_t> order);
 
 // Where order_in_simd_tiles puts the k-th ray of a batch of rows `width` (a multiple of 4), for k
 // inside the full pairs of rows: texel index y * width + x.
