@@ -14,6 +14,7 @@
 #include "core/memory.h"
 #include "core/shapes.h"
 #include "layout.h"
+#include "texels.h"
 
 namespace mobirt {
 
@@ -138,8 +139,7 @@ struct FlatKdTree {
   size_t leaf_entries() const { return leaf_prims.size() / MOBIRT_TEXELS_PER_TRIANGLE; }
   // The primitive of leaf entry `entry` (< leaf_entries()).
   int32_t leaf_prim(size_t entry) const {
-    return static_cast<int32_t>(leaf_prims[entry * MOBIRT_TEXELS_PER_TRIANGLE + MOBIRT_LEAF_PRIM_INDEX_TEXEL]
-                                          [MOBIRT_LEAF_PRIM_INDEX]);
+    return static_cast<int32_t>(leaf_prim_texel::prim(leaf_prim_texel::of(leaf_prims, entry)));
   }
 };
 
