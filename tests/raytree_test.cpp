@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstring>
 #include <sstream>
+#include <stdexcept>
 #include <vector>
 
 
@@ -225,6 +226,22 @@ TEST(ParallelFor, VisitsEveryIndexOnce) {
       parallel_for(uint32_t(seen.size()), threads, [&](uint32_t i) { seen[i].fetch_add(1); }, chunk);
       for (size_t i = 0; i < seen.size(); ++i) ASSERT_EQ(seen[i].load(), 1) << i << ", " << threads << " threads";
     }
+  }
+}
+
+// An exception in one index reaches the caller, the other chunks stop, and the next loop on the
+// same (persistent) threads runs in full.
+TEST(ParallelFor, RethrowsAnExceptionAndRunsTheNextLoop) {
+  for (unsigned threads : {1u, 2u, 0u}) {
+    std::atomic<int> visited{0};
+    EXPECT_THROW(parallel_for(100000, threads, [&](uint32_t i) {
+      visited.fetch_add(1);
+      if (i == 10) throw std::runtime_error("index 10");
+    }, 4), std::runtime_error) << threads << " threads";
+    EXPECT_LT(visited.load(), 100000) << "the loop went on after the exception, " << threads << " threads";
+    std::vector<std::atomic<int>> seen(5000);
+    parallel_for(uint32_t(seen.size()), threads, [&](uint32_t i) { seen[i].fetch_add(1); }, 16);
+    for (size_t i = 0; i < seen.size(); ++i) ASSERT_EQ(seen[i].load(), 1) << i << ", " << threads << " threads";
   }
 }
 
