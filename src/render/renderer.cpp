@@ -413,41 +413,41 @@ void Renderer::upload_materials(const Scene& scene) {
 
 std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
                                        std::span<const SurfaceHit> hits, GenerationTimings& timings) {
-  // The shading pass's inputs, one texel per ray in the ray layout.
+  // The shading pass's inputs, one texel per ray in the ray layout: position and material,
+  // normal and shadow bits, and texture coordinates where the scene has textures (the CPU computed
+  // them in decoding). On all cores, like the decoding that made the hits (a serial loop here cost
+  // 0.5 ms a generation), into arrays not zeroed first: every texel is written below. One pass over
+  // the records for all three: a second pass for the texture coordinates read the 72-byte records
+  // back from memory again (1.3 % of a textured toaster frame's CPU time under perf).
+  Data& d = *data_;
+  prepare_atlas(scene);  // says whether the scene has textures
   auto stage = Clock::now();
-  // On all cores, like the decoding that made the hits (a serial loop here cost 0.5 ms a generation),
-  // into arrays not zeroed first: every texel is written below.
   constexpr uint32_t kChunk = 1024;
   const uint32_t n = rays.count();
   const std::unique_ptr<HitPositionTexel[]> position = std::make_unique_for_overwrite<HitPositionTexel[]>(n);
   const std::unique_ptr<HitNormalTexel[]> normal = std::make_unique_for_overwrite<HitNormalTexel[]>(n);
+  const std::unique_ptr<HitTexcoordTexel[]> uv =
+      d.has_atlas ? std::make_unique_for_overwrite<HitTexcoordTexel[]>(n) : nullptr;
   parallel_for(n, 0, [&](uint32_t i) {
     const SurfaceHit& h = hits[i];
     if (!h.valid()) {
       position[i] = HitPositionTexel::miss();
       normal[i] = HitNormalTexel{glm::vec3(0.0f), 0.0f};
+      if (uv) uv[i] = HitTexcoordTexel{glm::vec2(0.0f), glm::vec2(0.0f)};
       return;
     }
     position[i] = HitPositionTexel{h.position, float(h.material)};
     normal[i] = HitNormalTexel{h.normal, float(h.mask)};
+    if (uv) uv[i] = HitTexcoordTexel{h.texcoord, glm::vec2(0.0f)};
   }, kChunk);
   timings.decode_ms += elapsed_ms(stage);
 
-  Data& d = *data_;
-  prepare_atlas(scene);
   ensure_texture(d.hit_position.handle, d.hit_position.rows, rays.width, rays.rows(), TexelFormat::RGBA32F, data_kind_);
   ensure_texture(d.hit_normal.handle, d.hit_normal.rows, rays.width, rays.rows(), TexelFormat::RGBA32F, data_kind_);
   backend_.upload(d.hit_position.handle, position.get(), size_t(n) * sizeof(HitPositionTexel));
   backend_.upload(d.hit_normal.handle, normal.get(), size_t(n) * sizeof(HitNormalTexel));
-  // Texture coordinates only where the scene has textures (the CPU computed them in decoding).
   TextureHandle texcoords = d.hit_position.handle;
-  if (d.has_atlas) {
-    stage = Clock::now();
-    const std::unique_ptr<HitTexcoordTexel[]> uv = std::make_unique_for_overwrite<HitTexcoordTexel[]>(n);
-    parallel_for(n, 0, [&](uint32_t i) {
-      uv[i] = HitTexcoordTexel{hits[i].valid() ? hits[i].texcoord : glm::vec2(0.0f), glm::vec2(0.0f)};
-    }, kChunk);
-    timings.decode_ms += elapsed_ms(stage);
+  if (uv) {
     ensure_texture(d.hit_texcoord.handle, d.hit_texcoord.rows, rays.width, rays.rows(), TexelFormat::RGBA32F,
                    data_kind_);
     backend_.upload(d.hit_texcoord.handle, uv.get(), size_t(n) * sizeof(HitTexcoordTexel));
