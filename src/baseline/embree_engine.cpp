@@ -1,6 +1,7 @@
 #include "baseline/embree_engine.h"
 
 #include <embree3/rtcore.h>
+#include <tbb/task_arena.h>
 
 #include <cmath>
 #include <limits>
@@ -40,6 +41,7 @@ struct EmbreeEngine::Impl {
   RTCGeometry geometry = nullptr;
   size_t capacity = 0;  // triangles the geometry's buffers hold
   bool dynamic_low = true;
+  unsigned threads = 0;  // the build's TBB arena (0: the calling thread's)
 
   ~Impl() {
     if (scene) rtcReleaseScene(scene);
@@ -74,9 +76,13 @@ struct EmbreeEngine::Impl {
 };
 
 EmbreeEngine::EmbreeEngine(const EmbreeOptions& options) : impl_(std::make_unique<Impl>()) {
-  const std::string config = options.threads ? "threads=" + std::to_string(options.threads) : std::string();
-  impl_->device = rtcNewDevice(config.c_str());
-  if (!impl_->device) embree_failed(nullptr, "rtcNewDevice(\"" + config + "\")");
+  // No "threads=N" in the device's configuration: Embree 3 turns it into a process-wide TBB limit
+  // (tbb::global_control) that would cap every other TBB loop of the process too, mobirt's own
+  // frame stages (core/parallel.h) included. The build runs in a TBB arena of N threads instead,
+  // which Embree's TBB tasks stay in.
+  impl_->device = rtcNewDevice(nullptr);
+  if (!impl_->device) embree_failed(nullptr, "rtcNewDevice");
+  impl_->threads = options.threads;
   impl_->scene = rtcNewScene(impl_->device);
   if (!impl_->scene) embree_failed(impl_->device, "rtcNewScene");
   impl_->dynamic_low = options.dynamic_low;
@@ -119,7 +125,12 @@ void EmbreeEngine::build(std::span<const glm::vec3> positions) {
     rtcUpdateGeometryBuffer(impl_->geometry, RTC_BUFFER_TYPE_VERTEX, 0);
     rtcCommitGeometry(impl_->geometry);
   }
-  rtcCommitScene(impl_->scene);
+  if (impl_->threads > 0) {
+    tbb::task_arena arena(int(impl_->threads));
+    arena.execute([&] { rtcCommitScene(impl_->scene); });
+  } else {
+    rtcCommitScene(impl_->scene);
+  }
   if (rtcGetDeviceError(impl_->device) != RTC_ERROR_NONE) embree_failed(impl_->device, "rtcCommitScene");
 }
 

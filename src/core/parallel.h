@@ -29,23 +29,31 @@ tbb::task_arena& parallel_arena(unsigned threads);
 // (lavapipe's threads and the next frame's kd-tree build on the same two cores) the caller, done
 // with every chunk, still waited to join a thread the scheduler had not yet run. Here a chunk no
 // worker has taken is run by the caller, and the caller waits only for chunks that are running.
+//
+// `threads` is an upper bound, not a promise: when no worker is free (the kd-tree build's arena
+// holds it) the caller runs every chunk itself. So f(i) must never wait for another index.
 template <class F>
 void parallel_for(uint32_t n, unsigned threads, F&& f, uint32_t chunk = 64) {
   if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
   chunk = std::max(chunk, 1u);
-  threads = std::min<unsigned>(threads, (n + chunk - 1) / chunk);
-  if (threads <= 1) {
+  if (threads <= 1 || n <= chunk) {
     for (uint32_t i = 0; i < n; ++i) f(i);
     return;
   }
+  // One arena per requested thread count (not per count of chunks): the partitioner already makes
+  // no more tasks than chunks.
   detail::parallel_arena(threads).execute([&] {
-    // simple_partitioner: ranges split down to chunk indices or fewer, each a task to steal.
-    tbb::parallel_for(
-        tbb::blocked_range<uint32_t>(0, n, chunk),
-        [&](const tbb::blocked_range<uint32_t>& r) {
-          for (uint32_t i = r.begin(); i < r.end(); ++i) f(i);
-        },
-        tbb::simple_partitioner());
+    // Isolated: a loop inside f(i) waits for its own chunks only, never by running another chunk
+    // of this loop on the stack of a suspended f(i).
+    tbb::this_task_arena::isolate([&] {
+      // simple_partitioner: ranges split down to chunk indices or fewer, each a task to steal.
+      tbb::parallel_for(
+          tbb::blocked_range<uint32_t>(0, n, chunk),
+          [&](const tbb::blocked_range<uint32_t>& r) {
+            for (uint32_t i = r.begin(); i < r.end(); ++i) f(i);
+          },
+          tbb::simple_partitioner());
+    });
   });
 }
 
