@@ -7,6 +7,7 @@
 #include <cmath>
 
 #include "backend/backend.h"
+#include "raytree/packing.h"
 #include "render/cpu_render.h"
 #include "render/renderer.h"
 #include "scene/animation.h"
@@ -104,6 +105,50 @@ TEST_F(WhittedFrame, AnimationRebuildsTheTreeAndChangesTheImage) {
   const ImageDiff e = compare_images(b, render_on_cpu(scene, *scene.camera, settings));
   EXPECT_GE(e.psnr, 40.0);
   EXPECT_LE(e.share_over, 0.005);
+}
+
+// The shading pass shades the hits and one miss, whose texel colours every miss: a quad over the
+// left half of the view, a background on the right; all hits, and all misses, as edge cases; 8-
+// and 16-bit colour. Every miss shows the background as the pass rounds it.
+TEST_F(WhittedFrame, ShadingPassShadesTheHitsAndOneMiss) {
+  const int w = 64, h = 32;
+  const float distance = 4.0f;
+  const Camera camera{{0, 0, distance}, {0, 0, 0}, {0, 1, 0}, 2.0f * std::atan(1.0f / distance), 0.0f};
+  for (const ColourDepth depth : {ColourDepth::Bits8, ColourDepth::Bits16}) {
+    // The view spans x in [-2, 2]; quads from x = -2 to `right`.
+    for (const float right : {0.0f, 2.5f, -3.0f}) {
+      SCOPED_TRACE(std::to_string(int(depth)) + " bits, quad to x = " + std::to_string(right));
+      Scene s = test::base_scene("half-quad");
+      s.background = glm::vec3(0.2f, 0.4f, 0.6f);  // whole steps of 8 and 16 bits: no rounding ties
+      const float left = right > -2.0f ? -2.5f : -4.0f;  // right = -3: the quad is out of view
+      test::add_triangle(s, {left, 1.5f, 0}, {left, -1.5f, 0}, {right, -1.5f, 0}, 0);
+      test::add_triangle(s, {left, 1.5f, 0}, {right, -1.5f, 0}, {right, 1.5f, 0}, 0);
+      RenderSettings settings;
+      settings.width = w;
+      settings.height = h;
+      settings.depth = 0;
+      settings.colour = depth;
+      Renderer renderer(*backend, settings);
+      FrameTimings t;
+      const Image image = renderer.render(s, camera, &t);
+      ASSERT_EQ(t.generations.size(), 1u);
+      const GenerationTimings& g = t.generations[0];
+      const uint32_t misses = g.rays - g.hits;
+      EXPECT_EQ(g.shaded, g.hits + (misses > 0 ? 1u : 0u));
+      if (right == 0.0f) EXPECT_EQ(g.hits, uint32_t(w * h / 2)) << "the left half hit";
+      if (right == 2.5f) EXPECT_EQ(misses, 0u);
+      if (right == -3.0f) EXPECT_EQ(g.hits, 0u);
+      const glm::vec3 background = quantize_colour(s.background, depth);
+      int background_pixels = 0;
+      for (int y = 0; y < h; ++y) {
+        for (int x = 0; x < w; ++x) {
+          if (image.at(x, y) == background) ++background_pixels;
+        }
+      }
+      // The quad's Phong colour is not the background's: the background pixels are the misses.
+      EXPECT_EQ(background_pixels, int(misses));
+    }
+  }
 }
 
 }  // namespace

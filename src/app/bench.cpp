@@ -178,6 +178,7 @@ void add_frame(Samples& s, double animate_ms, const FrameTimings& t, const Pipel
   s.add("frame", step ? step->period_ms : animate_ms + t.total_ms);
   s.add("traced_rays", double(g.rays));
   s.add("shadow_rays", double(g.shadow_rays));
+  s.add("shaded_rays", double(g.shaded));
   s.add("bytes_read", double(g.bytes_read));
   // The CPU engines cast their shadow rays after the closest hits; the passes, in the same pass.
   s.add("trace_mrays", mrays(double(g.rays + g.shadow_rays), g.trace_ms + g.shadow_ms));

@@ -171,7 +171,7 @@ void print_timings(const FrameTimings& t, bool built_ahead, double period_ms) {
               s.trace_readback_ms + s.shade_readback_ms, static_cast<unsigned long long>(s.bytes_read));
   std::printf("hit decoding       %9.2f   (%u hits, %u capped rays traced on the CPU)\n", s.decode_ms,
               s.hits, s.capped);
-  std::printf("shading passes     %9.2f\n", s.shade_ms);
+  std::printf("shading passes     %9.2f   (%u rays: the hits, and one miss for every miss)\n", s.shade_ms, s.shaded);
   std::printf("accumulate         %9.2f\n", s.accumulate_ms);
   std::printf("secondary rays     %9.2f\n", s.secondary_ms);
   std::printf("frame              %9.2f   (%.1f fps)\n", t.total_ms, t.total_ms > 0 ? 1000.0 / t.total_ms : 0.0);
@@ -204,6 +204,7 @@ nlohmann::json timings_json(const FrameTimings& t) {
                           {"decode_ms", g.decode_ms},
                           {"shade_ms", g.shade_ms},
                           {"shade_readback_ms", g.shade_readback_ms},
+                          {"shaded", g.shaded},
                           {"accumulate_ms", g.accumulate_ms},
                           {"secondary_ms", g.secondary_ms},
                           {"bytes_read", g.bytes_read}};

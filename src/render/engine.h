@@ -39,6 +39,8 @@ struct GenerationTimings {
   double shade_readback_ms = 0;
   double accumulate_ms = 0;     // colours into the float frame with the rays' weights (CPU)
   double secondary_ms = 0;      // the next generation's rays (CPU)
+  uint32_t shaded = 0;          // rays a shading pass shaded: the hits and, when any ray missed, one
+                                // miss, whose colour is every miss's (Renderer::shade)
   uint64_t bytes_read = 0;      // bytes that left the GPU: 4 per ray and pass
 
   GenerationTimings& operator+=(const GenerationTimings& g);

@@ -112,6 +112,7 @@ struct Renderer::Data {
   };
   Texture nodes, leaf_prims, triangles, materials;
   Texture ray_origin, ray_direction, hit_position, hit_normal, hit_texcoord;
+  Texture shade_direction;  // the shading pass's rays' directions, hits compacted (Renderer::shade)
   // The scene's atlas pages, or one 1x1 stand-in without textures (the pass binds every page slot).
   std::vector<TextureHandle> atlas_pages;
   Atlas atlas_data;             // placements for the uniforms, kept while the scene's textures stay
@@ -353,7 +354,8 @@ void Renderer::upload_tree(const FlatKdTree& tree) {
 void Renderer::upload_rays(const RayBatch& rays) {
   Data& d = *data_;
   if (d.ray_width != rays.width) {
-    for (Data::Texture* t : {&d.ray_origin, &d.ray_direction, &d.hit_position, &d.hit_normal, &d.hit_texcoord}) {
+    for (Data::Texture* t :
+         {&d.ray_origin, &d.ray_direction, &d.hit_position, &d.hit_normal, &d.hit_texcoord, &d.shade_direction}) {
       if (t->handle) backend_.destroy(t->handle);
       *t = {};
     }
@@ -413,44 +415,69 @@ void Renderer::upload_materials(const Scene& scene) {
 
 std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
                                        std::span<const SurfaceHit> hits, GenerationTimings& timings) {
-  // The shading pass's inputs, one texel per ray in the ray layout: position and material,
-  // normal and shadow bits, and texture coordinates where the scene has textures (the CPU computed
-  // them in decoding). On all cores, like the decoding that made the hits (a serial loop here cost
-  // 0.5 ms a generation), into arrays not zeroed first: every texel is written below. One pass over
-  // the records for all three: a second pass for the texture coordinates read the 72-byte records
-  // back from memory again (1.3 % of a textured toaster frame's CPU time under perf).
+  // The shading pass shades the hits only, compacted, and one miss: a miss's colour is the
+  // background's, the same for every miss (glsl/shade_main.glsl), so the one texel the pass writes
+  // for it serves them all, bit for bit. A pass over every ray ran the whole Phong code for groups
+  // of 8 fragments that all missed (llvmpipe runs an `if` under a mask, not around it) and
+  // uploaded, read back and decoded a texel per miss: the Utah wood doll's rays mostly miss.
+  //
+  // Its inputs, one texel per shaded ray: position and material, normal and shadow bits, the ray's
+  // direction, and texture coordinates where the scene has textures (the CPU computed them in
+  // decoding). On all cores in chunks, into arrays not zeroed first: every texel is written below.
   Data& d = *data_;
   prepare_atlas(scene);  // says whether the scene has textures
   auto stage = Clock::now();
   constexpr uint32_t kChunk = 1024;
   const uint32_t n = rays.count();
-  const std::unique_ptr<HitPositionTexel[]> position = std::make_unique_for_overwrite<HitPositionTexel[]>(n);
-  const std::unique_ptr<HitNormalTexel[]> normal = std::make_unique_for_overwrite<HitNormalTexel[]>(n);
+  const uint32_t chunks = (n + kChunk - 1) / kChunk;
+  // first[c]: the shaded index of chunk c's first hit (a prefix sum of the hits per chunk).
+  std::vector<uint32_t> first(size_t(chunks) + 1, 0);
+  parallel_for(chunks, 0, [&](uint32_t c) {
+    uint32_t count = 0;
+    for (uint32_t i = c * kChunk, end = std::min(n, i + kChunk); i < end; ++i) count += hits[i].valid() ? 1u : 0u;
+    first[c + 1] = count;
+  }, 1);
+  for (uint32_t c = 0; c < chunks; ++c) first[c + 1] += first[c];
+  const uint32_t hit_count = first[chunks];
+  const bool any_miss = hit_count < n;
+  const uint32_t shaded = hit_count + (any_miss ? 1u : 0u);  // the miss last
+  const std::unique_ptr<HitPositionTexel[]> position = std::make_unique_for_overwrite<HitPositionTexel[]>(shaded);
+  const std::unique_ptr<HitNormalTexel[]> normal = std::make_unique_for_overwrite<HitNormalTexel[]>(shaded);
+  const std::unique_ptr<glm::vec4[]> direction = std::make_unique_for_overwrite<glm::vec4[]>(shaded);
   const std::unique_ptr<HitTexcoordTexel[]> uv =
-      d.has_atlas ? std::make_unique_for_overwrite<HitTexcoordTexel[]>(n) : nullptr;
-  parallel_for(n, 0, [&](uint32_t i) {
-    const SurfaceHit& h = hits[i];
-    if (!h.valid()) {
-      position[i] = HitPositionTexel::miss();
-      normal[i] = HitNormalTexel{glm::vec3(0.0f), 0.0f};
-      if (uv) uv[i] = HitTexcoordTexel{glm::vec2(0.0f), glm::vec2(0.0f)};
-      return;
+      d.has_atlas ? std::make_unique_for_overwrite<HitTexcoordTexel[]>(shaded) : nullptr;
+  parallel_for(chunks, 0, [&](uint32_t c) {
+    uint32_t k = first[c];
+    for (uint32_t i = c * kChunk, end = std::min(n, i + kChunk); i < end; ++i) {
+      const SurfaceHit& h = hits[i];
+      if (!h.valid()) continue;
+      position[k] = HitPositionTexel{h.position, float(h.material)};
+      normal[k] = HitNormalTexel{h.normal, float(h.mask)};
+      direction[k] = rays.direction[i];
+      if (uv) uv[k] = HitTexcoordTexel{h.texcoord, glm::vec2(0.0f)};
+      ++k;
     }
-    position[i] = HitPositionTexel{h.position, float(h.material)};
-    normal[i] = HitNormalTexel{h.normal, float(h.mask)};
-    if (uv) uv[i] = HitTexcoordTexel{h.texcoord, glm::vec2(0.0f)};
-  }, kChunk);
+  }, 1);
+  if (any_miss) {
+    position[hit_count] = HitPositionTexel::miss();
+    normal[hit_count] = HitNormalTexel{glm::vec3(0.0f), 0.0f};
+    direction[hit_count] = glm::vec4(0.0f, 0.0f, -1.0f, 0.0f);  // not read for a miss
+    if (uv) uv[hit_count] = HitTexcoordTexel{glm::vec2(0.0f), glm::vec2(0.0f)};
+  }
   timings.decode_ms += elapsed_ms(stage);
 
-  ensure_texture(d.hit_position.handle, d.hit_position.rows, rays.width, rays.rows(), TexelFormat::RGBA32F, data_kind_);
-  ensure_texture(d.hit_normal.handle, d.hit_normal.rows, rays.width, rays.rows(), TexelFormat::RGBA32F, data_kind_);
-  backend_.upload(d.hit_position.handle, position.get(), size_t(n) * sizeof(HitPositionTexel));
-  backend_.upload(d.hit_normal.handle, normal.get(), size_t(n) * sizeof(HitNormalTexel));
+  const uint32_t rows = (shaded + rays.width - 1) / rays.width;
+  ensure_texture(d.hit_position.handle, d.hit_position.rows, rays.width, rows, TexelFormat::RGBA32F, data_kind_);
+  ensure_texture(d.hit_normal.handle, d.hit_normal.rows, rays.width, rows, TexelFormat::RGBA32F, data_kind_);
+  ensure_texture(d.shade_direction.handle, d.shade_direction.rows, rays.width, rows, TexelFormat::RGBA32F,
+                 data_kind_);
+  backend_.upload(d.hit_position.handle, position.get(), size_t(shaded) * sizeof(HitPositionTexel));
+  backend_.upload(d.hit_normal.handle, normal.get(), size_t(shaded) * sizeof(HitNormalTexel));
+  backend_.upload(d.shade_direction.handle, direction.get(), size_t(shaded) * sizeof(glm::vec4));
   TextureHandle texcoords = d.hit_position.handle;
   if (uv) {
-    ensure_texture(d.hit_texcoord.handle, d.hit_texcoord.rows, rays.width, rays.rows(), TexelFormat::RGBA32F,
-                   data_kind_);
-    backend_.upload(d.hit_texcoord.handle, uv.get(), size_t(n) * sizeof(HitTexcoordTexel));
+    ensure_texture(d.hit_texcoord.handle, d.hit_texcoord.rows, rays.width, rows, TexelFormat::RGBA32F, data_kind_);
+    backend_.upload(d.hit_texcoord.handle, uv.get(), size_t(shaded) * sizeof(HitTexcoordTexel));
     texcoords = d.hit_texcoord.handle;
   }
 
@@ -465,25 +492,33 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   // A slot beyond the scene's pages gets its last page: bound, never read.
   const auto page = [&](size_t i) { return d.atlas_pages[std::min(i, d.atlas_pages.size() - 1)]; };
   const TextureHandle textures[] = {d.hit_position.handle, d.hit_normal.handle, d.materials.handle,
-                                    d.ray_direction.handle, texcoords, page(0), page(1), page(2)};
+                                    d.shade_direction.handle, texcoords, page(0), page(1), page(2)};
   // 16-bit colour: the same shading twice, the high bytes, then the low bytes of each channel.
   const bool deep = settings_.colour == ColourDepth::Bits16;
   std::vector<uint32_t> texels[2];
   for (int half = 0; half < (deep ? 2 : 1); ++half) {
     const int colour = !deep ? MOBIRT_COLOUR_8 : half == 0 ? MOBIRT_COLOUR_16_HIGH : MOBIRT_COLOUR_16_LOW;
-    texels[half].resize(rays.count());
-    const PassTiming shaded = backend_.run_pass(shade_pass(lights, texture_count, pages, colour), textures, uniforms,
-                                                rays.width, rays.count(), texels[half]);
-    timings.upload_ms += shaded.upload_ms;
-    timings.shade_ms += shaded.gpu_ms;
-    timings.shade_readback_ms += shaded.readback_ms;
-    timings.bytes_read += shaded.bytes_read;
+    texels[half].resize(shaded);
+    const PassTiming pass = backend_.run_pass(shade_pass(lights, texture_count, pages, colour), textures, uniforms,
+                                              rays.width, shaded, texels[half]);
+    timings.upload_ms += pass.upload_ms;
+    timings.shade_ms += pass.gpu_ms;
+    timings.shade_readback_ms += pass.readback_ms;
+    timings.bytes_read += pass.bytes_read;
   }
+  timings.shaded += shaded;
   stage = Clock::now();
-  std::vector<glm::vec3> colors(rays.count());
-  parallel_for(rays.count(), 0, [&](uint32_t i) {
-    colors[i] = deep ? decode_colour(texels[0][i], texels[1][i]) : decode_colour(texels[0][i]);
-  }, kChunk);
+  const auto decoded = [&](uint32_t k) {
+    return deep ? decode_colour(texels[0][k], texels[1][k]) : decode_colour(texels[0][k]);
+  };
+  const glm::vec3 miss_colour = any_miss ? decoded(hit_count) : glm::vec3(0.0f);
+  std::vector<glm::vec3> colors(n);
+  parallel_for(chunks, 0, [&](uint32_t c) {
+    uint32_t k = first[c];
+    for (uint32_t i = c * kChunk, end = std::min(n, i + kChunk); i < end; ++i) {
+      colors[i] = hits[i].valid() ? decoded(k++) : miss_colour;
+    }
+  }, 1);
   timings.accumulate_ms += elapsed_ms(stage);
   return colors;
 }

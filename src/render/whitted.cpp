@@ -24,6 +24,7 @@ GenerationTimings& GenerationTimings::operator+=(const GenerationTimings& g) {
   shade_readback_ms += g.shade_readback_ms;
   accumulate_ms += g.accumulate_ms;
   secondary_ms += g.secondary_ms;
+  shaded += g.shaded;
   bytes_read += g.bytes_read;
   return *this;
 }
