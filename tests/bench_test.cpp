@@ -77,9 +77,12 @@ TEST(Bench, OneSmallCellWithEveryColumn) {
     for (const char* column : {"mobirt", "mobirt_gles"}) {
       SCOPED_TRACE(column);
       const nlohmann::json& gpu = c[column]["stages_ms"];
-      // The paper's bandwidth model: 4 bytes per ray and pass, every traced ray from the traversal
-      // pass, the shaded ones (the hits and one miss) from the shading pass.
-      EXPECT_EQ(gpu["bytes_read"].get<double>(), 4.0 * (gpu["traced_rays"].get<double>() + gpu["shaded_rays"].get<double>()));
+      // The paper's bandwidth model: 4 bytes per ray and pass (8-bit colour), every traced ray from
+      // the traversal pass, the shaded ones (the hits and one miss) from the shading pass. Checked
+      // on the primary generation, whose ray count is fixed, so that the medians over frames of
+      // bytes and of shaded rays are in the same relation as each frame's.
+      EXPECT_EQ(gpu["pass0_bytes_read"].get<double>(),
+                4.0 * (gpu["pass0_rays"].get<double>() + gpu["pass0_shaded_rays"].get<double>()));
       EXPECT_GT(gpu["shaded_rays"].get<double>(), 0.0);
       EXPECT_LE(gpu["shaded_rays"].get<double>(), gpu["traced_rays"].get<double>());
       EXPECT_EQ(gpu["pass0_rays"].get<double>(), 64.0 * 40.0);
@@ -95,15 +98,16 @@ TEST(Bench, OneSmallCellWithEveryColumn) {
     // The compute peer traces mobirt's rays with mobirt's tree: a wide record per ray from its
     // traversal pass, 4 bytes per ray from the shading pass.
     const nlohmann::json& cp = c["compute"]["stages_ms"];
-    EXPECT_EQ(cp["bytes_read"].get<double>(),
-              MOBIRT_HIT_RECORD_BYTES * cp["traced_rays"].get<double>() + 4.0 * cp["shaded_rays"].get<double>());
+    EXPECT_EQ(cp["pass0_bytes_read"].get<double>(),
+              MOBIRT_HIT_RECORD_BYTES * cp["pass0_rays"].get<double>() + 4.0 * cp["pass0_shaded_rays"].get<double>());
     EXPECT_EQ(cp["pass0_rays"].get<double>(), 64.0 * 40.0);
     EXPECT_NEAR(cp["traced_rays"].get<double>(), c["mobirt"]["stages_ms"]["traced_rays"].get<double>(),
                 0.01 * c["mobirt"]["stages_ms"]["traced_rays"].get<double>());
     if (ray_query) {
       // The peer traces the same rays as mobirt's passes and reads back as much.
       const nlohmann::json& rq = c["ray_query"]["stages_ms"];
-      EXPECT_EQ(rq["bytes_read"].get<double>(), 4.0 * (rq["traced_rays"].get<double>() + rq["shaded_rays"].get<double>()));
+      EXPECT_EQ(rq["pass0_bytes_read"].get<double>(),
+                4.0 * (rq["pass0_rays"].get<double>() + rq["pass0_shaded_rays"].get<double>()));
       EXPECT_EQ(rq["pass0_rays"].get<double>(), 64.0 * 40.0);
       EXPECT_NEAR(rq["traced_rays"].get<double>(), c["mobirt"]["stages_ms"]["traced_rays"].get<double>(),
                   0.01 * c["mobirt"]["stages_ms"]["traced_rays"].get<double>());

@@ -109,20 +109,26 @@ TEST_F(WhittedFrame, AnimationRebuildsTheTreeAndChangesTheImage) {
 
 // The shading pass shades the hits and one miss, whose texel colours every miss: a quad over the
 // left half of the view, a background on the right; all hits, and all misses, as edge cases; 8-
-// and 16-bit colour. Every miss shows the background as the pass rounds it.
+// and 16-bit colour. 96x48 rays: hits in five chunks of the compaction. Every miss shows the
+// background as the pass rounds it, and the image is the CPU's expectation (a point light close
+// to the quad shades every hit differently, so a hit shaded into another's pixel would show).
 TEST_F(WhittedFrame, ShadingPassShadesTheHitsAndOneMiss) {
-  const int w = 64, h = 32;
+  const int w = 96, h = 48;
   const float distance = 4.0f;
   const Camera camera{{0, 0, distance}, {0, 0, 0}, {0, 1, 0}, 2.0f * std::atan(1.0f / distance), 0.0f};
   for (const ColourDepth depth : {ColourDepth::Bits8, ColourDepth::Bits16}) {
-    // The view spans x in [-2, 2]; quads from x = -2 to `right`.
+    // The view spans x in [-2, 2]; quads from the left to x = `right`.
     for (const float right : {0.0f, 2.5f, -3.0f}) {
       SCOPED_TRACE(std::to_string(int(depth)) + " bits, quad to x = " + std::to_string(right));
       Scene s = test::base_scene("half-quad");
       s.background = glm::vec3(0.2f, 0.4f, 0.6f);  // whole steps of 8 and 16 bits: no rounding ties
+      Light light;
+      light.position = glm::vec3(-0.5f, 0.3f, 1.0f);
+      light.intensity = 2.0f;
+      s.lights = {light};
       const float left = right > -2.0f ? -2.5f : -4.0f;  // right = -3: the quad is out of view
-      test::add_triangle(s, {left, 1.5f, 0}, {left, -1.5f, 0}, {right, -1.5f, 0}, 0);
-      test::add_triangle(s, {left, 1.5f, 0}, {right, -1.5f, 0}, {right, 1.5f, 0}, 0);
+      test::add_triangle(s, {left, 1.5f, 0}, {left, -1.5f, 0}, {right, -1.5f, 0}, 1);
+      test::add_triangle(s, {left, 1.5f, 0}, {right, -1.5f, 0}, {right, 1.5f, 0}, 1);
       RenderSettings settings;
       settings.width = w;
       settings.height = h;
@@ -145,8 +151,10 @@ TEST_F(WhittedFrame, ShadingPassShadesTheHitsAndOneMiss) {
           if (image.at(x, y) == background) ++background_pixels;
         }
       }
-      // The quad's Phong colour is not the background's: the background pixels are the misses.
       EXPECT_EQ(background_pixels, int(misses));
+      const ImageDiff e = compare_images(image, render_on_cpu(s, camera, settings));
+      EXPECT_GE(e.psnr, 40.0);
+      EXPECT_LE(e.share_over, 0.005);
     }
   }
 }

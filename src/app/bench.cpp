@@ -189,6 +189,7 @@ void add_frame(Samples& s, double animate_ms, const FrameTimings& t, const Pipel
     s.add(p + "shadow_rays", double(x.shadow_rays));
     s.add(p + "trace_ms", x.trace_ms + x.shadow_ms);
     s.add(p + "mrays", mrays(double(x.rays + x.shadow_rays), x.trace_ms + x.shadow_ms));
+    s.add(p + "shaded_rays", double(x.shaded));
     s.add(p + "bytes_read", double(x.bytes_read));
   }
 }

@@ -1,6 +1,7 @@
 #include "render/renderer.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -113,6 +114,14 @@ struct Renderer::Data {
   Texture nodes, leaf_prims, triangles, materials;
   Texture ray_origin, ray_direction, hit_position, hit_normal, hit_texcoord;
   Texture shade_direction;  // the shading pass's rays' directions, hits compacted (Renderer::shade)
+  // Every texture in rows of the rays' width; with the scene data's, every texture it owns.
+  std::array<Texture*, 6> ray_layout() {
+    return {&ray_origin, &ray_direction, &hit_position, &hit_normal, &hit_texcoord, &shade_direction};
+  }
+  std::array<Texture*, 10> all() {
+    return {&nodes, &leaf_prims, &triangles, &materials, &ray_origin, &ray_direction, &hit_position, &hit_normal,
+            &hit_texcoord, &shade_direction};
+  }
   // The scene's atlas pages, or one 1x1 stand-in without textures (the pass binds every page slot).
   std::vector<TextureHandle> atlas_pages;
   Atlas atlas_data;             // placements for the uniforms, kept while the scene's textures stay
@@ -214,8 +223,7 @@ Renderer::Renderer(Backend& backend, const RenderSettings& settings)
 
 Renderer::~Renderer() {
   Data& d = *data_;
-  for (Data::Texture* t : {&d.nodes, &d.leaf_prims, &d.triangles, &d.materials, &d.ray_origin,
-                           &d.ray_direction, &d.hit_position, &d.hit_normal, &d.hit_texcoord}) {
+  for (Data::Texture* t : d.all()) {
     if (t->handle) backend_.destroy(t->handle);
   }
   for (TextureHandle page : d.atlas_pages) backend_.destroy(page);
@@ -351,16 +359,19 @@ void Renderer::upload_tree(const FlatKdTree& tree) {
                 TexelFormat::RGBA32F);
 }
 
+void Renderer::fit_ray_layout(uint32_t width) {
+  Data& d = *data_;
+  if (d.ray_width == width) return;
+  for (Data::Texture* t : d.ray_layout()) {
+    if (t->handle) backend_.destroy(t->handle);
+    *t = {};
+  }
+  d.ray_width = width;
+}
+
 void Renderer::upload_rays(const RayBatch& rays) {
   Data& d = *data_;
-  if (d.ray_width != rays.width) {
-    for (Data::Texture* t :
-         {&d.ray_origin, &d.ray_direction, &d.hit_position, &d.hit_normal, &d.hit_texcoord, &d.shade_direction}) {
-      if (t->handle) backend_.destroy(t->handle);
-      *t = {};
-    }
-    d.ray_width = rays.width;
-  }
+  fit_ray_layout(rays.width);
   ensure_texture(d.ray_origin.handle, d.ray_origin.rows, rays.width, rays.rows(), TexelFormat::RGBA32F, data_kind_);
   ensure_texture(d.ray_direction.handle, d.ray_direction.rows, rays.width, rays.rows(), TexelFormat::RGBA32F,
                  data_kind_);
@@ -425,10 +436,13 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   // direction, and texture coordinates where the scene has textures (the CPU computed them in
   // decoding). On all cores in chunks, into arrays not zeroed first: every texel is written below.
   Data& d = *data_;
+  const uint32_t n = rays.count();
+  if (n == 0) return {};
+  if (rays.width == 0) throw Error(ErrorKind::Internal, "Renderer::shade: a batch of rays with rows of width 0");
+  fit_ray_layout(rays.width);
   prepare_atlas(scene);  // says whether the scene has textures
   auto stage = Clock::now();
   constexpr uint32_t kChunk = 1024;
-  const uint32_t n = rays.count();
   const uint32_t chunks = (n + kChunk - 1) / kChunk;
   // first[c]: the shaded index of chunk c's first hit (a prefix sum of the hits per chunk).
   std::vector<uint32_t> first(size_t(chunks) + 1, 0);
@@ -532,10 +546,9 @@ void Renderer::check_shades_like(const RenderSettings& frame, const char* who) c
 
 std::vector<glm::vec3> Renderer::shade_traced_elsewhere(const Scene& scene, const RayBatch& rays,
                                                         std::span<const SurfaceHit> hits, GenerationTimings& timings) {
-  // mobirt's own frame shares the traversal pass's ray textures with the shading pass; an engine
-  // that traced elsewhere uploads them here as well. The backend times them, in the shading pass's
-  // PassTiming::upload_ms: timing the call here as well counted them twice.
-  upload_rays(rays);
+  // The shading pass reads the hits' directions, which shade() uploads itself: the traversal
+  // pass's ray textures, which such an engine never used, are not uploaded (they were until the
+  // shading pass shaded the hits only, and counted in the peers' upload stage).
   return shade(scene, rays, hits, timings);
 }
 

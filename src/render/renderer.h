@@ -87,13 +87,14 @@ class Renderer {
   std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, std::span<const SurfaceHit> hits,
                                GenerationTimings& timings);
 
-  // For an engine that traces elsewhere and shades with this renderer's pass (the ray-query peer,
-  // src/baseline/ray_query_whitted.h): what shade() reads besides the hits, which mobirt's own
-  // frame uploads in begin_frame and trace: the scene's materials (once per frame) and the rays
-  // (each generation, before shade()).
+  // For an engine that traces elsewhere and shades with this renderer's pass (the ray-query and
+  // compute peers, src/baseline/*_whitted.h): what shade() reads besides the hits and the rays'
+  // directions (which it uploads itself, for the hits only), which mobirt's own frame uploads in
+  // begin_frame: the scene's materials (once per frame).
   void upload_materials(const Scene& scene);
+  // The traversal pass's ray textures (mobirt's own frame, each generation).
   void upload_rays(const RayBatch& rays);
-  // upload_rays() (timed as upload), then shade(): one generation shaded for such an engine.
+  // shade() for such an engine: one generation shaded.
   std::vector<glm::vec3> shade_traced_elsewhere(const Scene& scene, const RayBatch& rays,
                                                 std::span<const SurfaceHit> hits, GenerationTimings& timings);
 
@@ -114,6 +115,9 @@ class Renderer {
   PassHandle shade_pass(int lights, int textures, int pages, int colour);
   void prepare_atlas(const Scene& scene);
   void upload_tree(const FlatKdTree& tree);
+  // The textures laid out in rows of the rays' width (rays and shading inputs), made again when
+  // the width changes.
+  void fit_ray_layout(uint32_t width);
   // The lights the traversal pass casts shadow rays to: the scene's, or none without shadows.
   std::span<const Light> shadow_lights(const Scene& scene) const;
   // The light count a pass is built for: the scene's, or the packing's maximum when general.
