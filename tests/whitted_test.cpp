@@ -141,9 +141,13 @@ TEST_F(WhittedFrame, ShadingPassShadesTheHitsAndOneMiss) {
       const GenerationTimings& g = t.generations[0];
       const uint32_t misses = g.rays - g.hits;
       EXPECT_EQ(g.shaded, g.hits + (misses > 0 ? 1u : 0u));
-      if (right == 0.0f) EXPECT_EQ(g.hits, uint32_t(w * h / 2)) << "the left half hit";
-      if (right == 2.5f) EXPECT_EQ(misses, 0u);
-      if (right == -3.0f) EXPECT_EQ(g.hits, 0u);
+      if (right == 0.0f) {
+        EXPECT_EQ(g.hits, uint32_t(w * h / 2)) << "the left half hit";
+      } else if (right == 2.5f) {
+        EXPECT_EQ(misses, 0u);
+      } else {
+        EXPECT_EQ(g.hits, 0u);
+      }
       const glm::vec3 background = quantize_colour(s.background, depth);
       int background_pixels = 0;
       for (int y = 0; y < h; ++y) {
