@@ -114,13 +114,11 @@ struct Renderer::Data {
   Texture nodes, leaf_prims, triangles, materials;
   Texture ray_origin, ray_direction, hit_position, hit_normal, hit_texcoord;
   Texture shade_direction;  // the shading pass's rays' directions, hits compacted (Renderer::shade)
-  // Every texture in rows of the rays' width; with the scene data's, every texture it owns.
+  // Every texture the renderer owns, each named once: the scene data's, and those in rows of the
+  // rays' width (made again when the width changes).
+  std::array<Texture*, 4> scene_data() { return {&nodes, &leaf_prims, &triangles, &materials}; }
   std::array<Texture*, 6> ray_layout() {
     return {&ray_origin, &ray_direction, &hit_position, &hit_normal, &hit_texcoord, &shade_direction};
-  }
-  std::array<Texture*, 10> all() {
-    return {&nodes, &leaf_prims, &triangles, &materials, &ray_origin, &ray_direction, &hit_position, &hit_normal,
-            &hit_texcoord, &shade_direction};
   }
   // The scene's atlas pages, or one 1x1 stand-in without textures (the pass binds every page slot).
   std::vector<TextureHandle> atlas_pages;
@@ -223,9 +221,11 @@ Renderer::Renderer(Backend& backend, const RenderSettings& settings)
 
 Renderer::~Renderer() {
   Data& d = *data_;
-  for (Data::Texture* t : d.all()) {
+  const auto destroy = [&](Data::Texture* t) {
     if (t->handle) backend_.destroy(t->handle);
-  }
+  };
+  for (Data::Texture* t : d.scene_data()) destroy(t);
+  for (Data::Texture* t : d.ray_layout()) destroy(t);
   for (TextureHandle page : d.atlas_pages) backend_.destroy(page);
   for (auto& [key, pass] : d.trace_passes) backend_.destroy(pass);
   for (auto& [key, pass] : d.shade_passes) backend_.destroy(pass);
