@@ -233,20 +233,32 @@ TEST(ParallelFor, VisitsEveryIndexOnce) {
 // An exception in one index reaches the caller, the other chunks stop, and the next loop on the
 // same (persistent) threads runs in full.
 TEST(ParallelFor, RethrowsAnExceptionAndRunsTheNextLoop) {
+  // Each index does some work, so that the whole loop takes far longer (about 0.1 s) than
+  // throwing and unwinding does, even when the scheduler preempts the thread that throws.
+  constexpr uint32_t n = 1u << 20;
   for (unsigned threads : {1u, 2u, 0u}) {
-    std::atomic<int> visited{0};
+    std::atomic<uint32_t> visited{0};
     std::string what;
     try {
-      parallel_for(100000, threads, [&](uint32_t i) {
-        visited.fetch_add(1);
+      parallel_for(n, threads, [&](uint32_t i) {
+        visited.fetch_add(1, std::memory_order_relaxed);
         if (i == 10) throw std::runtime_error("index 10");
+        volatile uint32_t work = 0;
+        for (uint32_t k = 0; k < 64; ++k) work = work + k;
       }, 4);
     } catch (const std::runtime_error& e) {
       what = e.what();
     }
     EXPECT_EQ(what, "index 10") << threads << " threads";
-    // Chunks already running finish; the others are dropped (index 10 is among the first).
-    EXPECT_LT(visited.load(), 50000) << "the loop went on after the exception, " << threads << " threads";
+    if (threads == 1) {
+      // One thread runs the indices in order and stops at the throw.
+      EXPECT_EQ(visited.load(), 11u);
+    } else {
+      // Chunks already running finish; the others are dropped. How many ran before the throw
+      // reached TBB depends on the scheduler (CI once saw 50,011 of 100,000 with a tighter
+      // bound), so only the stop itself is asserted.
+      EXPECT_LT(visited.load(), n) << "the loop went on after the exception, " << threads << " threads";
+    }
     std::vector<std::atomic<int>> seen(5000);
     parallel_for(uint32_t(seen.size()), threads, [&](uint32_t i) { seen[i].fetch_add(1); }, 16);
     for (size_t i = 0; i < seen.size(); ++i) ASSERT_EQ(seen[i].load(), 1) << i << ", " << threads << " threads";
