@@ -564,7 +564,9 @@ TEST(RealAnimations, FoxSkinned) {
             << " triangles), bounds at t=0: " << b0.extent().x << " x " << b0.extent().y << " x "
             << b0.extent().z << ", at t=0.5: " << b1.extent().x << " x " << b1.extent().y << " x "
             << b1.extent().z << "\n";
-  EXPECT_LT(ms, 5.0);  // debug builds and loaded machines included; about 0.1 ms release
+  // No bound on the time: tests assert no times (a loaded machine is not a wrong result); the line
+  // above is for whoever reads the log.
+  EXPECT_GT(s.mesh.triangle_count(), 0u);
 }
 
 // Reads accessor `index` of a glTF with one external .bin (tightly packed floats), independently
