@@ -3,6 +3,7 @@
 // beyond the critical angle; and the GPU frame with bounces matches the CPU expectation.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstring>
@@ -84,6 +85,25 @@ TEST(RayTree, PrimaryRaysAreCameraRaysBitForBit) {
       }
     }
   }
+}
+
+// render_whitted adds a batch's colours on all cores only when the batch says no pixel has two
+// rays in it: the primary rays say so, in any order; a secondary generation never does.
+TEST(RayTree, OnlyPrimaryRaysAreMarkedOnePerPixel) {
+  RayBatch rays = primary_rays(Camera{}, 8, 6);
+  EXPECT_TRUE(rays.unique_pixels);
+  order_in_simd_tiles(rays);
+  EXPECT_TRUE(rays.unique_pixels);
+  std::vector<int> seen(rays.count(), 0);
+  for (uint32_t i = 0; i < rays.count(); ++i) ++seen.at(rays.pixel[i]);
+  EXPECT_EQ(std::count(seen.begin(), seen.end(), 1), std::ptrdiff_t(seen.size()));
+  const Scene scene = glass_slab(2.0f, 1.5f);
+  const FlatKdTree tree = build_kdtree(scene.mesh.positions);
+  const RayBatch next = one_bounce(scene, tree, Ray{glm::vec3(0.0f, 5.0f, 0.0f), glm::vec3(0.0f, -1.0f, 0.0f), 0.0f, kInfinity});
+  ASSERT_GT(next.count(), 0u);
+  EXPECT_FALSE(next.unique_pixels);
+  rays.clear();
+  EXPECT_FALSE(rays.unique_pixels);
 }
 
 TEST(RayTree, GlassSlabShiftsTheRayWithoutTurningIt) {

@@ -17,11 +17,13 @@ void RayBatch::clear() {
   direction.clear();
   pixel.clear();
   weight.clear();
+  unique_pixels = false;
 }
 
 RayBatch primary_rays(const Camera& camera, int width, int height) {
   RayBatch batch;
   batch.width = uint32_t(width);
+  batch.unique_pixels = true;  // ray i is pixel i
   const uint32_t n = uint32_t(width) * uint32_t(height);
   batch.origin.resize(n);  // unwritten (RayArray): every ray is written below, on all cores
   batch.direction.resize(n);
@@ -50,6 +52,7 @@ void gather_in_simd_tiles(RayBatch& batch, std::span<const uint32_t> order) {
   const uint32_t tiled = simd_tiled_rays(batch);
   RayBatch out;
   out.width = batch.width;
+  out.unique_pixels = batch.unique_pixels;  // a permutation of the rays
   out.origin.resize(n);
   out.direction.resize(n);
   out.pixel.resize(n);

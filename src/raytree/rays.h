@@ -25,6 +25,10 @@ struct RayBatch {
   RayArray<glm::vec4> direction;  // xyz, tmax
   RayArray<uint32_t> pixel;       // the image pixel each ray adds to
   RayArray<glm::vec3> weight;     // the ray's weight in that pixel
+  // No pixel has two rays in the batch (primary rays, in any order): their colours can be added to
+  // the image on all cores. A generation of secondary rays may hold two rays of one pixel (a glass
+  // hit's mirror and refracted rays), added in their order.
+  bool unique_pixels = false;
 
   uint32_t count() const { return uint32_t(origin.size()); }
   uint32_t rows() const { return width == 0 ? 0 : (count() + width - 1) / width; }
