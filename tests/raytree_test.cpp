@@ -17,6 +17,7 @@
 #include "core/parallel.h"
 #include "backend/backend.h"
 #include "raytree/hits.h"
+#include "raytree/ray_order.h"
 #include "raytree/secondary.h"
 #include "render/cpu_render.h"
 #include "render/renderer.h"
@@ -94,14 +95,23 @@ TEST(RayTree, OnlyPrimaryRaysAreMarkedOnePerPixel) {
   EXPECT_TRUE(rays.unique_pixels);
   order_in_simd_tiles(rays);
   EXPECT_TRUE(rays.unique_pixels);
+  order_for_traversal(rays, Aabb{glm::vec3(-1.0f), glm::vec3(1.0f)}, 0.0f);  // sorted, then tiled
+  EXPECT_TRUE(rays.unique_pixels);
   std::vector<int> seen(rays.count(), 0);
   for (uint32_t i = 0; i < rays.count(); ++i) ++seen.at(rays.pixel[i]);
   EXPECT_EQ(std::count(seen.begin(), seen.end(), 1), std::ptrdiff_t(seen.size()));
-  const Scene scene = glass_slab(2.0f, 1.5f);
+  // A glass hit with Fresnel's reflectance: a mirror and a refracted ray of the same pixel.
+  Scene scene = glass_slab(2.0f, 1.5f);
+  scene.materials.back().fresnel = true;
   const FlatKdTree tree = build_kdtree(scene.mesh.positions);
   const RayBatch next = one_bounce(scene, tree, Ray{glm::vec3(0.0f, 5.0f, 0.0f), glm::vec3(0.0f, -1.0f, 0.0f), 0.0f, kInfinity});
-  ASSERT_GT(next.count(), 0u);
+  ASSERT_EQ(next.count(), 2u);
+  EXPECT_EQ(next.pixel[0], next.pixel[1]);
   EXPECT_FALSE(next.unique_pixels);
+  // Rays pushed onto a batch may share pixels: a push takes the mark off.
+  RayBatch more = primary_rays(Camera{}, 2, 1);
+  more.push(more.ray(0), more.pixel[0], glm::vec3(1.0f));
+  EXPECT_FALSE(more.unique_pixels);
   rays.clear();
   EXPECT_FALSE(rays.unique_pixels);
 }

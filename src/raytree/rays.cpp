@@ -10,6 +10,7 @@ void RayBatch::push(const Ray& ray, uint32_t pixel_index, const glm::vec3& ray_w
   direction.emplace_back(ray.direction, ray.tmax);
   pixel.push_back(pixel_index);
   weight.push_back(ray_weight);
+  unique_pixels = false;  // the pushed ray's pixel may have one already
 }
 
 void RayBatch::clear() {
