@@ -2,10 +2,6 @@
 // ends with no validation message at all.
 #include <gtest/gtest.h>
 
-#if defined(__linux__)
-#include <sched.h>
-#endif
-
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
@@ -132,13 +128,9 @@ std::vector<std::pair<std::string, std::string>> driver_thread_cpus() {
 // a pass still runs right afterwards.
 TEST_F(VulkanBackendTest, DriverThreadsArePinnedOnePerCpu) {
   if (!backend->device_info().is_software) GTEST_SKIP() << "not lavapipe: no llvmpipe threads";
-  // The CPUs this process may run on (a container's CPU set), which pin_driver_threads spreads the
-  // threads over; hardware_concurrency() counts the machine's.
-  cpu_set_t allowed;
-  CPU_ZERO(&allowed);
-  if (sched_getaffinity(0, sizeof allowed, &allowed) != 0 || CPU_COUNT(&allowed) < 2) {
-    GTEST_SKIP() << "fewer than 2 CPUs allowed: nothing to spread";
-  }
+  // The CPUs pin_driver_threads spreads the threads over (hardware_concurrency() counts the
+  // machine's, not this process's CPU set).
+  if (allowed_cpus().size() < 2) GTEST_SKIP() << "fewer than 2 CPUs allowed: nothing to spread";
   const int pinned = pin_driver_threads();
   const auto threads = driver_thread_cpus();
   ASSERT_GE(threads.size(), 2u) << "lavapipe made fewer than 2 rasterizer threads (LP_NUM_THREADS?)";

@@ -8,20 +8,26 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
-#include <vector>
 #endif
 
 namespace mobirt {
 
-int pin_driver_threads() {
+std::vector<int> allowed_cpus() {
+  std::vector<int> cpus;
 #if defined(__linux__)
   cpu_set_t allowed;
   CPU_ZERO(&allowed);
-  if (sched_getaffinity(0, sizeof allowed, &allowed) != 0) return 0;
-  std::vector<int> cpus;
+  if (sched_getaffinity(0, sizeof allowed, &allowed) != 0) return cpus;
   for (int c = 0; c < CPU_SETSIZE; ++c) {
     if (CPU_ISSET(c, &allowed)) cpus.push_back(c);
   }
+#endif
+  return cpus;
+}
+
+int pin_driver_threads() {
+#if defined(__linux__)
+  const std::vector<int> cpus = allowed_cpus();
   if (cpus.size() < 2) return 0;
   static constexpr char kPrefix[] = "llvmpipe-";  // mesa/src/gallium/drivers/llvmpipe/lp_rast.c
   int pinned = 0;

@@ -12,7 +12,13 @@
 // whichever thread asks next, so a thread on a busier CPU simply takes fewer of them.
 #pragma once
 
+#include <vector>
+
 namespace mobirt {
+
+// The CPUs this process may run on (its own CPU set: a cpuset or taskset, not the machine's
+// count), in increasing order; empty off Linux or when the set cannot be read.
+std::vector<int> allowed_cpus();
 
 // Pins every thread of this process named "llvmpipe-N" to the (N mod count)-th CPU of the
 // process's own CPU set (so a cpuset or taskset still holds). Threads pinned by an earlier call
