@@ -7,7 +7,8 @@
 // all of them: valgrind --tool=callgrind --toggle-collect='mobirt::build_kdtree(*Shape*' with THREADS 1
 // (callgrind counts only the threads that enter build_kdtree). Environment knobs for experiments
 // are read below (MOBIRT_KD_ISECT, _LEAF, _BINS, _DEPTH, _GAIN, _SMALL, _CLUSTER, _EMPTY, _SSE2,
-// _FRAMES, _COLD, _PAUSE_MS).
+// _FRAMES, _COLD, _PAUSE_MS, _FRESH, _WORKER). Each build goes into the same tree, as an animation's
+// per-frame build does (rebuild_kdtree); MOBIRT_KD_FRESH=1 builds a new tree every time instead.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -82,17 +83,36 @@ int main(int argc, char** argv) {
   std::vector<char> flush(cold ? size_t(32) << 20 : 0);
   std::vector<double> ms;
   std::vector<double> cpu;
+  const char* fresh_env = std::getenv("MOBIRT_KD_FRESH");
+  const bool fresh = fresh_env && std::atoi(fresh_env) != 0;
+  // MOBIRT_KD_WORKER=1: the builds run on a thread of their own, as the frame pipeline's worker
+  // runs them (glibc serves a non-main thread's allocations above its arena's 64 MiB heaps with
+  // fresh pages every time, whatever retain_freed_memory() asks).
+  const char* worker_env = std::getenv("MOBIRT_KD_WORKER");
+  const bool on_worker = worker_env && std::atoi(worker_env) != 0;
   FlatKdTree tree;
-  for (int i = 0; i < iterations; ++i) {
-    if (frames && animation.animated()) animation.evaluate(double(i) / animation.fps(), frame);
-    for (size_t k = 0; k < flush.size(); k += 64) flush[k] = char(k + size_t(i));
-    if (pause_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(pause_ms));
-    const std::span<const glm::vec3> input = frames ? std::span<const glm::vec3>(frame.mesh.positions) : positions;
-    const double cpu_start = process_cpu_ms();
-    const auto start = std::chrono::steady_clock::now();
-    tree = build_kdtree(input, options);
-    ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
-    cpu.push_back(process_cpu_ms() - cpu_start);
+  auto build_all = [&] {
+    for (int i = 0; i < iterations; ++i) {
+      if (frames && animation.animated()) animation.evaluate(double(i) / animation.fps(), frame);
+      for (size_t k = 0; k < flush.size(); k += 64) flush[k] = char(k + size_t(i));
+      if (pause_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(pause_ms));
+      const std::span<const glm::vec3> input = frames ? std::span<const glm::vec3>(frame.mesh.positions) : positions;
+      const double cpu_start = process_cpu_ms();
+      const auto start = std::chrono::steady_clock::now();
+      if (fresh) {
+        tree = build_kdtree(input, options);
+      } else {
+        rebuild_kdtree(tree, input, {}, options);
+      }
+      ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+      cpu.push_back(process_cpu_ms() - cpu_start);
+    }
+  };
+  if (on_worker) {
+    std::thread worker(build_all);
+    worker.join();
+  } else {
+    build_all();
   }
   std::sort(cpu.begin(), cpu.end());
   const KdBuildStats& stats = tree.stats;

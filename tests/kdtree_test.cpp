@@ -9,9 +9,12 @@
 #include <cstdint>
 #include <cstring>
 #include <functional>
+#include <limits>
 #include <random>
+#include <span>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "accel/kdtree.h"
@@ -861,6 +864,55 @@ TEST(KdTree, SameTreeForAnyThreadCount) {
         }
       }
     }
+  }
+}
+
+// rebuild_kdtree replaces whatever tree it is given (larger, smaller, with shapes or not) by the
+// very tree build_kdtree makes, and leaves none behind when the input is refused.
+TEST(KdTree, RebuildIntoAnotherTreeGivesTheSameArrays) {
+  const std::vector<glm::vec3> big = random_soup(20000, 51);
+  const std::vector<glm::vec3> small = random_soup(700, 52);
+  const std::vector<glm::vec3> planes = planar(53);
+  Shape sphere;
+  sphere.base = glm::vec3(0.2f);
+  sphere.base_radius = 0.3f;
+  const std::vector<Shape> shapes = {sphere};
+  auto same = [](const FlatKdTree& a, const FlatKdTree& b) {
+    auto bytes = [](const TexelArray& x, const TexelArray& y) {
+      return x.size() == y.size() && std::memcmp(x.data(), y.data(), x.size() * sizeof(glm::vec4)) == 0;
+    };
+    EXPECT_TRUE(bytes(a.nodes, b.nodes));
+    EXPECT_TRUE(bytes(a.leaf_prims, b.leaf_prims));
+    EXPECT_TRUE(bytes(a.triangles, b.triangles));
+    EXPECT_EQ(std::memcmp(&a.bounds, &b.bounds, sizeof(Aabb)), 0);
+    EXPECT_EQ(a.max_depth, b.max_depth);
+    EXPECT_EQ(a.stats.nodes, b.stats.nodes);
+    EXPECT_EQ(a.stats.leaves, b.stats.leaves);
+    EXPECT_EQ(a.stats.empty_leaves, b.stats.empty_leaves);
+    EXPECT_EQ(a.stats.prim_references, b.stats.prim_references);
+    EXPECT_EQ(a.stats.max_leaf_size, b.stats.max_leaf_size);
+    EXPECT_EQ(a.stats.max_depth_reached, b.stats.max_depth_reached);
+    EXPECT_EQ(a.stats.sah_cost, b.stats.sah_cost);
+  };
+  for (int threads : {1, 0}) {
+    SCOPED_TRACE(std::to_string(threads) + " threads");
+    KdBuildOptions o;
+    o.threads = threads;
+    FlatKdTree tree;
+    // Big, then small (arrays shrink, memory kept), then big again (they grow back), then a
+    // planar scene with a shape (other bounds, other texels after the triangles).
+    const std::vector<std::pair<const std::vector<glm::vec3>*, std::span<const Shape>>> sequence = {
+        {&big, {}}, {&small, {}}, {&big, {}}, {&planes, shapes}, {&small, {}}};
+    for (const auto& [positions, with] : sequence) {
+      rebuild_kdtree(tree, *positions, with, o);
+      same(tree, build_kdtree(*positions, with, o));
+    }
+    std::vector<glm::vec3> broken = small;
+    broken[301].y = std::numeric_limits<float>::quiet_NaN();
+    test::expect_bad_input([&] { rebuild_kdtree(tree, broken, {}, o); }, {"triangle 100 vertex 1", "non-finite"});
+    EXPECT_TRUE(tree.nodes.empty() && tree.leaf_prims.empty() && tree.triangles.empty());
+    rebuild_kdtree(tree, small, {}, o);  // and the tree is usable again
+    same(tree, build_kdtree(small, {}, o));
   }
 }
 

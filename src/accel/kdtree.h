@@ -150,6 +150,16 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, const KdBuildOptio
 // of the surface itself: conservative, and exact for a box).
 FlatKdTree build_kdtree(std::span<const glm::vec3> positions, std::span<const Shape> shapes,
                         const KdBuildOptions& options = {});
+// The same tree, built into `tree` (its previous contents replaced) so that the arrays keep their
+// memory from one build to the next: an animation's per-frame build, as Embree's rtcCommitScene
+// keeps a dynamic scene's memory. A new tree's arrays are fresh pages, zeroed by the kernel as
+// they are first written, wherever glibc maps them anew: on a thread other than the main one (the
+// frame pipeline's worker), arrays above its arena's 64 MiB heaps, in every build, whatever
+// retain_freed_memory() asks. A 1M-triangle tree's leaf entries are 104 MB: built on a worker
+// thread, 28,000-31,000 page faults a build against 3,000-4,000 (README, "The kd-tree build").
+// On an error the tree is left empty.
+void rebuild_kdtree(FlatKdTree& tree, std::span<const glm::vec3> positions, std::span<const Shape> shapes,
+                    const KdBuildOptions& options = {});
 
 // Sets the empty-child flags of every interior node (glsl/layout.h: MOBIRT_NODE_BELOW_EMPTY,
 // MOBIRT_NODE_ABOVE_EMPTY in the node's fourth component), with which traversal closes an empty

@@ -507,8 +507,12 @@ class Builder {
     cluster_refs_ = size_t(kd_cluster_refs(options));
   }
 
-  FlatKdTree build() {
-    FlatKdTree tree;
+  // Into `tree`, whose arrays keep their memory: resizing them writes nothing, and only what
+  // grows beyond their capacity is allocated anew.
+  void build(FlatKdTree& tree) {
+    tree.bounds = Aabb{};
+    tree.stats = KdBuildStats{};
+    tree.triangles.clear();
     const size_t n = triangle_count_;
     tree.max_depth = kdtree_depth_limit(n, options_.max_depth);
     max_depth_ = tree.max_depth;
@@ -532,7 +536,6 @@ class Builder {
     s.max_depth_reached = t.max_depth_reached;
     const double root_area = area(to_box(tree.bounds));
     s.sah_cost = root_area > 0.0 ? t.cost / root_area : options_.intersection_cost * double(n);
-    return tree;
   }
 
  private:
@@ -1417,6 +1420,13 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, const KdBuildOptio
 
 FlatKdTree build_kdtree(std::span<const glm::vec3> positions, std::span<const Shape> shapes,
                         const KdBuildOptions& options) {
+  FlatKdTree tree;
+  rebuild_kdtree(tree, positions, shapes, options);
+  return tree;
+}
+
+void rebuild_kdtree(FlatKdTree& tree, std::span<const glm::vec3> positions, std::span<const Shape> shapes,
+                    const KdBuildOptions& options) {
   if (positions.size() % 3 != 0) {
     throw Error(ErrorKind::BadInput, "kd-tree: " + count_text(positions.size()) +
                                          " positions do not make whole triangles (3 per triangle)");
@@ -1465,15 +1475,18 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, std::span<const Sh
     }
   }
   Builder builder(positions, shapes, options);
-  FlatKdTree tree;
-  if (options.threads == 0) {
-    tree = builder.build();
-  } else {
-    // More threads than the machine has would only make TBB warn (the tree is the same anyway).
-    tbb::task_arena arena(std::min(options.threads, tbb::info::default_concurrency()));
-    tree = arena.execute([&] { return builder.build(); });
+  try {
+    if (options.threads == 0) {
+      builder.build(tree);
+    } else {
+      // More threads than the machine has would only make TBB warn (the tree is the same anyway).
+      tbb::task_arena arena(std::min(options.threads, tbb::info::default_concurrency()));
+      arena.execute([&] { builder.build(tree); });
+    }
+  } catch (...) {
+    tree = FlatKdTree{};  // no half-built tree, and its memory goes with it
+    throw;
   }
-  return tree;
 }
 
 }  // namespace mobirt

@@ -22,7 +22,8 @@ void ComputeWhittedEngine::begin_frame(const Scene& scene, const RenderSettings&
   const bool reuse = !settings.always_rebuild && tree_valid_ && tree_positions_ == scene.mesh.positions;
   if (!reuse) {
     const auto start = std::chrono::steady_clock::now();
-    tree_ = build_kdtree(scene.mesh.positions, settings.kd);
+    tree_valid_ = false;  // rebuilt into the last tree's arrays: no cache until uploaded again
+    rebuild_kdtree(tree_, scene.mesh.positions, {}, settings.kd);
     tree_positions_ = scene.mesh.positions;
     frame.build_ms = elapsed_ms(start);
     compute_.upload_tree(tree_);

@@ -20,7 +20,7 @@ glm::vec3 shade_phong(const Scene& scene, const SurfaceHit& hit, const glm::vec3
   return phong<float>(scene.lights, m, diffuse, hit.position, hit.normal, view, hit.mask);
 }
 
-void KdTreeEngine::build(const Scene& scene) { tree_ = build_kdtree(scene.mesh.positions, scene.shapes, options_); }
+void KdTreeEngine::build(const Scene& scene) { rebuild_kdtree(tree_, scene.mesh.positions, scene.shapes, options_); }
 
 Hit KdTreeEngine::closest(const Ray& ray) const { return traverse(tree_, ray, -1, test_); }
 

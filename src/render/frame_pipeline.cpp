@@ -26,7 +26,18 @@ double FramePipeline::prepare(size_t index) {
   const auto build_start = std::chrono::steady_clock::now();
   f.tree_built = always_rebuild_ || !built_any_ || built_positions_ != scene->mesh.positions ||
                  built_shapes_ != scene->shapes;
-  f.tree = f.tree_built ? build_kdtree(scene->mesh.positions, scene->shapes, kd_) : FlatKdTree{};
+  // Into the slot's tree, which holds the arrays of an older tree (render_prepared swaps them
+  // out of the renderer): their memory is reused. A frame without a build carries no tree, its
+  // arrays emptied but their memory kept.
+  if (f.tree_built) {
+    rebuild_kdtree(f.tree, scene->mesh.positions, scene->shapes, kd_);
+  } else {
+    f.tree.nodes.clear();
+    f.tree.leaf_prims.clear();
+    f.tree.triangles.clear();
+    f.tree.bounds = Aabb{};
+    f.tree.stats = KdBuildStats{};
+  }
   f.build_ms = f.tree_built ? elapsed_ms(build_start) : 0.0;
   if (f.tree_built && !always_rebuild_) {
     built_positions_ = scene->mesh.positions;
@@ -72,7 +83,7 @@ PipelineStep FramePipeline::step(size_t index, const std::function<void(Prepared
 
 Image render_prepared(Renderer& renderer, PreparedFrame& f, FrameTimings* timings) {
   if (!f.tree_built) return renderer.render(*f.scene, f.camera, timings);
-  return renderer.render(*f.scene, f.camera, std::move(f.tree), f.build_ms, timings);
+  return renderer.render(*f.scene, f.camera, f.tree, f.build_ms, timings);
 }
 
 }  // namespace mobirt

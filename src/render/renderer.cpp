@@ -158,7 +158,9 @@ class Renderer::Engine final : public WhittedEngine {
     if (prebuilt) {
       t.build_ms = cache.prebuilt_ms;  // on the frame pipeline's worker, during the previous frame
     } else if (!reuse) {
-      cache.tree = build_kdtree(scene.mesh.positions, scene.shapes, r_.settings_.kd);
+      // Into the last tree's arrays (their memory kept); until uploaded again it is no cache.
+      cache.tree_valid = false;
+      rebuild_kdtree(cache.tree, scene.mesh.positions, scene.shapes, r_.settings_.kd);
       cache.tree_positions = scene.mesh.positions;
       cache.tree_shapes = scene.shapes;
       t.build_ms = elapsed_ms(stage);
@@ -556,10 +558,10 @@ Image Renderer::render(const Scene& scene, const Camera& camera, FrameTimings* t
   return render_whitted(scene, camera, settings_, *engine_, timings);
 }
 
-Image Renderer::render(const Scene& scene, const Camera& camera, FlatKdTree&& tree, double build_ms,
+Image Renderer::render(const Scene& scene, const Camera& camera, FlatKdTree& tree, double build_ms,
                        FrameTimings* timings) {
   Data& d = *data_;
-  d.tree = std::move(tree);
+  std::swap(d.tree, tree);
   // Kept as the cache of the triangles the tree was built on, as a tree built here would be.
   d.tree_positions = scene.mesh.positions;
   d.tree_shapes = scene.shapes;

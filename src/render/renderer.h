@@ -72,9 +72,10 @@ class Renderer {
   // One frame: ray casting, shadows and up to settings.depth bounces; width x height.
   Image render(const Scene& scene, const Camera& camera, FrameTimings* timings = nullptr);
   // The same frame with a kd-tree built elsewhere over scene.mesh.positions as they are now (the
-  // frame pipeline's worker, render/frame_pipeline.h), moved in and uploaded instead of built;
-  // timings->build_ms is `build_ms`, the build's own wall clock.
-  Image render(const Scene& scene, const Camera& camera, FlatKdTree&& tree, double build_ms,
+  // frame pipeline's worker, render/frame_pipeline.h), uploaded instead of built; timings->build_ms
+  // is `build_ms`, the build's own wall clock. The tree is swapped in: `tree` comes back holding
+  // the renderer's previous one, whose arrays the caller's next rebuild_kdtree reuses.
+  Image render(const Scene& scene, const Camera& camera, FlatKdTree& tree, double build_ms,
                FrameTimings* timings = nullptr);
 
   // The traversal pass alone over the given rays (for tests and benchmarks). The tree must have
