@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <string>
 
 #include "core/error.h"
@@ -42,6 +43,9 @@ struct EmbreeEngine::Impl {
   size_t capacity = 0;  // triangles the geometry's buffers hold
   bool dynamic_low = true;
   unsigned threads = 0;  // the build's TBB arena (0: the calling thread's)
+  // Made once and kept, as a renderer on Embree would keep it: an arena made for each build paid
+  // for its workers joining a new arena every frame.
+  std::unique_ptr<tbb::task_arena> arena;
 
   ~Impl() {
     if (scene) rtcReleaseScene(scene);
@@ -126,8 +130,8 @@ void EmbreeEngine::build(std::span<const glm::vec3> positions) {
     rtcCommitGeometry(impl_->geometry);
   }
   if (impl_->threads > 0) {
-    tbb::task_arena arena(int(impl_->threads));
-    arena.execute([&] { rtcCommitScene(impl_->scene); });
+    if (!impl_->arena) impl_->arena = std::make_unique<tbb::task_arena>(int(impl_->threads));
+    impl_->arena->execute([&] { rtcCommitScene(impl_->scene); });
   } else {
     rtcCommitScene(impl_->scene);
   }
