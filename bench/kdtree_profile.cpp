@@ -4,8 +4,8 @@
 // statistics and a hash of its arrays (to tell whether two builders made the same tree), then the
 // tree's cost on 20,000 fixed rays (steps per ray, CPU traversal Mrays/s), to compare builds. A
 // driver for profilers, which need one process per mesh rather than Google Benchmark's loop over
-// all of them: valgrind --tool=callgrind --toggle-collect='mobirt::build_kdtree(*Shape*' with THREADS 1
-// (callgrind counts only the threads that enter build_kdtree). Environment knobs for experiments
+// all of them: valgrind --tool=callgrind --toggle-collect='mobirt::rebuild_kdtree*' with THREADS 1
+// (callgrind counts only the threads that enter rebuild_kdtree). Environment knobs for experiments
 // are read below (MOBIRT_KD_ISECT, _LEAF, _BINS, _DEPTH, _GAIN, _SMALL, _CLUSTER, _EMPTY, _SSE2,
 // _FRAMES, _COLD, _PAUSE_MS, _FRESH, _WORKER). Each build goes into the same tree, as an animation's
 // per-frame build does (rebuild_kdtree); MOBIRT_KD_FRESH=1 builds a new tree every time instead.

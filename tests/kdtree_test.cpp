@@ -913,6 +913,17 @@ TEST(KdTree, RebuildIntoAnotherTreeGivesTheSameArrays) {
     EXPECT_TRUE(tree.nodes.empty() && tree.leaf_prims.empty() && tree.triangles.empty());
     rebuild_kdtree(tree, small, {}, o);  // and the tree is usable again
     same(tree, build_kdtree(small, {}, o));
+    // Options refused before the build begins leave no tree either.
+    KdBuildOptions one_bin = o;
+    one_bin.bins = 1;
+    test::expect_bad_input([&] { rebuild_kdtree(tree, small, {}, one_bin); }, {"bins"});
+    EXPECT_TRUE(tree.nodes.empty() && tree.leaf_prims.empty() && tree.triangles.empty());
+    rebuild_kdtree(tree, small, {}, o);
+    tree.clear();  // no tree, its memory kept
+    EXPECT_TRUE(tree.nodes.empty() && tree.leaf_prims.empty() && tree.triangles.empty());
+    EXPECT_GT(tree.nodes.capacity(), 0u);
+    rebuild_kdtree(tree, big, {}, o);
+    same(tree, build_kdtree(big, {}, o));
   }
 }
 

@@ -137,6 +137,15 @@ struct FlatKdTree {
   int max_depth = 0;                    // depth limit used; bounds the full traversal stack
 
   size_t leaf_entries() const { return leaf_prims.size() / MOBIRT_TEXELS_PER_TRIANGLE; }
+  // No tree, the arrays' memory kept for the next rebuild_kdtree.
+  void clear() {
+    bounds = Aabb{};
+    nodes.clear();
+    triangles.clear();
+    leaf_prims.clear();
+    stats = KdBuildStats{};
+    max_depth = 0;
+  }
   // The primitive of leaf entry `entry` (< leaf_entries()).
   int32_t leaf_prim(size_t entry) const {
     return static_cast<int32_t>(leaf_prim_texel::prim(leaf_prim_texel::of(leaf_prims, entry)));

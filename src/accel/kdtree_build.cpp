@@ -523,6 +523,10 @@ class Builder {
     const Tally& t = root->tally;
     if (root->node_total > kKdIndexLimit) throw too_many_nodes();
     if (root->prim_total > kKdMaxLeafEntries) throw too_many_prim_references();
+    // Emptied first: growing past the capacity then allocates exactly the size, copying nothing
+    // of the last tree (a resize from its size would move it and double the capacity).
+    tree.nodes.clear();
+    tree.leaf_prims.clear();
     tree.nodes.resize(root->node_total);
     tree.leaf_prims.resize(root->prim_total * MOBIRT_TEXELS_PER_TRIANGLE);
     lay_out(*root, 0, 0, tree);
@@ -1425,8 +1429,11 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, std::span<const Sh
   return tree;
 }
 
-void rebuild_kdtree(FlatKdTree& tree, std::span<const glm::vec3> positions, std::span<const Shape> shapes,
-                    const KdBuildOptions& options) {
+namespace {
+
+// rebuild_kdtree without its clean-up on an error.
+void build_into(FlatKdTree& tree, std::span<const glm::vec3> positions, std::span<const Shape> shapes,
+                const KdBuildOptions& options) {
   if (positions.size() % 3 != 0) {
     throw Error(ErrorKind::BadInput, "kd-tree: " + count_text(positions.size()) +
                                          " positions do not make whole triangles (3 per triangle)");
@@ -1475,16 +1482,23 @@ void rebuild_kdtree(FlatKdTree& tree, std::span<const glm::vec3> positions, std:
     }
   }
   Builder builder(positions, shapes, options);
+  if (options.threads == 0) {
+    builder.build(tree);
+  } else {
+    // More threads than the machine has would only make TBB warn (the tree is the same anyway).
+    tbb::task_arena arena(std::min(options.threads, tbb::info::default_concurrency()));
+    arena.execute([&] { builder.build(tree); });
+  }
+}
+
+}  // namespace
+
+void rebuild_kdtree(FlatKdTree& tree, std::span<const glm::vec3> positions, std::span<const Shape> shapes,
+                    const KdBuildOptions& options) {
   try {
-    if (options.threads == 0) {
-      builder.build(tree);
-    } else {
-      // More threads than the machine has would only make TBB warn (the tree is the same anyway).
-      tbb::task_arena arena(std::min(options.threads, tbb::info::default_concurrency()));
-      arena.execute([&] { builder.build(tree); });
-    }
+    build_into(tree, positions, shapes, options);
   } catch (...) {
-    tree = FlatKdTree{};  // no half-built tree, and its memory goes with it
+    tree = FlatKdTree{};  // neither the previous tree nor a half-built one, and no memory kept
     throw;
   }
 }

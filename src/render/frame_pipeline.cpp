@@ -32,11 +32,7 @@ double FramePipeline::prepare(size_t index) {
   if (f.tree_built) {
     rebuild_kdtree(f.tree, scene->mesh.positions, scene->shapes, kd_);
   } else {
-    f.tree.nodes.clear();
-    f.tree.leaf_prims.clear();
-    f.tree.triangles.clear();
-    f.tree.bounds = Aabb{};
-    f.tree.stats = KdBuildStats{};
+    f.tree.clear();
   }
   f.build_ms = f.tree_built ? elapsed_ms(build_start) : 0.0;
   if (f.tree_built && !always_rebuild_) {

@@ -36,7 +36,9 @@ struct PreparedFrame {
   size_t index = 0;             // in the pipeline's frame list
   const Scene* scene = nullptr; // posed; owned by the caller's slot
   Camera camera;
-  FlatKdTree tree;              // over scene->mesh.positions, when tree_built
+  FlatKdTree tree;              // over scene->mesh.positions when tree_built, else empty; after
+                                // render_prepared, the renderer's previous tree (its memory for
+                                // the slot's next build)
   bool tree_built = false;      // false: the triangles did not move since the last tree built
   double pose_ms = 0.0;         // posing the scene
   double build_ms = 0.0;        // the kd-tree build's wall clock; pipelined, on the worker while
@@ -95,8 +97,9 @@ class FramePipeline {
   std::future<double> ahead_;      // the worker preparing frame next_
 };
 
-// Frame `f` through `renderer`: with the tree built ahead (moved into the renderer), or, when the
-// triangles did not move, with the renderer's own tree.
+// Frame `f` through `renderer`: with the tree built ahead (swapped into the renderer, f.tree then
+// holding the renderer's previous one), or, when the triangles did not move, with the renderer's
+// own tree.
 Image render_prepared(Renderer& renderer, PreparedFrame& f, FrameTimings* timings = nullptr);
 
 }  // namespace mobirt

@@ -562,10 +562,11 @@ Image Renderer::render(const Scene& scene, const Camera& camera, FlatKdTree& tre
                        FrameTimings* timings) {
   Data& d = *data_;
   std::swap(d.tree, tree);
-  // Kept as the cache of the triangles the tree was built on, as a tree built here would be.
+  // Kept as the cache of the triangles the tree was built on, as a tree built here would be; valid
+  // once begin_frame has uploaded it (a frame refused before that leaves no cache).
   d.tree_positions = scene.mesh.positions;
   d.tree_shapes = scene.shapes;
-  d.tree_valid = true;
+  d.tree_valid = false;
   d.tree_prebuilt = true;
   d.prebuilt_ms = build_ms;
   return render_whitted(scene, camera, settings_, *engine_, timings);
