@@ -17,6 +17,10 @@
 //                     order_for_traversal, as the renderer does: sorted by direction octant and
 //                     origin when their octants are mixed, then laid out so that a tile holds 8
 //                     consecutive rays; --ray-order sorted always sorts, tiles never does)
+//   postponed leaves  the node-loop and triangle-loop iterations the same groups would run if a
+//                     lane kept the leaf it reached and walked on (speculative traversal), with
+//                     and without a vote between the lanes, against the pass as it is; see
+//                     simulate_postponed() below
 //
 // Usage: mobirt_simd_stats SCENE [--mtl F] [--camera SPEC] [--light SPEC]... [--size WxH]
 //        [--stack N] [--bins N] [--leaf-size N] [--isect-cost C] [--depth N]
@@ -42,6 +46,7 @@ namespace {
 // The walks of one ray: its closest-hit walk, then one per light (empty: no shadow ray).
 struct RayWalks {
   std::vector<TraversalTrace> walks;
+  std::vector<bool> hit;  // per walk: it ended at a hit
   bool active = false;  // the fragment has a ray at all
 };
 
@@ -77,13 +82,123 @@ LoopCounts simulate_walk(const std::vector<const TraversalTrace*>& lanes) {
   return c;
 }
 
+// Postponed leaves (Aila and Laine 2009, "speculative traversal"), estimated from the same walks:
+// a lane that reaches a leaf with primitives keeps it and walks on toward the next one; the leaf
+// loop then tests the kept leaf and, when the lane reached it, the next. Each lane tests its
+// leaves in the same order as now, so the hits and the step counts would not change (the steps
+// walked past a leaf that ends the ray would be dropped). Two ways to end the node loop:
+//   no vote  each lane walks until it holds two leaves (or its walk ends), the loop runs until
+//            the last lane does (GLSL ES 1.00 has no cross-lane operation);
+//   vote     the loop ends once every lane holds a leaf or is done (subgroupAll, Vulkan only);
+//            lanes that found theirs early walk on meanwhile, and keep their progress.
+// A lane whose walk ended at a hit would, past that leaf, walk on to a leaf the trace does not
+// record: counted as the lane's mean node iterations per leaf (no vote), or as free (vote: it
+// only fills iterations the group runs anyway).
+struct LaneWalk {
+  std::vector<TraversalTrace::Segment> leaves;  // the segments that end at a leaf with primitives
+  uint32_t end = 1;       // node iterations of the walk's last segment (after its last leaf)
+  bool hit = false;       // the walk ended at a hit (at its last leaf)
+  uint32_t past_hit = 0;  // the node iterations charged for walking on past that leaf (no vote)
+  size_t next = 0;        // the leaf the lane walks toward
+  uint32_t walked = 0;    // node iterations already walked toward it
+  bool done = false;
+
+  LaneWalk(const TraversalTrace& trace, bool ended_at_hit) : hit(ended_at_hit) {
+    uint64_t sum = 0;
+    for (const TraversalTrace::Segment& seg : trace.segments) {
+      if (seg.triangle_tests > 0) {
+        leaves.push_back(seg);
+        sum += seg.node_iterations;
+      } else {
+        end = seg.node_iterations;
+      }
+    }
+    hit = hit && !leaves.empty();
+    if (hit) past_hit = uint32_t(std::max<uint64_t>(1, (sum + leaves.size() / 2) / leaves.size()));
+  }
+  // Node iterations still needed to reach the next leaf, or the end of the walk.
+  uint32_t need() const {
+    const uint32_t total = next < leaves.size() ? leaves[next].node_iterations : end;
+    return total - std::min(walked, total);
+  }
+};
+
+LoopCounts simulate_postponed(const std::vector<const TraversalTrace*>& lanes, const std::vector<bool>& hits,
+                              bool vote) {
+  LoopCounts c;
+  std::vector<LaneWalk> ls;
+  for (size_t l = 0; l < lanes.size(); ++l) ls.emplace_back(*lanes[l], hits[l]);
+  bool first_round = true;
+  for (;;) {
+    bool active = false;
+    for (const LaneWalk& x : ls) active = active || !x.done;
+    if (!active && !first_round) break;  // a loop runs at least once
+    first_round = false;
+    // The node loop's length: until every lane holds a leaf (vote), or holds two (no vote).
+    uint32_t node = 1;
+    for (const LaneWalk& x : ls) {
+      if (x.done) continue;
+      uint32_t n = x.need();
+      if (!vote && x.next < x.leaves.size()) {
+        if (x.next + 1 < x.leaves.size()) {
+          n += x.leaves[x.next + 1].node_iterations;
+        } else {
+          n += x.hit ? x.past_hit : x.end;
+        }
+      }
+      node = std::max(node, n);
+    }
+    uint32_t leaf = 1;
+    for (LaneWalk& x : ls) {
+      if (x.done) continue;
+      uint32_t budget = node;
+      const uint32_t n0 = x.need();
+      c.lane_node += n0;
+      budget -= n0;
+      if (x.next >= x.leaves.size()) {  // the walk ends without another leaf
+        x.done = true;
+        continue;
+      }
+      uint32_t tests = x.leaves[x.next].triangle_tests;
+      ++x.next;
+      x.walked = 0;
+      if (x.next >= x.leaves.size() && x.hit) {  // this leaf ends the ray: walking on is dropped
+        c.lane_node += vote ? 0 : x.past_hit;
+        x.done = true;
+      } else {
+        const uint32_t n1 = x.need();
+        if (n1 <= budget) {
+          c.lane_node += n1;
+          if (x.next < x.leaves.size()) {  // reached its second leaf: tested too
+            tests += x.leaves[x.next].triangle_tests;
+            ++x.next;
+            if (x.next >= x.leaves.size() && x.hit) x.done = true;
+          } else {
+            x.done = true;  // reached the end of its walk
+          }
+        } else {
+          c.lane_node += budget;
+          x.walked = budget;
+        }
+      }
+      c.lane_leaf += tests;
+      leaf = std::max(leaf, tests);
+    }
+    c.node += node;
+    c.leaf += leaf;
+  }
+  return c;
+}
+
 // A group's traversal pass: the closest-hit walk, then the light loop.
-LoopCounts simulate_group(const std::vector<const RayWalks*>& lanes, size_t lights) {
+// mode 0: the pass as it is; 1: postponed leaves without a vote; 2: with a vote.
+LoopCounts simulate_group(const std::vector<const RayWalks*>& lanes, size_t lights, int mode = 0) {
   LoopCounts c;
   for (size_t w = 0; w <= lights; ++w) {
     std::vector<const TraversalTrace*> walks;
-    for (const RayWalks* r : lanes) walks.push_back(&r->walks[w]);
-    c += simulate_walk(walks);
+    std::vector<bool> hit;
+    for (const RayWalks* r : lanes) { walks.push_back(&r->walks[w]); hit.push_back(w < r->hit.size() && r->hit[w]); }
+    c += mode == 0 ? simulate_walk(walks) : simulate_postponed(walks, hit, mode == 2);
   }
   return c;
 }
@@ -92,6 +207,7 @@ struct PassStats {
   uint64_t rays = 0, shadow_rays = 0;
   TraversalStats steps;
   LoopCounts tiled, linear;  // 4x2 tiles of the ray texture; 8 consecutive rays
+  LoopCounts postponed, voted;  // 4x2 tiles, postponed leaves without and with a vote
 };
 
 PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& rays, int stack,
@@ -104,25 +220,27 @@ PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& r
     RayWalks& r = walks[i];
     r.active = true;
     r.walks.resize(lights + 1);
+    r.hit.assign(lights + 1, false);
     const Ray ray = rays.ray(i);
     TraversalStats ts;
     const Hit h = traverse(tree, ray, stack, ts, -1, RayTest{}, &r.walks[0]);
     s.steps += ts;
     ++s.rays;
+    r.hit[0] = h.valid();
     if (!h.valid()) continue;
     uint32_t mask = 0;
     const auto shadows = shadow_rays(tree, scene.lights, h.prim, ray, h.t, ShadowSettings{});
     for (size_t l = 0; l < lights; ++l) {
       if (!shadows[l]) continue;
       TraversalStats ss;
-      if (!occluded(tree, *shadows[l], stack, ss, -1, RayTest{}, &r.walks[l + 1])) mask |= 1u << l;
+      if (!occluded(tree, *shadows[l], stack, ss, -1, RayTest{}, &r.walks[l + 1])) { mask |= 1u << l; } else { r.hit[l + 1] = true; }
       s.steps += ss;
       ++s.shadow_rays;
     }
     hits[i] = surface_hit(scene, tree, ray, h.prim);
     hits[i].mask = mask;
   }
-  const RayWalks idle{std::vector<TraversalTrace>(lights + 1), false};
+  const RayWalks idle{std::vector<TraversalTrace>(lights + 1), std::vector<bool>(lights + 1, false), false};
   auto lane = [&](uint64_t i) { return i < rays.count() ? &walks[i] : &idle; };
   // llvmpipe's groups: 4x2 tiles of the pass (ray i at (i mod W, i div W)).
   const uint32_t w = rays.width, rows = rays.rows();
@@ -133,6 +251,8 @@ PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& r
         for (uint32_t x = x0; x < std::min(x0 + 4, w); ++x) group.push_back(lane(uint64_t(y) * w + x));
       }
       s.tiled += simulate_group(group, lights);
+      s.postponed += simulate_group(group, lights, 1);
+      s.voted += simulate_group(group, lights, 2);
     }
   }
   for (uint64_t i0 = 0; i0 < rays.count(); i0 += 8) {
@@ -179,6 +299,17 @@ int run(int argc, char** argv) {
                 (unsigned long long)s.tiled.node, occupancy(s.tiled.lane_node, s.tiled.node),
                 (unsigned long long)s.tiled.leaf, occupancy(s.tiled.lane_leaf, s.tiled.leaf),
                 (unsigned long long)s.linear.node, occupancy(s.linear.lane_node, s.linear.node));
+    // Weighted 1 to 2: a node iteration is one texel fetch and the split decision, a leaf
+    // iteration three fetches and the intersection (the toaster's JIT samples, jit_dump.sh, put
+    // about 65 % in the node loop and 35 % in the triangle loop over 497K and 160K group
+    // iterations: 1 to 1.7).
+    for (const auto& [label, counts] : {std::pair<const char*, const LoopCounts*>{"no vote", &s.postponed},
+                                        std::pair<const char*, const LoopCounts*>{"vote", &s.voted}}) {
+      std::printf("    postponed leaves, %-7s node iter. %12llu (x%.3f)  leaf iter. %11llu (x%.3f)  1:2 weighted x%.3f\n",
+                  label, (unsigned long long)counts->node, double(counts->node) / double(s.tiled.node),
+                  (unsigned long long)counts->leaf, double(counts->leaf) / double(s.tiled.leaf),
+                  double(counts->node + 2 * counts->leaf) / double(s.tiled.node + 2 * s.tiled.leaf));
+    }
     if (out) {
       std::fprintf(out, "%d,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%.4f,%.4f,%llu,%llu,%.4f\n", g,
                    (unsigned long long)s.rays, (unsigned long long)s.shadow_rays,
