@@ -389,7 +389,13 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
         if (any_hit) return vec3(best_prim, best_t, 0.0);
       }
     }
-    if (leaf_count > 0.0) leaf_done = true;
+    if (leaf_count > 0.0) {
+      // The leaf's close begins here: a hit within its interval ends the walk at once. Left to
+      // the node loop's next iteration (which closes it all the same), the group ran that
+      // iteration, its node fetch and one more triangle-loop iteration for lanes that were done.
+      if (best_t <= tmax) return vec3(best_prim, best_t, 0.0);
+      leaf_done = true;
+    }
   }
   // The cap, or the driver's own loop limit, ended the walk before it could decide.
   return vec3(best_prim, best_t, 1.0);

@@ -867,6 +867,47 @@ TEST(KdTree, SameTreeForAnyThreadCount) {
   }
 }
 
+// A trace (tools/profile/simd_stats.cpp) walks on past the hit that ended the walk, to measure
+// what a speculative lane would spend: the hit, the steps and every counter stay those of the walk
+// without a trace, and the trace says which walks ended at a hit in a leaf.
+TEST(KdTree, TraceLeavesTheWalkUnchanged) {
+  const Positions positions = random_soup(3000, 61);
+  const FlatKdTree tree = build_kdtree(positions);
+  const std::vector<Ray> rays = make_rays(tree, positions, 2000 / test::sanitizer_stride(4), 62);
+  auto same_stats = [](const TraversalStats& a, const TraversalStats& b) {
+    return a.nodes_visited == b.nodes_visited && a.leaves_visited == b.leaves_visited &&
+           a.triangles_tested == b.triangles_tested && a.steps == b.steps && a.pops == b.pops &&
+           a.dropped == b.dropped && a.restarts == b.restarts && a.capped == b.capped;
+  };
+  size_t ended_at_hit = 0, walked_on = 0;
+  for (int stack : {-1, 0, 4}) {
+    for (const Ray& ray : rays) {
+      TraversalStats plain, traced;
+      TraversalTrace trace;
+      const Hit a = traverse(tree, ray, stack, plain);
+      const Hit b = traverse(tree, ray, stack, traced, -1, RayTest{}, &trace);
+      ASSERT_EQ(a.prim, b.prim);
+      ASSERT_EQ(std::memcmp(&a.t, &b.t, sizeof(float)), 0);
+      ASSERT_TRUE(same_stats(plain, traced));
+      // A walk that ended at a hit in a leaf has no closing segment; one that did not ends with it.
+      ASSERT_TRUE(!trace.ended_at_hit || a.valid());
+      ASSERT_FALSE(trace.segments.empty() && trace.ended_at_hit);
+      ASSERT_EQ(trace.ended_at_hit, !trace.segments.empty() && trace.segments.back().triangle_tests > 0);
+      ended_at_hit += trace.ended_at_hit;
+      walked_on += trace.past_hit_iterations > 0;
+      // Shadow rays: the walk ends at the first hit found, always in a leaf.
+      TraversalStats shadow_plain, shadow_traced;
+      TraversalTrace shadow_trace;
+      const bool blocked = occluded(tree, ray, stack, shadow_plain);
+      ASSERT_EQ(occluded(tree, ray, stack, shadow_traced, -1, RayTest{}, &shadow_trace), blocked);
+      ASSERT_TRUE(same_stats(shadow_plain, shadow_traced));
+      ASSERT_EQ(shadow_trace.ended_at_hit, blocked);
+    }
+  }
+  EXPECT_GT(ended_at_hit, rays.size());  // the soup is dense: most rays hit
+  EXPECT_EQ(walked_on, ended_at_hit);    // each walk on fetches at least the node it goes on to
+}
+
 // rebuild_kdtree replaces whatever tree it is given (larger, smaller, with shapes or not) by the
 // very tree build_kdtree makes, and leaves none behind when the input is refused.
 TEST(KdTree, RebuildIntoAnotherTreeGivesTheSameArrays) {

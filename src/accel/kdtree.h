@@ -250,13 +250,19 @@ struct TraversalStats {
 // loop that led to it (one per node fetched, interior or leaf, the first also closing the previous
 // leaf) and the triangles tested there; a walk that ends by closing a leaf (not by an any-hit)
 // ends with a segment of the node-loop iterations after the last leaf, plus the closing one, and
-// no triangles.
+// no triangles. A walk that ends at a hit in its last leaf (closest or any hit) has no such
+// segment: the pass returns right after the triangle loop.
 struct TraversalTrace {
   struct Segment {
     uint32_t node_iterations = 0;
     uint32_t triangle_tests = 0;
   };
   std::vector<Segment> segments;
+  // When the walk ended at a hit: the node-loop iterations it would have run past that leaf, had
+  // the hit not ended it, to its next leaf with primitives (that leaf's fetch included) or to its
+  // end (the closing iteration included); what a lane walking on speculatively would spend.
+  bool ended_at_hit = false;
+  uint32_t past_hit_iterations = 0;
 };
 
 // Closest hit in [ray.tmin, ray.tmax] by traversal of the flattened arrays.

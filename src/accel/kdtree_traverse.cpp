@@ -326,7 +326,7 @@ class ShortStack {
 class TraceRecorder {
  public:
   explicit TraceRecorder(TraversalTrace* trace) : trace_(trace) {
-    if (trace_) trace_->segments.clear();
+    if (trace_) *trace_ = TraversalTrace{};
   }
   void node() { ++node_iterations_; }
   void leaf(uint32_t triangle_tests) {
@@ -338,6 +338,17 @@ class TraceRecorder {
   void end() {
     if (trace_) trace_->segments.push_back({node_iterations_ + 1, 0});
   }
+  // The walk ended at a hit in the leaf just recorded; the walk on past it is measured next.
+  void hit() {
+    if (!trace_) return;
+    trace_->ended_at_hit = true;
+    node_iterations_ = 0;
+  }
+  // The walk on past the hit reached a leaf with primitives (fetch included) or, closing, its end.
+  void walked_on(bool closing) {
+    if (trace_) trace_->past_hit_iterations = node_iterations_ + (closing ? 1 : 0);
+  }
+  bool wanted() const { return trace_ != nullptr; }
 
  private:
   TraversalTrace* trace_;
@@ -401,11 +412,31 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
     node = 0;
     return false;
   };
+  // For a trace only: once the walk has ended at a hit, it walks on, the hit set aside, to measure
+  // what a lane walking on speculatively would spend (TraversalTrace::past_hit_iterations); the
+  // result and the statistics are those of the moment the hit ended it.
+  bool probing = false;
+  Hit result;
+  TraversalStats ended_stats;
+  auto walk_on = [&]() {
+    if (!recorder.wanted()) return false;
+    recorder.hit();
+    probing = true;
+    result = best;
+    ended_stats = stats;
+    best = Hit{};  // no hit ends the walk on
+    return true;
+  };
+  auto walked_on = [&](bool closing) {
+    recorder.walked_on(closing);
+    stats = ended_stats;
+    return result;
+  };
   for (;;) {
     const glm::vec4 n = nodes[node];
     recorder.node();
     if (!node_texel::is_leaf(n)) {
-      if (stats.steps >= cap) {
+      if (!probing && stats.steps >= cap) {
         stats.capped = 1;
         return Hit{};
       }
@@ -441,6 +472,7 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
         tmax = tsplit;
       }
       if (closed && close()) {
+        if (probing) return walked_on(true);
         recorder.end();
         return best;
       }
@@ -451,13 +483,15 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
     ++stats.nodes_visited;
     ++stats.leaves_visited;
     const int count = checked_index(node_texel::leaf_count(n), entries + 1, "leaf count");
-    if (count == 0) {
+    if (probing && count > 0) return walked_on(false);
+    if (count == 0 && !probing) {
       if (stats.steps >= cap) {
         stats.capped = 1;
         return Hit{};
       }
       ++stats.steps;
     }
+    bool any_hit = false;
     for (int i = 0; i < count; ++i) {
       if (stats.steps >= cap) {
         stats.capped = 1;
@@ -471,11 +505,20 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
       const int32_t prim = checked_index(leaf_prim_texel::prim(texels), prim_count, "primitive");
       if (intersect_texels(texels, prim, ray, best, test) && kAnyHit) {
         recorder.leaf(uint32_t(i + 1));
-        return best;
+        if (!walk_on()) return best;
+        any_hit = true;
+        break;
       }
     }
-    if (count > 0) recorder.leaf(uint32_t(count));
+    if (count > 0 && !any_hit) {
+      recorder.leaf(uint32_t(count));
+      // glsl/traverse.glsl closes a leaf with primitives right after its triangle loop: a hit
+      // within the leaf's interval ends the walk there, without a node-loop iteration (close()
+      // would return true at once; only the trace differs).
+      if (best.t <= tmax && !walk_on()) return best;
+    }
     if (close()) {
+      if (probing) return walked_on(true);
       recorder.end();
       return best;
     }

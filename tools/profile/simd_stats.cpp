@@ -46,7 +46,6 @@ namespace {
 // The walks of one ray: its closest-hit walk, then one per light (empty: no shadow ray).
 struct RayWalks {
   std::vector<TraversalTrace> walks;
-  std::vector<bool> hit;  // per walk: it ended at a hit
   bool active = false;  // the fragment has a ray at all
 };
 
@@ -91,30 +90,28 @@ LoopCounts simulate_walk(const std::vector<const TraversalTrace*>& lanes) {
 //            the last lane does (GLSL ES 1.00 has no cross-lane operation);
 //   vote     the loop ends once every lane holds a leaf or is done (subgroupAll, Vulkan only);
 //            lanes that found theirs early walk on meanwhile, and keep their progress.
-// A lane whose walk ended at a hit would, past that leaf, walk on to a leaf the trace does not
-// record: counted as the lane's mean node iterations per leaf (no vote), or as free (vote: it
-// only fills iterations the group runs anyway).
+// A lane whose walk ended at a hit walks on past that leaf for nothing: the trace measures how far
+// (TraversalTrace::past_hit_iterations, the CPU walk continued with the hit set aside). Without a
+// vote the group waits for it; with one it only fills iterations the group runs anyway.
 struct LaneWalk {
   std::vector<TraversalTrace::Segment> leaves;  // the segments that end at a leaf with primitives
-  uint32_t end = 1;       // node iterations of the walk's last segment (after its last leaf)
+  uint32_t end = 0;       // node iterations of the walk's last segment (after its last leaf)
   bool hit = false;       // the walk ended at a hit (at its last leaf)
-  uint32_t past_hit = 0;  // the node iterations charged for walking on past that leaf (no vote)
+  uint32_t past_hit = 0;  // the node iterations of walking on past that leaf
   size_t next = 0;        // the leaf the lane walks toward
   uint32_t walked = 0;    // node iterations already walked toward it
   bool done = false;
 
-  LaneWalk(const TraversalTrace& trace, bool ended_at_hit) : hit(ended_at_hit) {
-    uint64_t sum = 0;
+  explicit LaneWalk(const TraversalTrace& trace)
+      : hit(trace.ended_at_hit), past_hit(trace.past_hit_iterations) {
     for (const TraversalTrace::Segment& seg : trace.segments) {
       if (seg.triangle_tests > 0) {
         leaves.push_back(seg);
-        sum += seg.node_iterations;
       } else {
         end = seg.node_iterations;
       }
     }
     hit = hit && !leaves.empty();
-    if (hit) past_hit = uint32_t(std::max<uint64_t>(1, (sum + leaves.size() / 2) / leaves.size()));
   }
   // Node iterations still needed to reach the next leaf, or the end of the walk.
   uint32_t need() const {
@@ -123,11 +120,10 @@ struct LaneWalk {
   }
 };
 
-LoopCounts simulate_postponed(const std::vector<const TraversalTrace*>& lanes, const std::vector<bool>& hits,
-                              bool vote) {
+LoopCounts simulate_postponed(const std::vector<const TraversalTrace*>& lanes, bool vote) {
   LoopCounts c;
   std::vector<LaneWalk> ls;
-  for (size_t l = 0; l < lanes.size(); ++l) ls.emplace_back(*lanes[l], hits[l]);
+  for (const TraversalTrace* t : lanes) ls.emplace_back(*t);
   bool first_round = true;
   for (;;) {
     bool active = false;
@@ -196,9 +192,8 @@ LoopCounts simulate_group(const std::vector<const RayWalks*>& lanes, size_t ligh
   LoopCounts c;
   for (size_t w = 0; w <= lights; ++w) {
     std::vector<const TraversalTrace*> walks;
-    std::vector<bool> hit;
-    for (const RayWalks* r : lanes) { walks.push_back(&r->walks[w]); hit.push_back(w < r->hit.size() && r->hit[w]); }
-    c += mode == 0 ? simulate_walk(walks) : simulate_postponed(walks, hit, mode == 2);
+    for (const RayWalks* r : lanes) walks.push_back(&r->walks[w]);
+    c += mode == 0 ? simulate_walk(walks) : simulate_postponed(walks, mode == 2);
   }
   return c;
 }
@@ -220,27 +215,25 @@ PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& r
     RayWalks& r = walks[i];
     r.active = true;
     r.walks.resize(lights + 1);
-    r.hit.assign(lights + 1, false);
     const Ray ray = rays.ray(i);
     TraversalStats ts;
     const Hit h = traverse(tree, ray, stack, ts, -1, RayTest{}, &r.walks[0]);
     s.steps += ts;
     ++s.rays;
-    r.hit[0] = h.valid();
     if (!h.valid()) continue;
     uint32_t mask = 0;
     const auto shadows = shadow_rays(tree, scene.lights, h.prim, ray, h.t, ShadowSettings{});
     for (size_t l = 0; l < lights; ++l) {
       if (!shadows[l]) continue;
       TraversalStats ss;
-      if (!occluded(tree, *shadows[l], stack, ss, -1, RayTest{}, &r.walks[l + 1])) { mask |= 1u << l; } else { r.hit[l + 1] = true; }
+      if (!occluded(tree, *shadows[l], stack, ss, -1, RayTest{}, &r.walks[l + 1])) mask |= 1u << l;
       s.steps += ss;
       ++s.shadow_rays;
     }
     hits[i] = surface_hit(scene, tree, ray, h.prim);
     hits[i].mask = mask;
   }
-  const RayWalks idle{std::vector<TraversalTrace>(lights + 1), std::vector<bool>(lights + 1, false), false};
+  const RayWalks idle{std::vector<TraversalTrace>(lights + 1), false};
   auto lane = [&](uint64_t i) { return i < rays.count() ? &walks[i] : &idle; };
   // llvmpipe's groups: 4x2 tiles of the pass (ray i at (i mod W, i div W)).
   const uint32_t w = rays.width, rows = rays.rows();
