@@ -879,22 +879,33 @@ TEST(KdTree, TraceLeavesTheWalkUnchanged) {
            a.triangles_tested == b.triangles_tested && a.steps == b.steps && a.pops == b.pops &&
            a.dropped == b.dropped && a.restarts == b.restarts && a.capped == b.capped;
   };
-  size_t ended_at_hit = 0, walked_on = 0;
+  size_t walks = 0, ended_at_hit = 0, walked_on = 0, walked_far = 0;
   for (int stack : {-1, 0, 4}) {
     for (const Ray& ray : rays) {
-      TraversalStats plain, traced;
-      TraversalTrace trace;
+      TraversalStats plain;
       const Hit a = traverse(tree, ray, stack, plain);
-      const Hit b = traverse(tree, ray, stack, traced, -1, RayTest{}, &trace);
-      ASSERT_EQ(a.prim, b.prim);
-      ASSERT_EQ(std::memcmp(&a.t, &b.t, sizeof(float)), 0);
-      ASSERT_TRUE(same_stats(plain, traced));
-      // A walk that ended at a hit in a leaf has no closing segment; one that did not ends with it.
-      ASSERT_TRUE(!trace.ended_at_hit || a.valid());
-      ASSERT_FALSE(trace.segments.empty() && trace.ended_at_hit);
-      ASSERT_EQ(trace.ended_at_hit, !trace.segments.empty() && trace.segments.back().triangle_tests > 0);
-      ended_at_hit += trace.ended_at_hit;
-      walked_on += trace.past_hit_iterations > 0;
+      // Unlimited, then capped at the walk's own steps (it completes) and one fewer (it is capped):
+      // the walk on past the hit must neither count against the cap nor be stopped by it.
+      for (int64_t cap : {int64_t(-1), int64_t(plain.steps), int64_t(plain.steps) - 1}) {
+        SCOPED_TRACE("stack " + std::to_string(stack) + ", cap " + std::to_string(cap));
+        TraversalStats untraced, traced;
+        TraversalTrace trace;
+        const Hit u = traverse(tree, ray, stack, untraced, cap);
+        const Hit b = traverse(tree, ray, stack, traced, cap, RayTest{}, &trace);
+        ASSERT_EQ(u.prim, b.prim);
+        ASSERT_EQ(std::memcmp(&u.t, &b.t, sizeof(float)), 0);
+        ASSERT_TRUE(same_stats(untraced, traced)) << traced.steps << " steps against " << untraced.steps;
+        ASSERT_EQ(traced.capped, uint64_t(cap >= 0 && cap < int64_t(plain.steps)));
+        if (cap >= 0) continue;
+        ASSERT_EQ(u.prim, a.prim);
+        // A walk that ended at a hit in a leaf has no closing segment; one that did not ends with it.
+        ASSERT_TRUE(!trace.ended_at_hit || a.valid());
+        ASSERT_EQ(trace.ended_at_hit, !trace.segments.empty() && trace.segments.back().triangle_tests > 0);
+        ++walks;
+        ended_at_hit += trace.ended_at_hit;
+        walked_on += trace.past_hit_iterations > 0;
+        walked_far += trace.past_hit_iterations > 1;
+      }
       // Shadow rays: the walk ends at the first hit found, always in a leaf.
       TraversalStats shadow_plain, shadow_traced;
       TraversalTrace shadow_trace;
@@ -904,8 +915,9 @@ TEST(KdTree, TraceLeavesTheWalkUnchanged) {
       ASSERT_EQ(shadow_trace.ended_at_hit, blocked);
     }
   }
-  EXPECT_GT(ended_at_hit, rays.size());  // the soup is dense: most rays hit
-  EXPECT_EQ(walked_on, ended_at_hit);    // each walk on fetches at least the node it goes on to
+  EXPECT_GT(4 * ended_at_hit, walks);  // a third of these walks end at a hit in a leaf
+  EXPECT_EQ(walked_on, ended_at_hit);  // each walk on fetches at least the node it goes on to
+  EXPECT_GT(walked_far, ended_at_hit / 4);  // and many go on past a pop to another node
 }
 
 // rebuild_kdtree replaces whatever tree it is given (larger, smaller, with shapes or not) by the

@@ -258,9 +258,10 @@ struct TraversalTrace {
     uint32_t triangle_tests = 0;
   };
   std::vector<Segment> segments;
-  // When the walk ended at a hit: the node-loop iterations it would have run past that leaf, had
-  // the hit not ended it, to its next leaf with primitives (that leaf's fetch included) or to its
-  // end (the closing iteration included); what a lane walking on speculatively would spend.
+  // When the walk ended at a hit in a leaf: the node-loop iterations a lane that had not yet
+  // tested that leaf (knowing only the hits of the leaves before it) would run past it, to its
+  // next leaf with primitives (that leaf's fetch included) or to its end (the closing iteration
+  // included): what a lane walking on speculatively spends.
   bool ended_at_hit = false;
   uint32_t past_hit_iterations = 0;
 };

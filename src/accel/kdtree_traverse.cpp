@@ -412,11 +412,13 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
     node = 0;
     return false;
   };
-  // For a trace only: once the walk has ended at a hit, it walks on, the hit set aside, to measure
-  // what a lane walking on speculatively would spend (TraversalTrace::past_hit_iterations); the
-  // result and the statistics are those of the moment the hit ended it.
+  // For a trace only: once the walk has ended at a hit in a leaf, it walks on as a lane that had
+  // not yet tested that leaf would (knowing the hits of the leaves before it), to measure what a
+  // lane walking on speculatively spends (TraversalTrace::past_hit_iterations); the result and the
+  // statistics are those of the moment the hit ended the walk.
   bool probing = false;
   Hit result;
+  Hit before_leaf;  // the best hit before the current leaf's triangles
   TraversalStats ended_stats;
   auto walk_on = [&]() {
     if (!recorder.wanted()) return false;
@@ -424,7 +426,7 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
     probing = true;
     result = best;
     ended_stats = stats;
-    best = Hit{};  // no hit ends the walk on
+    best = before_leaf;
     return true;
   };
   auto walked_on = [&](bool closing) {
@@ -492,6 +494,7 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
       ++stats.steps;
     }
     bool any_hit = false;
+    before_leaf = best;
     for (int i = 0; i < count; ++i) {
       if (stats.steps >= cap) {
         stats.capped = 1;
@@ -515,7 +518,7 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
       // glsl/traverse.glsl closes a leaf with primitives right after its triangle loop: a hit
       // within the leaf's interval ends the walk there, without a node-loop iteration (close()
       // would return true at once; only the trace differs).
-      if (best.t <= tmax && !walk_on()) return best;
+      if (best.valid() && best.t <= tmax && !walk_on()) return best;
     }
     if (close()) {
       if (probing) return walked_on(true);
