@@ -26,6 +26,16 @@
 #include "core/memory.h"
 #include "scene/animation.h"
 
+namespace {
+
+// An on/off knob: set to a non-zero number.
+bool env_on(const char* name) {
+  const char* value = std::getenv(name);
+  return value && std::atoi(value) != 0;
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
   using namespace mobirt;
   if (argc < 2) {
@@ -54,7 +64,7 @@ int main(int argc, char** argv) {
   // sweep only (the same tree: the hash says so).
   if (const char* cluster = std::getenv("MOBIRT_KD_CLUSTER")) options.cluster_refs = std::atoi(cluster);
   if (const char* empty = std::getenv("MOBIRT_KD_EMPTY")) options.empty_bonus = std::strtof(empty, nullptr);
-  if (const char* sse2 = std::getenv("MOBIRT_KD_SSE2"); sse2 && std::atoi(sse2) != 0) {
+  if (env_on("MOBIRT_KD_SSE2")) {
     options.sweep_simd = KdSweepSimd::Sse2;
   }
   bench::BenchMesh* mesh = nullptr;
@@ -83,13 +93,11 @@ int main(int argc, char** argv) {
   std::vector<char> flush(cold ? size_t(32) << 20 : 0);
   std::vector<double> ms;
   std::vector<double> cpu;
-  const char* fresh_env = std::getenv("MOBIRT_KD_FRESH");
-  const bool fresh = fresh_env && std::atoi(fresh_env) != 0;
+  const bool fresh = env_on("MOBIRT_KD_FRESH");
   // MOBIRT_KD_WORKER=1: the builds run on a thread of their own, as the frame pipeline's worker
   // runs them (glibc serves a non-main thread's allocations above its arena's 64 MiB heaps with
   // fresh pages every time, whatever retain_freed_memory() asks).
-  const char* worker_env = std::getenv("MOBIRT_KD_WORKER");
-  const bool on_worker = worker_env && std::atoi(worker_env) != 0;
+  const bool on_worker = env_on("MOBIRT_KD_WORKER");
   FlatKdTree tree;
   auto build_all = [&] {
     for (int i = 0; i < iterations; ++i) {

@@ -507,12 +507,11 @@ class Builder {
     cluster_refs_ = size_t(kd_cluster_refs(options));
   }
 
-  // Into `tree`, whose arrays keep their memory: resizing them writes nothing, and only what
-  // grows beyond their capacity is allocated anew.
+  // Into `tree`, whose arrays keep their memory: emptied first, so that resizing them writes
+  // nothing, and one that grows past its capacity gets exactly its size, copying nothing of the
+  // last tree (a resize from its old size would move it and double the capacity).
   void build(FlatKdTree& tree) {
-    tree.bounds = Aabb{};
-    tree.stats = KdBuildStats{};
-    tree.triangles.clear();
+    tree.clear();
     const size_t n = triangle_count_;
     tree.max_depth = kdtree_depth_limit(n, options_.max_depth);
     max_depth_ = tree.max_depth;
@@ -523,10 +522,6 @@ class Builder {
     const Tally& t = root->tally;
     if (root->node_total > kKdIndexLimit) throw too_many_nodes();
     if (root->prim_total > kKdMaxLeafEntries) throw too_many_prim_references();
-    // Emptied first: growing past the capacity then allocates exactly the size, copying nothing
-    // of the last tree (a resize from its size would move it and double the capacity).
-    tree.nodes.clear();
-    tree.leaf_prims.clear();
     tree.nodes.resize(root->node_total);
     tree.leaf_prims.resize(root->prim_total * MOBIRT_TEXELS_PER_TRIANGLE);
     lay_out(*root, 0, 0, tree);

@@ -42,9 +42,9 @@ struct EmbreeEngine::Impl {
   RTCGeometry geometry = nullptr;
   size_t capacity = 0;  // triangles the geometry's buffers hold
   bool dynamic_low = true;
-  unsigned threads = 0;  // the build's TBB arena (0: the calling thread's)
-  // Made once and kept, as a renderer on Embree would keep it: an arena made for each build paid
-  // for its workers joining a new arena every frame.
+  // The build's TBB arena of EmbreeOptions::threads (none for 0: the calling thread's). Made once
+  // and kept, as a renderer on Embree would keep it: an arena made for each build paid for its
+  // workers joining a new arena every frame.
   std::unique_ptr<tbb::task_arena> arena;
 
   ~Impl() {
@@ -86,7 +86,7 @@ EmbreeEngine::EmbreeEngine(const EmbreeOptions& options) : impl_(std::make_uniqu
   // which Embree's TBB tasks stay in.
   impl_->device = rtcNewDevice(nullptr);
   if (!impl_->device) embree_failed(nullptr, "rtcNewDevice");
-  impl_->threads = options.threads;
+  if (options.threads > 0) impl_->arena = std::make_unique<tbb::task_arena>(int(options.threads));
   impl_->scene = rtcNewScene(impl_->device);
   if (!impl_->scene) embree_failed(impl_->device, "rtcNewScene");
   impl_->dynamic_low = options.dynamic_low;
@@ -129,8 +129,7 @@ void EmbreeEngine::build(std::span<const glm::vec3> positions) {
     rtcUpdateGeometryBuffer(impl_->geometry, RTC_BUFFER_TYPE_VERTEX, 0);
     rtcCommitGeometry(impl_->geometry);
   }
-  if (impl_->threads > 0) {
-    if (!impl_->arena) impl_->arena = std::make_unique<tbb::task_arena>(int(impl_->threads));
+  if (impl_->arena) {
     impl_->arena->execute([&] { rtcCommitScene(impl_->scene); });
   } else {
     rtcCommitScene(impl_->scene);
