@@ -21,6 +21,9 @@
 //                     lane kept the leaf it reached and walked on (speculative traversal), with
 //                     and without a vote between the lanes, against the pass as it is; see
 //                     simulate_postponed() below
+//   entry nodes       (primary rays) the leading steps from the root that every ray of a 4x2
+//                     tile takes to one child, its interval unchanged: what a pass that started
+//                     each tile's rays below the root could skip at most; see entry_chain() below
 //
 // Usage: mobirt_simd_stats SCENE [--mtl F] [--camera SPEC] [--light SPEC]... [--size WxH]
 //        [--stack N] [--bins N] [--leaf-size N] [--isect-cost C] [--depth N]
@@ -256,6 +259,92 @@ PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& r
   return s;
 }
 
+// Entry nodes (an estimate, not built): a primary ray's first steps from the root often take one
+// child without touching the ray's interval (near side only, or far side only, the child not an
+// empty leaf that closes the walk): the pass leaves tmin, tmax, the stack and every flag as they
+// were and only moves `node`. A tile whose rays all share such a chain could start at its last
+// node, with the chain's steps added to its step count (the cap stays exact) and its kd-restarts
+// going there too. entry_chain() walks the chain with the shader's decisions (glsl/traverse.glsl,
+// the scene box slab test included) and returns its nodes; empty when the ray misses the box.
+std::vector<uint32_t> entry_chain(const FlatKdTree& tree, const Ray& ray) {
+  const glm::vec3 inv = 1.0f / ray.direction;
+  float t0 = ray.tmin, t1 = ray.tmax;
+  for (int a = 0; a < 3; ++a) {
+    const float ta = (tree.bounds.lo[a] - ray.origin[a]) * inv[a];
+    const float tb = (tree.bounds.hi[a] - ray.origin[a]) * inv[a];
+    const float tn = std::min(ta, tb), tf = std::max(ta, tb);
+    if (tn > t0) t0 = tn;
+    if (tf < t1) t1 = tf;
+  }
+  std::vector<uint32_t> chain;
+  if (!(t0 <= t1) || tree.nodes.empty()) return chain;
+  uint32_t node = 0;
+  chain.push_back(node);
+  for (;;) {
+    const glm::vec4 n = tree.nodes[node];
+    if (n.z == MOBIRT_NODE_LEAF) break;
+    const int a = int(n.z);
+    const float oa = ray.origin[a], inv_a = inv[a];
+    const float tsplit = (n.x - oa) * inv_a;
+    const bool below_first = oa < n.x || (oa == n.x && inv_a < 0.0f);
+    const bool near_only = tsplit > t1 || tsplit <= 0.0f || tsplit != tsplit;
+    const bool far_only = !near_only && tsplit < t0;
+    if (!near_only && !far_only) break;
+    const bool below = below_first != far_only;
+    const bool below_empty = n.w == MOBIRT_NODE_BELOW_EMPTY || n.w == MOBIRT_NODE_BELOW_EMPTY + MOBIRT_NODE_ABOVE_EMPTY;
+    const bool above_empty = n.w >= MOBIRT_NODE_ABOVE_EMPTY;
+    if (below ? below_empty : above_empty) break;
+    node = below ? node + 1 : uint32_t(n.y);
+    chain.push_back(node);
+  }
+  return chain;
+}
+
+// Over the 4x2 tiles of a primary generation: the steps of the chain every in-box ray of the tile
+// shares (the longest common prefix), summed over the in-box rays, and those rays' interior steps.
+struct EntryEstimate {
+  uint64_t in_box = 0, shared_steps = 0, own_steps = 0, interior_steps = 0;
+};
+
+EntryEstimate estimate_entry_nodes(const FlatKdTree& tree, const RayBatch& rays, int stack) {
+  EntryEstimate e;
+  std::vector<std::vector<uint32_t>> chains(rays.count());
+  for (uint32_t i = 0; i < rays.count(); ++i) {
+    chains[i] = entry_chain(tree, rays.ray(i));
+    if (chains[i].empty()) continue;
+    ++e.in_box;
+    e.own_steps += chains[i].size() - 1;
+    TraversalStats ts;
+    traverse(tree, rays.ray(i), stack, ts);
+    e.interior_steps += ts.nodes_visited - ts.leaves_visited;
+  }
+  const uint32_t w = rays.width, rows = rays.rows();
+  for (uint32_t y0 = 0; y0 < rows; y0 += 2) {
+    for (uint32_t x0 = 0; x0 < w; x0 += 4) {
+      const std::vector<uint32_t>* first = nullptr;
+      size_t common = 0;
+      uint64_t lanes = 0;
+      for (uint32_t y = y0; y < std::min(y0 + 2, rows); ++y) {
+        for (uint32_t x = x0; x < std::min(x0 + 4, w); ++x) {
+          const uint64_t i = uint64_t(y) * w + x;
+          if (i >= rays.count() || chains[i].empty()) continue;
+          ++lanes;
+          if (!first) {
+            first = &chains[i];
+            common = first->size();
+            continue;
+          }
+          size_t k = 0;
+          while (k < common && k < chains[i].size() && chains[i][k] == (*first)[k]) ++k;
+          common = k;
+        }
+      }
+      if (first) e.shared_steps += lanes * (common - 1);
+    }
+  }
+  return e;
+}
+
 double occupancy(uint64_t lane, uint64_t group) { return group ? double(lane) / (8.0 * double(group)) : 0.0; }
 
 int run(int argc, char** argv) {
@@ -312,6 +401,15 @@ int run(int argc, char** argv) {
                    occupancy(s.tiled.lane_node, s.tiled.node), occupancy(s.tiled.lane_leaf, s.tiled.leaf),
                    (unsigned long long)s.linear.node, (unsigned long long)s.linear.leaf,
                    occupancy(s.linear.lane_node, s.linear.node));
+    }
+    if (g == 0) {
+      const EntryEstimate e = estimate_entry_nodes(tree, rays, stack);
+      const double in_box = double(std::max<uint64_t>(e.in_box, 1));
+      std::printf("    entry nodes: %llu rays enter the scene box; per such ray %.2f leading one-child steps shared by its "
+                  "4x2 tile (%.2f its own) of %.2f interior steps: at most %.1f %% of them skipped\n",
+                  (unsigned long long)e.in_box, double(e.shared_steps) / in_box, double(e.own_steps) / in_box,
+                  double(e.interior_steps) / in_box,
+                  100.0 * double(e.shared_steps) / double(std::max<uint64_t>(e.interior_steps, 1)));
     }
     if (g < depth) {
       rays = next_generation(scene, tree.bounds, rays, hits, SecondarySettings{});
