@@ -267,17 +267,11 @@ PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& r
 // going there too. entry_chain() walks the chain with the shader's decisions (glsl/traverse.glsl,
 // the scene box slab test included) and returns its nodes; empty when the ray misses the box.
 std::vector<uint32_t> entry_chain(const FlatKdTree& tree, const Ray& ray) {
-  const glm::vec3 inv = 1.0f / ray.direction;
-  float t0 = ray.tmin, t1 = ray.tmax;
-  for (int a = 0; a < 3; ++a) {
-    const float ta = (tree.bounds.lo[a] - ray.origin[a]) * inv[a];
-    const float tb = (tree.bounds.hi[a] - ray.origin[a]) * inv[a];
-    const float tn = std::min(ta, tb), tf = std::max(ta, tb);
-    if (tn > t0) t0 = tn;
-    if (tf < t1) t1 = tf;
-  }
   std::vector<uint32_t> chain;
-  if (!(t0 <= t1) || tree.nodes.empty()) return chain;
+  // The box test traverse() itself makes (the CPU walk's, which the shader's slab test follows).
+  float t0 = 0.0f, t1 = 0.0f;
+  if (tree.nodes.empty() || tree.bounds.empty() || !intersect_aabb(tree.bounds, ray, t0, t1)) return chain;
+  const glm::vec3 inv = 1.0f / ray.direction;
   uint32_t node = 0;
   chain.push_back(node);
   for (;;) {
@@ -286,7 +280,8 @@ std::vector<uint32_t> entry_chain(const FlatKdTree& tree, const Ray& ray) {
     const int a = int(n.z);
     const float oa = ray.origin[a], inv_a = inv[a];
     const float tsplit = (n.x - oa) * inv_a;
-    const bool below_first = oa < n.x || (oa == n.x && inv_a < 0.0f);
+    // d_a <= 0 as the CPU walk tests it (the shader: its inv_s, -inf for a zero component).
+    const bool below_first = oa < n.x || (oa == n.x && ray.direction[a] <= 0.0f);
     const bool near_only = tsplit > t1 || tsplit <= 0.0f || tsplit != tsplit;
     const bool far_only = !near_only && tsplit < t0;
     if (!near_only && !far_only) break;
@@ -301,34 +296,39 @@ std::vector<uint32_t> entry_chain(const FlatKdTree& tree, const Ray& ray) {
 }
 
 // Over the 4x2 tiles of a primary generation: the steps of the chain every in-box ray of the tile
-// shares (the longest common prefix), summed over the in-box rays, and those rays' interior steps.
+// shares (the longest common prefix), summed over the in-box rays (once per descent from the
+// root: the first and each kd-restart), and those rays' interior steps; and per tile the group
+// iterations of the node loop its first descent would skip (the chain's steps: every lane that
+// walks skips them together).
 struct EntryEstimate {
-  uint64_t in_box = 0, shared_steps = 0, own_steps = 0, interior_steps = 0;
+  uint64_t in_box = 0, shared_steps = 0, own_steps = 0, interior_steps = 0, group_iterations = 0;
 };
 
 EntryEstimate estimate_entry_nodes(const FlatKdTree& tree, const RayBatch& rays, int stack) {
   EntryEstimate e;
   std::vector<std::vector<uint32_t>> chains(rays.count());
+  std::vector<uint64_t> descents(rays.count(), 0);
   for (uint32_t i = 0; i < rays.count(); ++i) {
     chains[i] = entry_chain(tree, rays.ray(i));
     if (chains[i].empty()) continue;
     ++e.in_box;
-    e.own_steps += chains[i].size() - 1;
     TraversalStats ts;
     traverse(tree, rays.ray(i), stack, ts);
     e.interior_steps += ts.nodes_visited - ts.leaves_visited;
+    descents[i] = 1 + ts.restarts;
+    e.own_steps += (chains[i].size() - 1) * descents[i];
   }
   const uint32_t w = rays.width, rows = rays.rows();
   for (uint32_t y0 = 0; y0 < rows; y0 += 2) {
     for (uint32_t x0 = 0; x0 < w; x0 += 4) {
       const std::vector<uint32_t>* first = nullptr;
       size_t common = 0;
-      uint64_t lanes = 0;
+      uint64_t lane_descents = 0;
       for (uint32_t y = y0; y < std::min(y0 + 2, rows); ++y) {
         for (uint32_t x = x0; x < std::min(x0 + 4, w); ++x) {
           const uint64_t i = uint64_t(y) * w + x;
           if (i >= rays.count() || chains[i].empty()) continue;
-          ++lanes;
+          lane_descents += descents[i];
           if (!first) {
             first = &chains[i];
             common = first->size();
@@ -339,7 +339,9 @@ EntryEstimate estimate_entry_nodes(const FlatKdTree& tree, const RayBatch& rays,
           common = k;
         }
       }
-      if (first) e.shared_steps += lanes * (common - 1);
+      if (!first) continue;
+      e.shared_steps += lane_descents * (common - 1);
+      e.group_iterations += common - 1;
     }
   }
   return e;
@@ -406,10 +408,13 @@ int run(int argc, char** argv) {
       const EntryEstimate e = estimate_entry_nodes(tree, rays, stack);
       const double in_box = double(std::max<uint64_t>(e.in_box, 1));
       std::printf("    entry nodes: %llu rays enter the scene box; per such ray %.2f leading one-child steps shared by its "
-                  "4x2 tile (%.2f its own) of %.2f interior steps: at most %.1f %% of them skipped\n",
+                  "4x2 tile (%.2f its own) of %.2f interior steps (%.1f %%); the node loop's group iterations %llu "
+                  "fewer of %llu (%.1f %%, the light loop's included)\n",
                   (unsigned long long)e.in_box, double(e.shared_steps) / in_box, double(e.own_steps) / in_box,
                   double(e.interior_steps) / in_box,
-                  100.0 * double(e.shared_steps) / double(std::max<uint64_t>(e.interior_steps, 1)));
+                  100.0 * double(e.shared_steps) / double(std::max<uint64_t>(e.interior_steps, 1)),
+                  (unsigned long long)e.group_iterations, (unsigned long long)s.tiled.node,
+                  100.0 * double(e.group_iterations) / double(std::max<uint64_t>(s.tiled.node, 1)));
     }
     if (g < depth) {
       rays = next_generation(scene, tree.bounds, rays, hits, SecondarySettings{});
