@@ -64,9 +64,12 @@ Sampler create_fetch_sampler(VkDevice vk_device, VkFilter filter) {
   return Sampler(vk_device, sampler);
 }
 
-RenderPass create_target_render_pass(VkDevice vk_device) {
-  // One render pass for every pipeline: one RGBA8 colour attachment, contents not loaded (every
-  // texel of the render area is written), stored and left ready for the copy to the host.
+// One render pass for every pipeline: one RGBA8 colour attachment, contents not loaded (every
+// texel of the render area is written) and stored. host_read: the target is a linear image in
+// host-visible memory that the host reads in place, left in GENERAL; else it is left ready for the
+// copy to the read-back buffer. Compatible render passes may differ in layouts only (the
+// pipelines made with one run in the other), so both carry the dependencies of both ways.
+RenderPass create_target_render_pass(VkDevice vk_device, bool host_read) {
   VkAttachmentDescription attachment{};
   attachment.format = kTargetFormat;
   attachment.samples = VK_SAMPLE_COUNT_1_BIT;
@@ -75,27 +78,28 @@ RenderPass create_target_render_pass(VkDevice vk_device) {
   attachment.stencilLoadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
   attachment.stencilStoreOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
   attachment.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
-  attachment.finalLayout = VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL;
+  attachment.finalLayout = host_read ? VK_IMAGE_LAYOUT_GENERAL : VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL;
   VkAttachmentReference color{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
   VkSubpassDescription subpass{};
   subpass.pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
   subpass.colorAttachmentCount = 1;
   subpass.pColorAttachments = &color;
   VkSubpassDependency dependencies[2]{};
-  // The previous pass's copy read the image before this pass overwrites it (write after read).
+  // The previous pass's copy read the image before this pass overwrites it (write after read; the
+  // host's reads of a linear target came before this submission, which orders them).
   dependencies[0].srcSubpass = VK_SUBPASS_EXTERNAL;
   dependencies[0].dstSubpass = 0;
   dependencies[0].srcStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT;
   dependencies[0].dstStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
   dependencies[0].srcAccessMask = 0;
   dependencies[0].dstAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
-  // The copy to the read-back buffer reads what the pass wrote.
+  // The copy to the read-back buffer, or the host, reads what the pass wrote.
   dependencies[1].srcSubpass = 0;
   dependencies[1].dstSubpass = VK_SUBPASS_EXTERNAL;
   dependencies[1].srcStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
-  dependencies[1].dstStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT;
+  dependencies[1].dstStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_HOST_BIT;
   dependencies[1].srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
-  dependencies[1].dstAccessMask = VK_ACCESS_TRANSFER_READ_BIT;
+  dependencies[1].dstAccessMask = VK_ACCESS_TRANSFER_READ_BIT | VK_ACCESS_HOST_READ_BIT;
   VkRenderPassCreateInfo render_pass_info{VK_STRUCTURE_TYPE_RENDER_PASS_CREATE_INFO};
   render_pass_info.attachmentCount = 1;
   render_pass_info.pAttachments = &attachment;
@@ -114,7 +118,8 @@ Pipelines::Pipelines(const Device& device, const std::string& cache_dir)
   sampler_ = create_fetch_sampler(vk_device, VK_FILTER_NEAREST);
   linear_sampler_ = create_fetch_sampler(vk_device, VK_FILTER_LINEAR);
 
-  render_pass_ = create_target_render_pass(vk_device);
+  render_pass_ = create_target_render_pass(vk_device, false);
+  host_render_pass_ = create_target_render_pass(vk_device, true);
 
   VkShaderModuleCreateInfo module_info{VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO};
   module_info.codeSize = sizeof(spirv_fullscreen_vert);

@@ -25,8 +25,9 @@ VkDescriptorType descriptor_type(TextureKind kind);
 // or with LINEAR the bilinear sampler of PassDesc::linear_bindings (no mipmaps, CLAMP_TO_EDGE).
 Sampler create_fetch_sampler(VkDevice device, VkFilter filter = VK_FILTER_NEAREST);
 // The render pass of every fragment pass: one kTargetFormat attachment, not loaded, stored and left
-// for the copy to the host, ordered after the previous pass's copy and before this one's.
-RenderPass create_target_render_pass(VkDevice device);
+// for the copy to the host, ordered after the previous pass's copy and before this one's; with
+// host_read, left in GENERAL for the host to read a linear target in place (a compatible pass).
+RenderPass create_target_render_pass(VkDevice device, bool host_read = false);
 
 // The graphics pipeline of a full-screen fragment pass: one triangle from `vertex`, `fragment` with
 // its specialisation (may be null), no culling, no blending, dynamic viewport and scissor, one
@@ -79,6 +80,8 @@ class Pipelines {
   // The pass's objects for desc, already checked (check_es2_constraints, check_pass_desc).
   Pass create_pass(const PassDesc& desc) const;
   VkRenderPass render_pass() const { return render_pass_.get(); }
+  // The same, compatible, for a linear target that the host reads in place (left in GENERAL).
+  VkRenderPass host_render_pass() const { return host_render_pass_.get(); }
   // Writes the pipeline cache to its file, whole or not at all; never throws (a cache is an
   // optimisation, so a folder that cannot be written only costs the next run its compile time).
   void save_cache() const;
@@ -91,6 +94,7 @@ class Pipelines {
   Sampler sampler_;
   Sampler linear_sampler_;  // PassDesc::linear_bindings
   RenderPass render_pass_;
+  RenderPass host_render_pass_;
   ShaderModule vertex_shader_;
   PipelineCache cache_;
 };

@@ -52,6 +52,7 @@ void RenderTarget::reset() {
   framebuffer.reset();
   image.reset();
   width = height = 0;
+  linear = false;
 }
 
 std::optional<uint32_t> find_memory_type(const VkPhysicalDeviceMemoryProperties& properties, uint32_t type_bits,

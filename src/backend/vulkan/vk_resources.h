@@ -73,6 +73,9 @@ struct RenderTarget {
   uint32_t width = 0, height = 0;
   DeviceImage image;
   Framebuffer framebuffer;
+  // A linear image in host-visible memory (image.mapped): the host reads the pass's texels in
+  // place, without a copy command to a read-back buffer.
+  bool linear = false;
 
   void reset();
 };

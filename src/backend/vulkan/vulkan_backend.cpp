@@ -5,7 +5,10 @@
 // lavapipe does) linearly tiled images live in host-visible memory, persistently mapped, and every
 // earlier pass was waited for, so nothing still reads them; a submission makes the host's writes
 // visible to the device. Only optimal images (staged_images, or a device without such linear
-// images) go through a staging buffer and a copy command.
+// images) go through a staging buffer and a copy command. The same for the pass's output: the
+// render target is a linear image in host-visible memory that the host reads in place after the
+// fence (no copy command to a read-back buffer), where the device renders into one (lavapipe);
+// staged_images or another device render into an optimal image and copy it to a buffer.
 // This file is the pass: textures, uploads, recording and timing a pass. The instance and device
 // are vk_device.*, memory and images vk_resources.*, pipelines vk_pipeline.*.
 #include "backend/vulkan/vulkan_backend.h"
@@ -70,6 +73,8 @@ class Impl {
 
   // After a fence timed out the device may still be executing: its objects must not be destroyed.
   bool hung() const { return hung_; }
+  // The last pass's texels were read in place from a linear target (no copy command).
+  bool reads_target_in_place() const { return target_.linear; }
 
  private:
   void create_command_objects();
@@ -198,11 +203,19 @@ void Impl::ensure_target(uint32_t width, uint32_t height) {
   target_.reset();
 
   vk::RenderTarget target;
-  target.image = vk::create_image(device_, w, h, vk::kTargetFormat,
-                                  VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT);
+  // A linear target the host reads in place where the device renders into one (lavapipe), as
+  // the data textures are written in place; staged_images keeps the optimal image and its copy.
+  if (!staged_images_) {
+    target.image = vk::create_host_image(device_, w, h, vk::kTargetFormat, VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT);
+    target.linear = target.image.mapped != nullptr;
+  }
+  if (!target.linear) {
+    target.image = vk::create_image(device_, w, h, vk::kTargetFormat,
+                                    VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT);
+  }
   const VkImageView view = target.image.view.get();
   VkFramebufferCreateInfo framebuffer_info{VK_STRUCTURE_TYPE_FRAMEBUFFER_CREATE_INFO};
-  framebuffer_info.renderPass = pipelines_.render_pass();
+  framebuffer_info.renderPass = target.linear ? pipelines_.host_render_pass() : pipelines_.render_pass();
   framebuffer_info.attachmentCount = 1;
   framebuffer_info.pAttachments = &view;
   framebuffer_info.width = w;
@@ -490,7 +503,7 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
   PassTiming timing;
   timing.upload_ms = pending_upload_ms_;
   ensure_target(width, height);
-  ensure_readback(VkDeviceSize(width) * height * 4);
+  if (!target_.linear) ensure_readback(VkDeviceSize(width) * height * 4);
 
   // Uniforms and textures. Every earlier submission has finished, so the set is free to update.
   if (pass.uniforms) {
@@ -569,7 +582,7 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
   if (timed) vkCmdWriteTimestamp(commands_, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, queries_.get(), 0);
 
   VkRenderPassBeginInfo begin{VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO};
-  begin.renderPass = pipelines_.render_pass();
+  begin.renderPass = target_.linear ? pipelines_.host_render_pass() : pipelines_.render_pass();
   begin.framebuffer = target_.framebuffer.get();
   begin.renderArea = {{0, 0}, {width, height}};
   vkCmdBeginRenderPass(commands_, &begin, VK_SUBPASS_CONTENTS_INLINE);
@@ -588,20 +601,22 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
   vkCmdEndRenderPass(commands_);
   if (timed) vkCmdWriteTimestamp(commands_, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_.get(), 1);
 
-  VkBufferImageCopy region{};
-  region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
-  region.imageExtent = {width, height, 1};
-  vkCmdCopyImageToBuffer(commands_, target_.image.image.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, readback_.buffer.get(), 1,
-                         &region);
-  VkBufferMemoryBarrier to_host{VK_STRUCTURE_TYPE_BUFFER_MEMORY_BARRIER};
-  to_host.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
-  to_host.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
-  to_host.srcQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
-  to_host.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
-  to_host.buffer = readback_.buffer.get();
-  to_host.size = VK_WHOLE_SIZE;
-  vkCmdPipelineBarrier(commands_, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 0, nullptr, 1, &to_host,
-                       0, nullptr);
+  if (!target_.linear) {
+    VkBufferImageCopy region{};
+    region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
+    region.imageExtent = {width, height, 1};
+    vkCmdCopyImageToBuffer(commands_, target_.image.image.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL,
+                           readback_.buffer.get(), 1, &region);
+    VkBufferMemoryBarrier to_host{VK_STRUCTURE_TYPE_BUFFER_MEMORY_BARRIER};
+    to_host.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+    to_host.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
+    to_host.srcQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+    to_host.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+    to_host.buffer = readback_.buffer.get();
+    to_host.size = VK_WHOLE_SIZE;
+    vkCmdPipelineBarrier(commands_, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 0, nullptr, 1,
+                         &to_host, 0, nullptr);
+  }
   if (timed) vkCmdWriteTimestamp(commands_, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_.get(), 2);
 
   const auto gpu_start = Clock::now();
@@ -609,13 +624,24 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
   const double submit_ms = elapsed_ms(gpu_start);
 
   const auto copy_start = Clock::now();
-  if (!readback_.coherent) {
+  const VkDeviceMemory read_memory = target_.linear ? target_.image.memory.get() : readback_.memory.get();
+  if (!(target_.linear ? target_.image.coherent : readback_.coherent)) {
     VkMappedMemoryRange range{VK_STRUCTURE_TYPE_MAPPED_MEMORY_RANGE};
-    range.memory = readback_.memory.get();
+    range.memory = read_memory;
     range.size = VK_WHOLE_SIZE;
     VK_CHECK(vkInvalidateMappedMemoryRanges(device_.handle(), 1, &range));
   }
-  std::memcpy(out.data(), readback_.mapped, size_t(count) * 4);
+  if (target_.linear) {
+    // Row by row: the target is as wide as the widest pass so far, its rows row_pitch apart.
+    const char* rows = static_cast<const char*>(target_.image.mapped);
+    for (uint32_t y = 0; y < height; ++y) {
+      const uint32_t first = y * width;
+      std::memcpy(out.data() + first, rows + VkDeviceSize(y) * target_.image.row_pitch,
+                  size_t(std::min(width, count - first)) * 4);
+    }
+  } else {
+    std::memcpy(out.data(), readback_.mapped, size_t(count) * 4);
+  }
   const double copy_ms = elapsed_ms(copy_start);
 
   if (timed) {
@@ -671,6 +697,7 @@ class VulkanBackend final : public Backend {
     return impl_->run_pass(pass, textures, uniforms, width, count, out);
   }
   std::vector<std::string> take_debug_messages() override { return impl_->take_debug_messages(); }
+  bool reads_target_in_place() const { return impl_->reads_target_in_place(); }
 
  private:
   std::unique_ptr<Impl> impl_;
@@ -680,6 +707,11 @@ class VulkanBackend final : public Backend {
 
 std::unique_ptr<Backend> create_vulkan_backend(const VulkanOptions& options) {
   return std::make_unique<VulkanBackend>(options);
+}
+
+bool vulkan_reads_target_in_place(const Backend& backend) {
+  const auto* vulkan = dynamic_cast<const VulkanBackend*>(&backend);
+  return vulkan && vulkan->reads_target_in_place();
 }
 
 std::unique_ptr<Backend> create_vulkan_backend(const BackendOptions& options) {

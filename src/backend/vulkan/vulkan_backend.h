@@ -16,8 +16,10 @@ struct VulkanOptions : BackendOptions {
   // on disk.
   std::string pipeline_cache_dir;
   // Data textures as optimally tiled images filled through a staging buffer and a copy command,
-  // the path of a device without host-mapped linear images that sample as optimal ones do; off:
-  // linear images written in place where the device has them (lavapipe). Tests compare the two.
+  // and the passes' output rendered into an optimal image copied to a read-back buffer: the path
+  // of a device without host-mapped linear images that sample (or are rendered into) as optimal
+  // ones do; off: linear images written and read in place where the device has them (lavapipe).
+  // Tests compare the two.
   bool staged_images = false;
 };
 
@@ -26,5 +28,10 @@ std::unique_ptr<Backend> create_vulkan_backend(const VulkanOptions& options);
 // Vulkan objects (images, buffers, memory, pipelines, ...) currently owned by every Vulkan backend
 // of this process; returns to its earlier value when textures and passes are destroyed.
 long vulkan_live_objects();
+
+// Whether `backend` is a Vulkan backend whose last pass wrote a linear target that the host read in
+// place (the default where the device renders into host-mapped linear images, as lavapipe does),
+// rather than an optimal image copied to a read-back buffer (staged_images, other devices).
+bool vulkan_reads_target_in_place(const Backend& backend);
 
 }  // namespace mobirt
