@@ -67,8 +67,9 @@ Sampler create_fetch_sampler(VkDevice vk_device, VkFilter filter) {
 // One render pass for every pipeline: one RGBA8 colour attachment, contents not loaded (every
 // texel of the render area is written) and stored. host_read: the target is a linear image in
 // host-visible memory that the host reads in place, left in GENERAL; else it is left ready for the
-// copy to the read-back buffer. Compatible render passes may differ in layouts only (the
-// pipelines made with one run in the other), so both carry the dependencies of both ways.
+// copy to the read-back buffer. Compatible render passes may differ only in layouts and load and
+// store operations, their dependencies must be identical (then the pipelines made with one run in
+// the other), so both carry the union of the two ways' dependencies.
 RenderPass create_target_render_pass(VkDevice vk_device, bool host_read) {
   VkAttachmentDescription attachment{};
   attachment.format = kTargetFormat;

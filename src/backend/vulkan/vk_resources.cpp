@@ -191,11 +191,11 @@ DeviceImage create_image(const Device& device, uint32_t width, uint32_t height, 
 }
 
 DeviceImage create_host_image(const Device& device, uint32_t width, uint32_t height, VkFormat format,
-                              VkImageUsageFlags usage) {
+                              VkImageUsageFlags usage, bool host_cached) {
   const VkDevice vk_device = device.handle();
   DeviceImage result;
   // Only where the linear image does everything the optimal one would (a filtered atlas page, a
-  // blended target), in this size.
+  // colour attachment), in this size.
   VkFormatProperties format_properties{};
   vkGetPhysicalDeviceFormatProperties(device.physical(), format, &format_properties);
   const VkFormatFeatureFlags wanted = usage_features(usage) & format_properties.optimalTilingFeatures;
@@ -210,11 +210,12 @@ DeviceImage create_host_image(const Device& device, uint32_t width, uint32_t hei
                                   VK_IMAGE_LAYOUT_PREINITIALIZED);
   VkMemoryRequirements requirements{};
   vkGetImageMemoryRequirements(vk_device, image.get(), &requirements);
-  if (!find_memory_type(device.memory_properties(), requirements.memoryTypeBits, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT, 0,
-                        nullptr)) {
+  const VkMemoryPropertyFlags required =
+      VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | (host_cached ? VK_MEMORY_PROPERTY_HOST_CACHED_BIT : 0);
+  if (!find_memory_type(device.memory_properties(), requirements.memoryTypeBits, required, 0, nullptr)) {
     return result;
   }
-  result.memory = allocate(device, requirements, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT,
+  result.memory = allocate(device, requirements, required,
                            VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT,
                            &result.coherent);
   result.image = std::move(image);

@@ -32,7 +32,8 @@ struct HostBuffer {
 
 // A 2D image of one mip level and layer with a colour view of it: optimally tiled in device
 // memory, or linearly tiled in host-visible memory, persistently mapped (`mapped` not null), that
-// the host writes straight into, rows `row_pitch` bytes apart.
+// the host writes straight into (data textures) or reads straight from (the render target), rows
+// `row_pitch` bytes apart.
 struct DeviceImage {
   Memory memory;
   Image image;
@@ -104,9 +105,11 @@ DeviceImage create_image(const Device& device, uint32_t width, uint32_t height, 
 // VK_IMAGE_LAYOUT_PREINITIALIZED (host writes are defined in it and in GENERAL), where the device
 // supports one that the usage's features work on as on an optimal image (sampling and linear
 // filtering for a sampled image, blending for an attachment) and maps its memory; otherwise an
-// image without `mapped`, and the caller uses create_image().
+// image without `mapped`, and the caller uses create_image(). host_cached: only in host-cached
+// memory (an image the host reads: uncached or write-combined memory, a GPU's BAR, would make
+// every read slow), else none.
 DeviceImage create_host_image(const Device& device, uint32_t width, uint32_t height, VkFormat format,
-                              VkImageUsageFlags usage);
+                              VkImageUsageFlags usage, bool host_cached = false);
 
 // A host-visible uniform texel buffer of `texels` texels of `format`, mapped, with its view.
 TexelBuffer create_texel_buffer(const Device& device, uint32_t texels, VkFormat format, size_t texel_bytes);

@@ -73,7 +73,8 @@ class Impl {
 
   // After a fence timed out the device may still be executing: its objects must not be destroyed.
   bool hung() const { return hung_; }
-  // The last pass's texels were read in place from a linear target (no copy command).
+  // Whether the current render target (made by the first pass that renders anything, made anew
+  // when a pass outgrows it) is a linear image read in place (no copy command).
   bool reads_target_in_place() const { return target_.linear; }
 
  private:
@@ -203,10 +204,12 @@ void Impl::ensure_target(uint32_t width, uint32_t height) {
   target_.reset();
 
   vk::RenderTarget target;
-  // A linear target the host reads in place where the device renders into one (lavapipe), as
-  // the data textures are written in place; staged_images keeps the optimal image and its copy.
+  // A linear target the host reads in place where the device renders into one in host-cached
+  // memory (lavapipe), as the data textures are written in place; staged_images, or a device
+  // without one, keeps the optimal image and its copy to a host-cached read-back buffer.
   if (!staged_images_) {
-    target.image = vk::create_host_image(device_, w, h, vk::kTargetFormat, VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT);
+    target.image = vk::create_host_image(device_, w, h, vk::kTargetFormat, VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT,
+                                         /*host_cached=*/true);
     target.linear = target.image.mapped != nullptr;
   }
   if (!target.linear) {
@@ -631,7 +634,9 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
     range.size = VK_WHOLE_SIZE;
     VK_CHECK(vkInvalidateMappedMemoryRanges(device_.handle(), 1, &range));
   }
-  if (target_.linear) {
+  if (target_.linear && target_.image.row_pitch == VkDeviceSize(width) * 4) {
+    std::memcpy(out.data(), target_.image.mapped, size_t(count) * 4);
+  } else if (target_.linear) {
     // Row by row: the target is as wide as the widest pass so far, its rows row_pitch apart.
     const char* rows = static_cast<const char*>(target_.image.mapped);
     for (uint32_t y = 0; y < height; ++y) {

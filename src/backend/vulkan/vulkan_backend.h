@@ -29,9 +29,10 @@ std::unique_ptr<Backend> create_vulkan_backend(const VulkanOptions& options);
 // of this process; returns to its earlier value when textures and passes are destroyed.
 long vulkan_live_objects();
 
-// Whether `backend` is a Vulkan backend whose last pass wrote a linear target that the host read in
-// place (the default where the device renders into host-mapped linear images, as lavapipe does),
-// rather than an optimal image copied to a read-back buffer (staged_images, other devices).
+// Whether `backend` is a Vulkan backend whose current render target (made by its first pass that
+// renders anything, made anew when a pass outgrows it) is a linear image in host-cached memory that
+// the host reads in place (the default where the device has one, as lavapipe does), rather than an
+// optimal image copied to a read-back buffer (staged_images, other devices). False before a pass.
 bool vulkan_reads_target_in_place(const Backend& backend);
 
 }  // namespace mobirt
