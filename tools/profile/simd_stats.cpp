@@ -29,6 +29,7 @@
 //        [--stack N] [--bins N] [--leaf-size N] [--isect-cost C] [--depth N]
 //        [--ray-order coherent|sorted|tiles] [--csv FILE]
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <optional>
 #include <string>
@@ -208,8 +209,9 @@ struct PassStats {
   LoopCounts postponed, voted;  // 4x2 tiles, postponed leaves without and with a vote
 };
 
+// primary_stats, when given: each ray's own closest-hit walk statistics, in ray order.
 PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& rays, int stack,
-                   std::vector<SurfaceHit>& hits) {
+                   std::vector<SurfaceHit>& hits, std::vector<TraversalStats>* primary_stats = nullptr) {
   PassStats s;
   const size_t lights = scene.lights.size();
   std::vector<RayWalks> walks(rays.count());
@@ -221,6 +223,7 @@ PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& r
     const Ray ray = rays.ray(i);
     TraversalStats ts;
     const Hit h = traverse(tree, ray, stack, ts, -1, RayTest{}, &r.walks[0]);
+    if (primary_stats) primary_stats->push_back(ts);
     s.steps += ts;
     ++s.rays;
     if (!h.valid()) continue;
@@ -276,20 +279,19 @@ std::vector<uint32_t> entry_chain(const FlatKdTree& tree, const Ray& ray) {
   chain.push_back(node);
   for (;;) {
     const glm::vec4 n = tree.nodes[node];
-    if (n.z == MOBIRT_NODE_LEAF) break;
-    const int a = int(n.z);
-    const float oa = ray.origin[a], inv_a = inv[a];
-    const float tsplit = (n.x - oa) * inv_a;
+    if (node_texel::is_leaf(n)) break;
+    const int a = int(node_texel::axis(n));
+    const float split = node_texel::split(n);
+    const float oa = ray.origin[a];
+    const float tsplit = (split - oa) * inv[a];
     // d_a <= 0 as the CPU walk tests it (the shader: its inv_s, -inf for a zero component).
-    const bool below_first = oa < n.x || (oa == n.x && ray.direction[a] <= 0.0f);
-    const bool near_only = tsplit > t1 || tsplit <= 0.0f || tsplit != tsplit;
+    const bool below_first = oa < split || (oa == split && ray.direction[a] <= 0.0f);
+    const bool near_only = tsplit > t1 || tsplit <= 0.0f || std::isnan(tsplit);
     const bool far_only = !near_only && tsplit < t0;
     if (!near_only && !far_only) break;
     const bool below = below_first != far_only;
-    const bool below_empty = n.w == MOBIRT_NODE_BELOW_EMPTY || n.w == MOBIRT_NODE_BELOW_EMPTY + MOBIRT_NODE_ABOVE_EMPTY;
-    const bool above_empty = n.w >= MOBIRT_NODE_ABOVE_EMPTY;
-    if (below ? below_empty : above_empty) break;
-    node = below ? node + 1 : uint32_t(n.y);
+    if (below ? node_texel::below_empty(n) : node_texel::above_empty(n)) break;
+    node = below ? node + 1 : uint32_t(node_texel::above_child(n));
     chain.push_back(node);
   }
   return chain;
@@ -304,7 +306,9 @@ struct EntryEstimate {
   uint64_t in_box = 0, shared_steps = 0, own_steps = 0, interior_steps = 0, group_iterations = 0;
 };
 
-EntryEstimate estimate_entry_nodes(const FlatKdTree& tree, const RayBatch& rays, int stack) {
+// walk_stats: each ray's closest-hit walk statistics (simulate()'s primary_stats).
+EntryEstimate estimate_entry_nodes(const FlatKdTree& tree, const RayBatch& rays,
+                                   const std::vector<TraversalStats>& walk_stats) {
   EntryEstimate e;
   std::vector<std::vector<uint32_t>> chains(rays.count());
   std::vector<uint64_t> descents(rays.count(), 0);
@@ -312,8 +316,7 @@ EntryEstimate estimate_entry_nodes(const FlatKdTree& tree, const RayBatch& rays,
     chains[i] = entry_chain(tree, rays.ray(i));
     if (chains[i].empty()) continue;
     ++e.in_box;
-    TraversalStats ts;
-    traverse(tree, rays.ray(i), stack, ts);
+    const TraversalStats& ts = walk_stats[i];
     e.interior_steps += ts.nodes_visited - ts.leaves_visited;
     descents[i] = 1 + ts.restarts;
     e.own_steps += (chains[i].size() - 1) * descents[i];
@@ -373,7 +376,8 @@ int run(int argc, char** argv) {
               "   (8 in a row: node iter. occ.)\n");
   for (int g = 0; g <= depth && rays.count() > 0; ++g) {
     std::vector<SurfaceHit> hits;
-    const PassStats s = simulate(tree, scene, rays, stack, hits);
+    std::vector<TraversalStats> walk_stats;  // generation 0's, for the entry-node estimate
+    const PassStats s = simulate(tree, scene, rays, stack, hits, g == 0 ? &walk_stats : nullptr);
     const double n = double(s.rays + s.shadow_rays);
     const uint64_t interior = s.steps.nodes_visited - s.steps.leaves_visited;
     const uint64_t empty = s.steps.steps - interior - s.steps.triangles_tested;
@@ -405,7 +409,7 @@ int run(int argc, char** argv) {
                    occupancy(s.linear.lane_node, s.linear.node));
     }
     if (g == 0) {
-      const EntryEstimate e = estimate_entry_nodes(tree, rays, stack);
+      const EntryEstimate e = estimate_entry_nodes(tree, rays, walk_stats);
       const double in_box = double(std::max<uint64_t>(e.in_box, 1));
       std::printf("    entry nodes: %llu rays enter the scene box; per such ray %.2f leading one-child steps shared by its "
                   "4x2 tile (%.2f its own) of %.2f interior steps (%.1f %%); the node loop's group iterations %llu "
