@@ -55,7 +55,7 @@ Scene glass_slab(float thickness, float ior) {
   return s;
 }
 
-// primary_rays() inlines CameraBasis::ray into its loop over the pixels: every ray must keep the very floats
+// primary_rays() computes CameraBasis::ray four pixels to a register (SSE2) with a scalar tail: every ray must keep the very floats
 // of camera_ray (the reference tracer and the tests' oracles make theirs with it), at odd sizes
 // and for cameras looking along an axis, obliquely and from far away.
 TEST(RayTree, PrimaryRaysAreCameraRaysBitForBit) {

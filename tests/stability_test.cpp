@@ -589,5 +589,38 @@ TEST_F(Stability, NonFiniteVerticesAreAClearError) {
   }
 }
 
+// validate_scene runs on every posed frame and passes unit normals without computing their length
+// (|n|^2 within 1e-5 of 1): each kind of normal must still get what the full check gives it.
+TEST(ValidateScene, NormalsOfEveryKindAsTheFullCheckTreatsThem) {
+  Scene s = test::base_scene("normals");
+  test::add_triangle(s, {0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 0);  // geometric normal +z
+  const glm::vec3 unit = glm::normalize(glm::vec3(0.3f, -0.4f, 0.8f));
+  const glm::vec3 near_unit = glm::vec3(0.0f, 0.0f, 1.0f + 4e-6f);  // within 1e-5: kept as it is
+  const glm::vec3 long_normal(0.0f, 2.0f, 0.0f);                     // normalised
+  // Just outside 1e-5 (|n|^2 = 1 + 4e-5, outside the fast path's window too): normalised.
+  s.mesh.normals[0] = unit;
+  s.mesh.normals[1] = near_unit;
+  s.mesh.normals[2] = long_normal;
+  validate_scene(s);
+  EXPECT_EQ(s.mesh.normals[0], unit);
+  EXPECT_EQ(s.mesh.normals[1], near_unit);
+  EXPECT_EQ(s.mesh.normals[2], glm::vec3(0.0f, 1.0f, 0.0f));
+  s.mesh.normals[0] = glm::vec3(0.0f, 0.0f, 1.0f + 2e-5f);
+  validate_scene(s);
+  EXPECT_EQ(s.mesh.normals[0], glm::vec3(0.0f, 0.0f, 1.0f));
+  s.mesh.normals[1] = glm::vec3(0.0f);  // no direction: the triangle's geometric normal
+  validate_scene(s);
+  EXPECT_EQ(s.mesh.normals[1], glm::vec3(0.0f, 0.0f, 1.0f));
+  for (float bad : {NAN, INFINITY}) {
+    Scene b = s;
+    b.mesh.normals[2].y = bad;
+    test::expect_bad_input([&] { validate_scene(b); }, {"normals", "triangle 0", "vertex 2", "non-finite normal"});
+  }
+  Scene t = s;  // a unit normal does not skip the texture coordinates' check
+  t.mesh.texcoords.assign(3, glm::vec2(0.5f));
+  t.mesh.texcoords[0].x = NAN;
+  test::expect_bad_input([&] { validate_scene(t); }, {"normals", "triangle 0", "vertex 0", "texture coordinates"});
+}
+
 }  // namespace
 }  // namespace mobirt

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -445,12 +446,25 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   prepare_atlas(scene);  // says whether the scene has textures
   auto stage = Clock::now();
   constexpr uint32_t kChunk = 1024;
+  constexpr uint32_t kWords = kChunk / 64;
   const uint32_t chunks = (n + kChunk - 1) / kChunk;
-  // first[c]: the shaded index of chunk c's first hit (a prefix sum of the hits per chunk).
+  // One pass over the records: a bit per ray that hit (12 KB for 96,000 rays), first[c + 1] the
+  // hits of chunk c. The fill below and the colours after the pass then read the bits instead of
+  // each record's primitive again, and the fill skips chunks without a hit: three scans of the
+  // 72-byte records, most of them misses on the wood doll, were 6 % of its frame's CPU (perf).
+  std::vector<uint64_t> hit_bits(size_t(chunks) * kWords);
   std::vector<uint32_t> first(size_t(chunks) + 1, 0);
   parallel_for(chunks, 0, [&](uint32_t c) {
     uint32_t count = 0;
-    for (uint32_t i = c * kChunk, end = std::min(n, i + kChunk); i < end; ++i) count += hits[i].valid() ? 1u : 0u;
+    uint64_t* words = hit_bits.data() + size_t(c) * kWords;
+    for (uint32_t w = 0, base = c * kChunk; w < kWords; ++w, base += 64) {
+      // Shifted in from the top (constant shifts in the loop), then down: ray base + j at bit j.
+      uint64_t bits = 0;
+      const uint32_t end = std::min(n - std::min(n, base), 64u);
+      for (uint32_t j = 0; j < end; ++j) bits = (bits >> 1) | (uint64_t(hits[base + j].valid()) << 63);
+      words[w] = end == 0 ? 0 : bits >> (64 - end);
+      count += uint32_t(std::popcount(bits));
+    }
     first[c + 1] = count;
   }, 1);
   for (uint32_t c = 0; c < chunks; ++c) first[c + 1] += first[c];
@@ -463,15 +477,19 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   const std::unique_ptr<HitTexcoordTexel[]> uv =
       d.has_atlas ? std::make_unique_for_overwrite<HitTexcoordTexel[]>(shaded) : nullptr;
   parallel_for(chunks, 0, [&](uint32_t c) {
+    if (first[c + 1] == first[c]) return;
     uint32_t k = first[c];
-    for (uint32_t i = c * kChunk, end = std::min(n, i + kChunk); i < end; ++i) {
-      const SurfaceHit& h = hits[i];
-      if (!h.valid()) continue;
-      position[k] = HitPositionTexel{h.position, float(h.material)};
-      normal[k] = HitNormalTexel{h.normal, float(h.mask)};
-      direction[k] = rays.direction[i];
-      if (uv) uv[k] = HitTexcoordTexel{h.texcoord, glm::vec2(0.0f)};
-      ++k;
+    const uint64_t* words = hit_bits.data() + size_t(c) * kWords;
+    for (uint32_t w = 0; w < kWords; ++w) {
+      for (uint64_t bits = words[w]; bits != 0; bits &= bits - 1) {
+        const uint32_t i = c * kChunk + w * 64 + uint32_t(std::countr_zero(bits));
+        const SurfaceHit& h = hits[i];
+        position[k] = HitPositionTexel{h.position, float(h.material)};
+        normal[k] = HitNormalTexel{h.normal, float(h.mask)};
+        direction[k] = rays.direction[i];
+        if (uv) uv[k] = HitTexcoordTexel{h.texcoord, glm::vec2(0.0f)};
+        ++k;
+      }
     }
   }, 1);
   if (any_miss) {
@@ -531,8 +549,10 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   std::vector<glm::vec3> colors(n);
   parallel_for(chunks, 0, [&](uint32_t c) {
     uint32_t k = first[c];
+    const uint64_t* words = hit_bits.data() + size_t(c) * kWords;
     for (uint32_t i = c * kChunk, end = std::min(n, i + kChunk); i < end; ++i) {
-      colors[i] = hits[i].valid() ? decoded(k++) : miss_colour;
+      const uint32_t j = i - c * kChunk;
+      colors[i] = (words[j / 64] >> (j % 64)) & 1u ? decoded(k++) : miss_colour;
     }
   }, 1);
   timings.accumulate_ms += elapsed_ms(stage);

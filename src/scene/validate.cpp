@@ -102,6 +102,13 @@ void validate_scene(Scene& scene) {
     }
   }
 
+  const auto check_texcoord = [&](size_t t, size_t k) {
+    const glm::vec2& uv = mesh.texcoords[3 * t + k];
+    if (!std::isfinite(uv.x) || !std::isfinite(uv.y)) {
+      throw input_error(scene.source, "triangle " + std::to_string(t) + ": vertex " + std::to_string(k) +
+                                          " has non-finite texture coordinates (NaN or infinity)");
+    }
+  };
   size_t degenerate = 0;
   for (size_t t = 0; t < tris; ++t) {
     for (size_t k = 0; k < 3; ++k) {
@@ -121,6 +128,15 @@ void validate_scene(Scene& scene) {
     for (size_t k = 0; k < 3; ++k) {
       const size_t i = 3 * t + k;
       glm::vec3& n = mesh.normals[i];
+      // A unit normal (what loaders and posing make) needs neither check below: |n|^2 within
+      // 1e-5 of 1 puts |n| within 5.1e-6 of 1 and every component finite (a NaN or an infinity
+      // fails the comparison). This runs on every posed frame, where the square root of every
+      // corner's length was most of validation's cost (perf: 1.4 % of a toaster frame's CPU).
+      const float length2 = n.x * n.x + n.y * n.y + n.z * n.z;
+      if (length2 >= 1.0f - 1e-5f && length2 <= 1.0f + 1e-5f) {
+        if (!mesh.texcoords.empty()) check_texcoord(t, k);
+        continue;
+      }
       if (!finite3(n)) {
         throw input_error(scene.source, "triangle " + std::to_string(t) + ": vertex " +
                                             std::to_string(k) +
@@ -132,14 +148,7 @@ void validate_scene(Scene& scene) {
       } else if (std::abs(len - 1.0f) > 1e-5f) {
         n /= len;
       }
-      if (!mesh.texcoords.empty()) {
-        const glm::vec2& uv = mesh.texcoords[i];
-        if (!std::isfinite(uv.x) || !std::isfinite(uv.y)) {
-          throw input_error(scene.source,
-                            "triangle " + std::to_string(t) + ": vertex " + std::to_string(k) +
-                                " has non-finite texture coordinates (NaN or infinity)");
-        }
-      }
+      if (!mesh.texcoords.empty()) check_texcoord(t, k);
     }
   }
   scene.degenerate_triangles = degenerate;
