@@ -61,7 +61,7 @@ void hit_decoding(benchmark::State& state) {
   DecodeStats stats;
   for (auto _ : state) {
     SurfaceHits hits = decode_hits(scene, tree, rays, texels, packing, scene.lights, shadows, &stats);
-    benchmark::DoNotOptimize(hits.data());
+    benchmark::DoNotOptimize(hits.hit_flags());
   }
   state.counters["rays"] = double(rays.count());
   state.counters["hits"] = double(stats.hits);
@@ -74,7 +74,7 @@ struct FishGeneration {
   const Scene& scene;
   FlatKdTree tree;
   RayBatch primary;
-  std::vector<SurfaceHit> hits;
+  SurfaceHits hits;
 };
 
 FishGeneration fish_generation() {
@@ -83,7 +83,7 @@ FishGeneration fish_generation() {
   g.hits.resize(g.primary.count());
   for (uint32_t i = 0; i < g.primary.count(); ++i) {
     const Hit h = traverse(g.tree, g.primary.ray(i));
-    if (h.valid()) g.hits[i] = surface_hit(scene, g.tree, g.primary.ray(i), h.prim);
+    g.hits.set(i, h.valid() ? surface_hit(scene, g.tree, g.primary.ray(i), h.prim) : SurfaceHit{});
   }
   return g;
 }

@@ -141,7 +141,7 @@ class HitsFormEngine final : public WhittedEngine {
     }
     return traced;
   }
-  std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, std::span<const SurfaceHit> hits,
+  std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, const SurfaceHits& hits,
                                GenerationTimings& g) override {
     return inner_.shade(scene, rays, hits, g);
   }

@@ -131,10 +131,53 @@ void expect_decode_matches_reference(const Case& c, const ShadowSettings& shadow
   }
 }
 
-// decode_hits() makes its records in memory it does not clear first (SurfaceHits): every record
-// must be written, a miss as SurfaceHit{}. Decoding a batch of hits and then the same batch as
-// misses hands the second call the first one's freed block (the same size, just freed): a miss
-// left unwritten would still hold a hit.
+// SurfaceHits keeps a record for each hit and a byte per ray: a miss, however it is marked (set()
+// with a miss record, set_miss()), reads as SurfaceHit{} and its record is not touched; copy_of()
+// and the range-for see the same records as operator[].
+TEST(SurfaceHits, MissesReadAsEmptyRecordsHitsAsWritten) {
+  SurfaceHit hit;
+  hit.prim = 7;
+  hit.t = 2.5f;
+  hit.mask = 0b11u;
+  SurfaceHit miss_with_data = hit;
+  miss_with_data.prim = -1;  // a miss, whatever else it holds
+  SurfaceHits hits(4);
+  hits.set(0, hit);
+  hits.set(1, miss_with_data);
+  hits.set_miss(2);
+  hits.record(3) = hit;
+  hits.record(3).prim = 9;
+  hits.set_hit(3);
+  EXPECT_TRUE(hits.hit(0));
+  EXPECT_FALSE(hits.hit(1));
+  EXPECT_FALSE(hits.hit(2));
+  EXPECT_TRUE(hits.hit(3));
+  EXPECT_TRUE(same(hits[0], hit));
+  EXPECT_TRUE(same(hits[1], SurfaceHit{}));
+  EXPECT_TRUE(same(hits[2], SurfaceHit{}));
+  EXPECT_EQ(hits[3].prim, 9);
+  EXPECT_EQ(hits.hit_flags()[0] + hits.hit_flags()[1] + hits.hit_flags()[2] + hits.hit_flags()[3], 2);
+  // A hit marked a miss later reads as a miss.
+  hits.set(0, miss_with_data);
+  EXPECT_TRUE(same(hits[0], SurfaceHit{}));
+  const std::vector<SurfaceHit> records = {hit, SurfaceHit{}, miss_with_data};
+  const SurfaceHits copy = SurfaceHits::copy_of(records);
+  ASSERT_EQ(copy.size(), 3u);
+  uint32_t i = 0;
+  for (const SurfaceHit& r : copy) {
+    EXPECT_TRUE(same(r, copy[i]));
+    EXPECT_EQ(copy.hit(i), records[i].valid());
+    ++i;
+  }
+  EXPECT_EQ(i, 3u);
+  EXPECT_TRUE(same(copy[0], hit));
+  EXPECT_TRUE(same(copy[2], SurfaceHit{}));
+}
+
+// decode_hits() makes its records and hit bytes in memory it does not clear first (SurfaceHits):
+// every ray must be marked, and a miss reads as SurfaceHit{}. Decoding a batch of hits and then the
+// same batch as misses hands the second call the first one's freed blocks (the same sizes, just
+// freed): a miss left unmarked would still read as a hit.
 TEST(DecodeHits, EveryMissIsWrittenAsAMiss) {
   const Scene scene = load_scene(std::string(MOBIRT_SOURCE_DIR) + "/scenes/toaster.gltf");
   const FlatKdTree tree = build_kdtree(scene.mesh.positions, scene.shapes);

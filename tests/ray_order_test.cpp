@@ -120,7 +120,7 @@ TEST_F(VulkanRayOrder, TraversalAnswersAndImageUnchanged) {
     const Hit h = traverse(tree, primary.ray(i));
     if (h.valid()) hits[i] = surface_hit(scene, tree, primary.ray(i), h.prim);
   }
-  RayBatch tiles = next_generation(scene, tree.bounds, primary, hits, settings.secondary);
+  RayBatch tiles = next_generation(scene, tree.bounds, primary, SurfaceHits::copy_of(hits), settings.secondary);
   ASSERT_GT(tiles.count(), 2 * tiles.width) << "the fish's glass makes a secondary generation";
   ASSERT_GE(octant_change_rate(tiles), kSortAboveOctantChanges) << "mirror and refracted rays mixed: sorted";
   RayBatch coherent = tiles;

@@ -40,7 +40,7 @@ RayBatch one_bounce(const Scene& scene, const FlatKdTree& tree, const Ray& ray, 
   if (hit_out) *hit_out = hits[0];
   SecondarySettings settings;
   settings.min_weight = 0.0f;
-  return next_generation(scene, tree.bounds, rays, hits, settings);
+  return next_generation(scene, tree.bounds, rays, SurfaceHits::copy_of(hits), settings);
 }
 
 Scene glass_slab(float thickness, float ior) {

@@ -74,7 +74,7 @@ TracedGeneration ComputeWhittedEngine::trace(const Scene& scene, const RayBatch&
 }
 
 std::vector<glm::vec3> ComputeWhittedEngine::shade(const Scene& scene, const RayBatch& rays,
-                                                   std::span<const SurfaceHit> hits, GenerationTimings& g) {
+                                                   const SurfaceHits& hits, GenerationTimings& g) {
   return shading_.shade_traced_elsewhere(scene, rays, hits, g);
 }
 

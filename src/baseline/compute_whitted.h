@@ -28,7 +28,7 @@ class ComputeWhittedEngine final : public WhittedEngine {
   const FlatKdTree& tree() const override { return tree_; }
   // The compute pass: one hit record per ray, handed on as hits and masks.
   TracedGeneration trace(const Scene& scene, const RayBatch& rays, GenerationTimings& g) override;
-  std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, std::span<const SurfaceHit> hits,
+  std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, const SurfaceHits& hits,
                                GenerationTimings& g) override;
   // As mobirt's passes order them: neighbouring rays walk the same nodes in one SIMD group.
   void order_rays(RayBatch& rays) const override;

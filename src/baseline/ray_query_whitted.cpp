@@ -33,7 +33,7 @@ TracedGeneration RayQueryWhittedEngine::trace(const Scene& scene, const RayBatch
 }
 
 std::vector<glm::vec3> RayQueryWhittedEngine::shade(const Scene& scene, const RayBatch& rays,
-                                                    std::span<const SurfaceHit> hits, GenerationTimings& g) {
+                                                    const SurfaceHits& hits, GenerationTimings& g) {
   return shading_.shade_traced_elsewhere(scene, rays, hits, g);
 }
 

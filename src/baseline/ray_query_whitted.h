@@ -24,7 +24,7 @@ class RayQueryWhittedEngine final : public WhittedEngine {
   const FlatKdTree& tree() const override { return rq_.triangles(); }
   // The ray-query pass: one packed texel per ray, as mobirt's traversal pass writes it.
   TracedGeneration trace(const Scene& scene, const RayBatch& rays, GenerationTimings& g) override;
-  std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, std::span<const SurfaceHit> hits,
+  std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, const SurfaceHits& hits,
                                GenerationTimings& g) override;
   // As mobirt's passes order them: neighbouring rays in one SIMD group suit a fragment pass either way.
   void order_rays(RayBatch& rays) const override;

@@ -536,13 +536,19 @@ __attribute__((target("avx2"))) uint32_t decode_triangles_avx2(const Scene& scen
 
 }  // namespace
 
+SurfaceHits SurfaceHits::copy_of(std::span<const SurfaceHit> records) {
+  SurfaceHits hits(uint32_t(records.size()));
+  for (uint32_t i = 0; i < uint32_t(records.size()); ++i) hits.set(i, records[i]);
+  return hits;
+}
+
 SurfaceHits decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays,
                         std::span<const uint32_t> texels, Packing packing, std::span<const Light> lights,
                         const ShadowSettings& shadows, DecodeStats* stats, uint32_t mask_or) {
   const uint32_t n = rays.count();
   if (texels.size() < n) throw Error(ErrorKind::Internal, "decode_hits: fewer texels than rays");
   const uint32_t prims = uint32_t(scene.primitive_count());
-  SurfaceHits hits(n);  // every record written below, in parallel (a miss: SurfaceHit{})
+  SurfaceHits hits(n);  // every ray marked below, in parallel (a miss: no record written)
   std::atomic<uint32_t> hit_count{0}, capped_count{0};
   std::atomic<uint64_t> shadow_count{0};
   // Rays are independent: decoded on all cores in chunks (a capped ray's CPU retrace is the slow
@@ -563,7 +569,7 @@ SurfaceHits decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBat
     uint64_t chunk_shadow = 0;
     // The last steps of a hit whose surface record is made: its mask and shadow-ray count.
     const auto finish = [&](uint32_t i, uint32_t mask) {
-      SurfaceHit& hit = hits[i];
+      SurfaceHit& hit = hits.record(i);
       hit.mask = mask | mask_or;
       // Every light visible (the common case): one ray each, what shadow_rays_cast() returns
       // without its call.
@@ -574,7 +580,8 @@ SurfaceHits decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBat
       }
     };
     const auto decode_scalar = [&](uint32_t i, int32_t prim, uint32_t mask) {
-      hits[i] = surface_hit(scene, tree, rays.ray(i), prim, shadows.ray_test.test);
+      hits.record(i) = surface_hit(scene, tree, rays.ray(i), prim, shadows.ray_test.test);
+      hits.set_hit(i);
       finish(i, mask);
     };
 #if defined(MOBIRT_DECODE_AVX2)
@@ -583,13 +590,14 @@ SurfaceHits decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBat
     int batch_size = 0;
     const auto flush = [&] {
       ShadowCount count{lights, shadows.offset.mode, absolute, batch_mask};
-      const uint32_t done = decode_triangles_avx2(scene, tree, rays, batch_ray, batch_prim, batch_size, hits.data(),
+      const uint32_t done = decode_triangles_avx2(scene, tree, rays, batch_ray, batch_prim, batch_size, hits.records(),
                                                   batch_counts ? &count : nullptr);
       chunk_shadow += count.rays;
       for (int k = 0; k < batch_size; ++k) {
         if ((done >> k) & 1u) {
+          hits.set_hit(batch_ray[k]);
           if (batch_counts) {
-            hits[batch_ray[k]].mask = batch_mask[k] | mask_or;
+            hits.record(batch_ray[k]).mask = batch_mask[k] | mask_or;
           } else {
             finish(batch_ray[k], batch_mask[k]);
           }
@@ -605,15 +613,16 @@ SurfaceHits decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBat
       const TraceTexel texel = unpack_trace(packing, texels[i]);
       if (texel.capped) {
         ++chunk_capped;
-        hits[i] = retrace_capped(scene, tree, rays.ray(i), lights, shadows);
-        if (hits[i].valid()) {
-          hits[i].mask |= mask_or;
+        SurfaceHit h = retrace_capped(scene, tree, rays.ray(i), lights, shadows);
+        if (h.valid()) {
+          h.mask |= mask_or;
           ++chunk_hits;
         }
+        hits.set(i, h);
         continue;
       }
       if (!texel.hit()) {
-        hits[i] = SurfaceHit{};
+        hits.set_miss(i);
         continue;
       }
       const int32_t prim = texel.prim();

@@ -13,7 +13,7 @@ bool scene_has_secondary_rays(const Scene& scene) {
 }
 
 RayBatch next_generation(const Scene& scene, const Aabb& scene_bounds, const RayBatch& rays,
-                         std::span<const SurfaceHit> hits, const SecondarySettings& settings,
+                         const SurfaceHits& hits, const SecondarySettings& settings,
                          SecondaryStats* stats) {
   RayBatch next;
   next.width = rays.width;

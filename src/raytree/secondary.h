@@ -34,7 +34,7 @@ struct SecondaryStats {
 // The next generation from the hits of this one (hits[i] belongs to ray i). scene_bounds sizes
 // the self-intersection offset.
 RayBatch next_generation(const Scene& scene, const Aabb& scene_bounds, const RayBatch& rays,
-                         std::span<const SurfaceHit> hits, const SecondarySettings& settings,
+                         const SurfaceHits& hits, const SecondarySettings& settings,
                          SecondaryStats* stats = nullptr);
 
 // True when some material of the scene reflects or refracts: only then is a second generation

@@ -60,19 +60,20 @@ TracedGeneration CpuRayEngine::trace(const Scene& scene, const RayBatch& rays, G
 
   TracedGeneration traced;
   traced.form = TracedGeneration::Form::Surfaces;
-  traced.surfaces.resize(n);  // unwritten: every record is written below
+  traced.surfaces.resize(n);  // unwritten: every ray is marked below
   const FlatKdTree& texels = triangles();
   const std::span<const Light> lights(scene.lights);
   std::atomic<uint64_t> shadow_rays{0};
   start = std::chrono::steady_clock::now();
   parallel_for(n, threads_, [&](uint32_t i) {
-    SurfaceHit& h = traced.surfaces[i];
     if (!closest_hits[i].valid()) {
-      h = SurfaceHit{};
+      traced.surfaces.set_miss(i);
       return;
     }
+    SurfaceHit& h = traced.surfaces.record(i);
     const Ray ray = rays.ray(i);
     h = surface(scene, ray, closest_hits[i]);
+    traced.surfaces.set_hit(i);
     if (!shadows_) return;  // the frame loop lights the hit by every light
     uint64_t cast = 0;
     h.mask = shadow_mask_with(texels, lights, closest_hits[i].prim, ray, closest_hits[i].t, shadow_rays_,
@@ -88,7 +89,7 @@ TracedGeneration CpuRayEngine::trace(const Scene& scene, const RayBatch& rays, G
 }
 
 std::vector<glm::vec3> CpuRayEngine::shade(const Scene& scene, const RayBatch& rays,
-                                           std::span<const SurfaceHit> hits, GenerationTimings& g) {
+                                           const SurfaceHits& hits, GenerationTimings& g) {
   const auto start = std::chrono::steady_clock::now();
   std::vector<glm::vec3> colors(rays.count());
   parallel_for(rays.count(), threads_, [&](uint32_t i) {

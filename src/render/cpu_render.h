@@ -48,7 +48,7 @@ class CpuRayEngine : public WhittedEngine {
   void begin_frame(const Scene& scene, const RenderSettings& settings, FrameTimings& frame) override;
   const FlatKdTree& tree() const override { return triangles(); }
   TracedGeneration trace(const Scene& scene, const RayBatch& rays, GenerationTimings& g) override;
-  std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, std::span<const SurfaceHit> hits,
+  std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, const SurfaceHits& hits,
                                GenerationTimings& g) override;
 
  private:

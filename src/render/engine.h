@@ -80,7 +80,7 @@ struct TracedGeneration {
   std::vector<Hit> hits;         // Hits
   std::vector<uint32_t> masks;   // Hits: shadow bits per ray
   std::vector<uint32_t> capped;  // Hits: rays the loop cap stopped, traced on the CPU against tree()
-  SurfaceHits surfaces;          // Surfaces: every record written by the engine (a miss: SurfaceHit{})
+  SurfaceHits surfaces;          // Surfaces: every ray marked by the engine, a record for each hit
   uint64_t shadow_rays = 0;      // Hits and Surfaces: shadow rays the engine cast
 };
 
@@ -105,7 +105,7 @@ class WhittedEngine {
   // One colour per ray for the decoded hits (a miss: the background), quantised as the shading pass
   // writes it. Fills the stages it runs in g.
   virtual std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays,
-                                       std::span<const SurfaceHit> hits, GenerationTimings& g) = 0;
+                                       const SurfaceHits& hits, GenerationTimings& g) = 0;
 
   // The order of a new generation's rays that suits the engine (the fragment passes: neighbouring
   // rays in one SIMD group); by default as the ray tree made them.

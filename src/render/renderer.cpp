@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <array>
-#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -189,7 +188,7 @@ class Renderer::Engine final : public WhittedEngine {
     return traced;
   }
 
-  std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, std::span<const SurfaceHit> hits,
+  std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, const SurfaceHits& hits,
                                GenerationTimings& g) override {
     return r_.shade(scene, rays, hits, g);
   }
@@ -428,7 +427,7 @@ void Renderer::upload_materials(const Scene& scene) {
 }
 
 std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
-                                       std::span<const SurfaceHit> hits, GenerationTimings& timings) {
+                                       const SurfaceHits& hits, GenerationTimings& timings) {
   // The shading pass shades the hits only, compacted, and one miss: a miss's colour is the
   // background's, the same for every miss (glsl/shade_main.glsl), so the one texel the pass writes
   // for it serves them all, bit for bit. A pass over every ray ran the whole Phong code for groups
@@ -442,29 +441,19 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   const uint32_t n = rays.count();
   if (n == 0) return {};
   if (rays.width == 0) throw Error(ErrorKind::Internal, "Renderer::shade: a batch of rays with rows of width 0");
+  if (hits.size() != n) throw Error(ErrorKind::Internal, "Renderer::shade: not one surface record per ray");
   fit_ray_layout(rays.width);
   prepare_atlas(scene);  // says whether the scene has textures
   auto stage = Clock::now();
   constexpr uint32_t kChunk = 1024;
-  constexpr uint32_t kWords = kChunk / 64;
   const uint32_t chunks = (n + kChunk - 1) / kChunk;
-  // One pass over the records: a bit per ray that hit (12 KB for 96,000 rays), first[c + 1] the
-  // hits of chunk c. The fill below and the colours after the pass then read the bits instead of
-  // each record's primitive again, and the fill skips chunks without a hit: three scans of the
-  // 72-byte records, most of them misses on the wood doll, were 6 % of its frame's CPU (perf).
-  std::vector<uint64_t> hit_bits(size_t(chunks) * kWords);
+  // first[c + 1]: the hits of chunk c, counted from the records' hit bytes (SurfaceHits), never
+  // from the records, which exist for the hits only; chunks without a hit are skipped below.
+  const uint8_t* hit = hits.hit_flags();
   std::vector<uint32_t> first(size_t(chunks) + 1, 0);
   parallel_for(chunks, 0, [&](uint32_t c) {
     uint32_t count = 0;
-    uint64_t* words = hit_bits.data() + size_t(c) * kWords;
-    for (uint32_t w = 0, base = c * kChunk; w < kWords; ++w, base += 64) {
-      // Shifted in from the top (constant shifts in the loop), then down: ray base + j at bit j.
-      uint64_t bits = 0;
-      const uint32_t end = std::min(n - std::min(n, base), 64u);
-      for (uint32_t j = 0; j < end; ++j) bits = (bits >> 1) | (uint64_t(hits[base + j].valid()) << 63);
-      words[w] = end == 0 ? 0 : bits >> (64 - end);
-      count += uint32_t(std::popcount(bits));
-    }
+    for (uint32_t i = c * kChunk, end = std::min(n, i + kChunk); i < end; ++i) count += hit[i] != 0 ? 1u : 0u;
     first[c + 1] = count;
   }, 1);
   for (uint32_t c = 0; c < chunks; ++c) first[c + 1] += first[c];
@@ -479,17 +468,14 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   parallel_for(chunks, 0, [&](uint32_t c) {
     if (first[c + 1] == first[c]) return;
     uint32_t k = first[c];
-    const uint64_t* words = hit_bits.data() + size_t(c) * kWords;
-    for (uint32_t w = 0; w < kWords; ++w) {
-      for (uint64_t bits = words[w]; bits != 0; bits &= bits - 1) {
-        const uint32_t i = c * kChunk + w * 64 + uint32_t(std::countr_zero(bits));
-        const SurfaceHit& h = hits[i];
-        position[k] = HitPositionTexel{h.position, float(h.material)};
-        normal[k] = HitNormalTexel{h.normal, float(h.mask)};
-        direction[k] = rays.direction[i];
-        if (uv) uv[k] = HitTexcoordTexel{h.texcoord, glm::vec2(0.0f)};
-        ++k;
-      }
+    for (uint32_t i = c * kChunk, end = std::min(n, i + kChunk); i < end; ++i) {
+      if (!hit[i]) continue;
+      const SurfaceHit& h = hits[i];
+      position[k] = HitPositionTexel{h.position, float(h.material)};
+      normal[k] = HitNormalTexel{h.normal, float(h.mask)};
+      direction[k] = rays.direction[i];
+      if (uv) uv[k] = HitTexcoordTexel{h.texcoord, glm::vec2(0.0f)};
+      ++k;
     }
   }, 1);
   if (any_miss) {
@@ -549,10 +535,8 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   std::vector<glm::vec3> colors(n);
   parallel_for(chunks, 0, [&](uint32_t c) {
     uint32_t k = first[c];
-    const uint64_t* words = hit_bits.data() + size_t(c) * kWords;
     for (uint32_t i = c * kChunk, end = std::min(n, i + kChunk); i < end; ++i) {
-      const uint32_t j = i - c * kChunk;
-      colors[i] = (words[j / 64] >> (j % 64)) & 1u ? decoded(k++) : miss_colour;
+      colors[i] = hit[i] ? decoded(k++) : miss_colour;
     }
   }, 1);
   timings.accumulate_ms += elapsed_ms(stage);
@@ -567,7 +551,7 @@ void Renderer::check_shades_like(const RenderSettings& frame, const char* who) c
 }
 
 std::vector<glm::vec3> Renderer::shade_traced_elsewhere(const Scene& scene, const RayBatch& rays,
-                                                        std::span<const SurfaceHit> hits, GenerationTimings& timings) {
+                                                        const SurfaceHits& hits, GenerationTimings& timings) {
   // The shading pass reads the hits' directions, which shade() uploads itself: the traversal
   // pass's ray textures, which such an engine never used, are not uploaded (they were until the
   // shading pass shaded the hits only, and counted in the peers' upload stage).

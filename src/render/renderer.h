@@ -85,7 +85,7 @@ class Renderer {
   // The shading pass alone over decoded hits (two passes for 16-bit colour); one colour per ray,
   // as read back from the RGBA8 texels. Lights the hits by their masks as they are (the frame sets
   // every light's bit without shadows).
-  std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, std::span<const SurfaceHit> hits,
+  std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, const SurfaceHits& hits,
                                GenerationTimings& timings);
 
   // For an engine that traces elsewhere and shades with this renderer's pass (the ray-query and
@@ -97,7 +97,7 @@ class Renderer {
   void upload_rays(const RayBatch& rays);
   // shade() for such an engine: one generation shaded.
   std::vector<glm::vec3> shade_traced_elsewhere(const Scene& scene, const RayBatch& rays,
-                                                std::span<const SurfaceHit> hits, GenerationTimings& timings);
+                                                const SurfaceHits& hits, GenerationTimings& timings);
 
   const RenderSettings& settings() const { return settings_; }
   // For an engine that shades with this renderer: throws Error(Internal) naming `who` unless the

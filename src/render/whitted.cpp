@@ -6,6 +6,7 @@
 #include <span>
 #include <utility>
 
+#include "core/error.h"
 #include "core/parallel.h"
 #include "raytree/secondary.h"
 
@@ -58,19 +59,21 @@ SurfaceHits decode_generation(const Scene& scene, const RenderSettings& settings
       break;
     }
     case TracedGeneration::Form::Hits:
-      hits.resize(rays.count());  // unwritten: every record is written here
+      hits.resize(rays.count());  // unwritten: every ray is marked here
       // On all cores, as decode_hits() decodes the packed texels.
       parallel_for(rays.count(), 0, [&](uint32_t i) {
         if (!traced.hits[i].valid()) {
-          hits[i] = SurfaceHit{};
+          hits.set_miss(i);
           return;
         }
-        hits[i] = surface_from_hit(scene, rays.ray(i), traced.hits[i]);
-        hits[i].mask = traced.masks[i];
+        SurfaceHit& h = hits.record(i);
+        h = surface_from_hit(scene, rays.ray(i), traced.hits[i]);
+        h.mask = traced.masks[i];
+        hits.set_hit(i);
       }, 256);
       parallel_for(uint32_t(traced.capped.size()), 0, [&](uint32_t k) {
         const uint32_t i = traced.capped[k];
-        hits[i] = retrace_capped(scene, tree, rays.ray(i), lights, settings.shadow_rays);
+        hits.set(i, retrace_capped(scene, tree, rays.ray(i), lights, settings.shadow_rays));
       }, 16);
       g.capped += uint32_t(traced.capped.size());
       g.shadow_rays += traced.shadow_rays;
@@ -81,7 +84,7 @@ SurfaceHits decode_generation(const Scene& scene, const RenderSettings& settings
       break;
   }
   // The other forms: their hits counted, and every light visible without shadows, on all cores
-  // (a serial pass over 72 bytes a ray cost about 1 ms a generation, the records cold).
+  // (a serial pass over the records cost about 1 ms a generation, the records cold).
   if (traced.form != TracedGeneration::Form::PackedTexels) {
     constexpr uint32_t kChunk = 4096;
     const uint32_t n = uint32_t(hits.size());
@@ -89,15 +92,15 @@ SurfaceHits decode_generation(const Scene& scene, const RenderSettings& settings
     parallel_for((n + kChunk - 1) / kChunk, 0, [&](uint32_t c) {
       uint32_t chunk_valid = 0;
       for (uint32_t i = c * kChunk, end = std::min(n, i + kChunk); i < end; ++i) {
-        SurfaceHit& h = hits[i];
-        if (!h.valid()) continue;
+        if (!hits.hit(i)) continue;
         ++chunk_valid;
-        if (!settings.shadows) h.mask = all_lights;
+        if (!settings.shadows) hits.record(i).mask = all_lights;
       }
       valid.fetch_add(chunk_valid, std::memory_order_relaxed);
     }, 1);
     g.hits += valid.load();
   }
+  if (hits.size() != rays.count()) throw Error(ErrorKind::Internal, "decode_generation: not one surface record per ray");
   return hits;
 }
 

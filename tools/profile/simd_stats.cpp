@@ -421,7 +421,7 @@ int run(int argc, char** argv) {
                   100.0 * double(e.group_iterations) / double(std::max<uint64_t>(s.tiled.node, 1)));
     }
     if (g < depth) {
-      rays = next_generation(scene, tree.bounds, rays, hits, SecondarySettings{});
+      rays = next_generation(scene, tree.bounds, rays, SurfaceHits::copy_of(hits), SecondarySettings{});
       // As the renderer does (--ray-order tiles: the tiling alone, to measure what the sort buys).
       std::printf("    next generation: %.1f %% of consecutive rays change octant (sorted at %.0f %% or more)\n",
                   100.0 * octant_change_rate(rays), 100.0 * kSortAboveOctantChanges);
