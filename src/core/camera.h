@@ -24,13 +24,17 @@ struct CameraBasis {
   Ray ray(float x, float y) const {
     // The operations of the per-ray formula this replaced, so every primary ray keeps its floats.
     const float sx = (2.0f * x / width - 1.0f) * tan_half * aspect;
-    const float sy = (1.0f - 2.0f * y / height) * tan_half;
+    const float sy = row_offset(y);
     Ray r;
     r.origin = eye;
     r.direction = glm::normalize(forward + sx * right + sy * up);
     r.tmin = znear;
     return r;
   }
+
+  // The vertical offset of image row y on the image plane (a multiple of `up`), shared with
+  // primary_rays()' four-pixel path, which computes it once per row.
+  float row_offset(float y) const { return (1.0f - 2.0f * y / height) * tan_half; }
 
   glm::vec3 eye, forward, right, up;
   float tan_half, aspect, width, height, znear;

@@ -92,8 +92,7 @@ RayBatch primary_rays(const Camera& camera, int width, int height) {
     uint32_t x = 0, i = y * uint32_t(width);
 #if defined(__SSE2__)
     const __m128 eye = _mm_setr_ps(basis.eye.x, basis.eye.y, basis.eye.z, basis.znear);  // ray() copies them
-    // sy as CameraBasis::ray() computes it, once per row.
-    const float sy = (1.0f - 2.0f * (float(y) + 0.5f) / basis.height) * basis.tan_half;
+    const float sy = basis.row_offset(float(y) + 0.5f);  // once per row
     for (; x + 4 <= uint32_t(width); x += 4, i += 4) primary_rays_x4(basis, sy, x, i, eye, batch);
 #endif
     for (; x < uint32_t(width); ++x, ++i) {

@@ -132,7 +132,7 @@ void validate_scene(Scene& scene) {
       // 1e-5 of 1 puts |n| within 5.1e-6 of 1 and every component finite (a NaN or an infinity
       // fails the comparison). This runs on every posed frame, where the square root of every
       // corner's length was most of validation's cost (perf: 1.4 % of a toaster frame's CPU).
-      const float length2 = n.x * n.x + n.y * n.y + n.z * n.z;
+      const float length2 = glm::dot(n, n);  // what glm::length takes the root of
       if (length2 >= 1.0f - 1e-5f && length2 <= 1.0f + 1e-5f) {
         if (!mesh.texcoords.empty()) check_texcoord(t, k);
         continue;
