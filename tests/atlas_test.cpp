@@ -6,6 +6,7 @@
 #include <OpenImageIO/imageio.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -583,6 +584,27 @@ std::vector<glm::vec2> border_and_random_uvs(size_t random_count, std::mt19937& 
 }
 
 const TextureWrap kModes[] = {TextureWrap::Repeat, TextureWrap::MirroredRepeat, TextureWrap::ClampToEdge};
+
+// At a texel's centre the bilinear weights are 0 and 1, so the lookup is the texel's own linear
+// value: for each of the 256 bytes, in every channel, the float srgb_to_linear() gives, bit for
+// bit, whatever way sample_atlas() decodes it (a table since the CPU engines stopped calling
+// std::pow per texel).
+TEST(AtlasFilter, TexelCentresDecodeEverySrgbByteAsSrgbToLinear) {
+  TextureImage image = solid(16, 16, 0);
+  for (uint32_t i = 0; i < 256; ++i) image.pixels[i] = pack_rgba8(i, 255 - i, (i * 7) & 0xffu, 255);
+  const Atlas atlas = assemble_atlas({{solid(3, 2, pack_rgba8(9, 9, 9, 255))}, {image}});
+  for (int y = 0; y < 16; ++y) {
+    for (int x = 0; x < 16; ++x) {
+      const glm::vec2 uv((float(x) + 0.5f) / 16.0f, (float(y) + 0.5f) / 16.0f);
+      const uint32_t p = image.at(x, y);
+      const glm::vec3 got = sample_atlas(atlas, 1, uv);
+      for (int c = 0; c < 3; ++c) {
+        ASSERT_EQ(std::bit_cast<uint32_t>(got[c]), std::bit_cast<uint32_t>(lin(channel(p, c))))
+            << "texel " << x << ", " << y << " channel " << c << " byte " << channel(p, c);
+      }
+    }
+  }
+}
 
 TEST(AtlasFilter, BilinearNeverReadsANeighbourTile) {
   std::mt19937 rng(5);
