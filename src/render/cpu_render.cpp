@@ -63,26 +63,31 @@ TracedGeneration CpuRayEngine::trace(const Scene& scene, const RayBatch& rays, G
   traced.surfaces.resize(n);  // unwritten: every ray is marked below
   const FlatKdTree& texels = triangles();
   const std::span<const Light> lights(scene.lights);
+  // Shadow rays counted per chunk of rays, one atomic add each: an add per hit, from both cores
+  // on one cache line, made this stage bimodal (the toaster's 5.8 or 7.2-7.6 ms run to run).
+  constexpr uint32_t kChunk = 64;
   std::atomic<uint64_t> shadow_rays{0};
   start = std::chrono::steady_clock::now();
-  parallel_for(n, threads_, [&](uint32_t i) {
-    if (!closest_hits[i].valid()) {
-      traced.surfaces.set_miss(i);
-      return;
-    }
-    SurfaceHit& h = traced.surfaces.record(i);
-    const Ray ray = rays.ray(i);
-    h = surface(scene, ray, closest_hits[i]);
-    traced.surfaces.set_hit(i);
-    if (!shadows_) return;  // the frame loop lights the hit by every light
+  parallel_for((n + kChunk - 1) / kChunk, threads_, [&](uint32_t c) {
     uint64_t cast = 0;
-    h.mask = shadow_mask_with(texels, lights, closest_hits[i].prim, ray, closest_hits[i].t, shadow_rays_,
-                              [&](const Ray& shadow) {
-                                ++cast;
-                                return occluded(shadow);
-                              });
+    for (uint32_t i = c * kChunk, end = std::min(n, i + kChunk); i < end; ++i) {
+      if (!closest_hits[i].valid()) {
+        traced.surfaces.set_miss(i);
+        continue;
+      }
+      SurfaceHit& h = traced.surfaces.record(i);
+      const Ray ray = rays.ray(i);
+      h = surface(scene, ray, closest_hits[i]);
+      traced.surfaces.set_hit(i);
+      if (!shadows_) continue;  // the frame loop lights the hit by every light
+      h.mask = shadow_mask_with(texels, lights, closest_hits[i].prim, ray, closest_hits[i].t, shadow_rays_,
+                                [&](const Ray& shadow) {
+                                  ++cast;
+                                  return occluded(shadow);
+                                });
+    }
     shadow_rays.fetch_add(cast, std::memory_order_relaxed);
-  });
+  }, 1);
   g.shadow_ms += elapsed_ms(start);
   traced.shadow_rays = shadow_rays.load();
   return traced;
