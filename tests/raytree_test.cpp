@@ -116,6 +116,61 @@ TEST(RayTree, OnlyPrimaryRaysAreMarkedOnePerPixel) {
   EXPECT_FALSE(rays.unique_pixels);
 }
 
+// next_generation() makes its rays on all cores, chunk by chunk: the batch must be the rays of one
+// loop over the hits, in their order, whatever the chunk boundaries. The oracle is each ray's own
+// next generation (a batch of one), concatenated: 5,000 rays (chunks of 2,048) onto Fresnel glass
+// (a mirror and a refracted ray each), every seventh missing, every fifth too faint to go on.
+TEST(RayTree, NextGenerationKeepsTheHitsOrderAcrossChunks) {
+  Scene scene = glass_slab(2.0f, 1.5f);
+  scene.materials.back().fresnel = true;
+  const FlatKdTree tree = build_kdtree(scene.mesh.positions);
+  SecondarySettings settings;
+  settings.min_weight = 0.01f;
+  RayBatch rays;
+  rays.width = 64;
+  std::vector<SurfaceHit> hits;
+  for (uint32_t i = 0; i < 5000; ++i) {
+    const float x = -40.0f + 80.0f * float(i % 97) / 97.0f, z = -40.0f + 80.0f * float(i % 89) / 89.0f;
+    const glm::vec3 d = i % 7 == 3 ? glm::vec3(0.1f, 1.0f, 0.0f) : glm::normalize(glm::vec3(0.3f * float(i % 5) - 0.6f, -1.0f, 0.2f));
+    const Ray ray{glm::vec3(x, 5.0f, z), d, 0.0f, kInfinity};
+    rays.push(ray, 4999 - i, i % 5 == 1 ? glm::vec3(0.004f) : glm::vec3(1.0f, 0.5f, 0.25f));
+    const Hit h = traverse(tree, ray);
+    hits.push_back(h.valid() ? surface_hit(scene, tree, ray, h.prim) : SurfaceHit{});
+  }
+  SecondaryStats stats;
+  const RayBatch next = next_generation(scene, tree.bounds, rays, SurfaceHits::copy_of(hits), settings, &stats);
+
+  RayBatch want;
+  SecondaryStats want_stats;
+  for (uint32_t i = 0; i < rays.count(); ++i) {
+    RayBatch one;
+    one.width = 1;
+    one.push(rays.ray(i), rays.pixel[i], rays.weight[i]);
+    SecondaryStats s;
+    const RayBatch part = next_generation(scene, tree.bounds, one, SurfaceHits::copy_of({&hits[i], 1}), settings, &s);
+    for (uint32_t k = 0; k < part.count(); ++k) want.push(part.ray(k), part.pixel[k], part.weight[k]);
+    want_stats.reflected += s.reflected;
+    want_stats.refracted += s.refracted;
+    want_stats.total_internal_reflections += s.total_internal_reflections;
+    want_stats.culled += s.culled;
+  }
+  ASSERT_GT(want.count(), 4096u);  // more rays than two chunks' hits make
+  ASSERT_GT(want_stats.culled, 0u);
+  ASSERT_EQ(next.count(), want.count());
+  EXPECT_EQ(next.width, rays.width);
+  EXPECT_FALSE(next.unique_pixels);
+  for (uint32_t k = 0; k < next.count(); ++k) {
+    ASSERT_EQ(std::memcmp(&next.origin[k], &want.origin[k], sizeof(glm::vec4)), 0) << "ray " << k;
+    ASSERT_EQ(std::memcmp(&next.direction[k], &want.direction[k], sizeof(glm::vec4)), 0) << "ray " << k;
+    ASSERT_EQ(next.pixel[k], want.pixel[k]) << "ray " << k;
+    ASSERT_EQ(next.weight[k], want.weight[k]) << "ray " << k;
+  }
+  EXPECT_EQ(stats.reflected, want_stats.reflected);
+  EXPECT_EQ(stats.refracted, want_stats.refracted);
+  EXPECT_EQ(stats.total_internal_reflections, want_stats.total_internal_reflections);
+  EXPECT_EQ(stats.culled, want_stats.culled);
+}
+
 TEST(RayTree, GlassSlabShiftsTheRayWithoutTurningIt) {
   const float thickness = 2.0f, ior = 1.5f;
   const Scene scene = glass_slab(thickness, ior);

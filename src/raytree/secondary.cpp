@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <vector>
+
+#include "core/parallel.h"
 
 namespace mobirt {
 
@@ -15,49 +18,86 @@ bool scene_has_secondary_rays(const Scene& scene) {
 RayBatch next_generation(const Scene& scene, const Aabb& scene_bounds, const RayBatch& rays,
                          const SurfaceHits& hits, const SecondarySettings& settings,
                          SecondaryStats* stats) {
+  const float absolute = absolute_offset(scene_bounds, settings.offset);
+  // The rays' hits in chunks on all cores, each chunk's new rays in order in a part of its own,
+  // then the parts one after the other: the rays of one loop over the hits, in its order. (One
+  // loop on one core was 2.3 ms of the toaster's frame with 2 bounces, for every column of the
+  // bench alike.)
+  constexpr uint32_t kChunk = 2048;
+  const uint32_t n = rays.count();
+  const uint32_t chunks = (n + kChunk - 1) / kChunk;
+  struct Part {
+    RayBatch rays;
+    SecondaryStats stats;
+  };
+  std::vector<Part> parts(chunks);
+  parallel_for(chunks, 0, [&](uint32_t c) {
+    RayBatch& out = parts[c].rays;
+    SecondaryStats& local = parts[c].stats;
+    auto emit = [&](const glm::vec3& origin, const glm::vec3& direction, uint32_t pixel, const glm::vec3& w,
+                    uint32_t& counter) {
+      if (std::max(w.x, std::max(w.y, w.z)) < settings.min_weight) {
+        ++local.culled;
+        return;
+      }
+      out.push(Ray{origin, direction, 0.0f, kInfinity}, pixel, w);
+      ++counter;
+    };
+    for (uint32_t i = c * kChunk, end = std::min(n, i + kChunk); i < end; ++i) {
+      const SurfaceHit& h = hits[i];
+      if (!h.valid()) continue;
+      const Material& m = scene.materials[h.material];
+      if (m.reflectance <= 0.0f && m.transmittance <= 0.0f) continue;
+      const glm::vec3 d = glm::normalize(glm::vec3(rays.direction[i]));
+      const glm::vec3 weight = rays.weight[i];
+      // Normals face the incoming ray (hits.h); the shading normal bends the directions, the
+      // geometric one decides which side of the surface each new ray starts on.
+      const glm::vec3& ng = h.geometric;
+      const glm::vec3& ns = h.normal;
+      // Wachter and Binder's offset starts from the point on the triangle (point_on_triangle()).
+      glm::vec3 p = h.position;
+      if (settings.offset.mode == OffsetMode::NormalUlp && size_t(h.prim) < scene.mesh.triangle_count()) {
+        const glm::vec3* v = &scene.mesh.positions[3 * size_t(h.prim)];
+        p = v[0] + h.u * (v[1] - v[0]) + h.v * (v[2] - v[0]);
+      }
+      const glm::vec3 above = offset_origin(p, ng, settings.offset.mode, absolute);
+      const glm::vec3 below = offset_origin(p, -ng, settings.offset.mode, absolute);
+
+      const WeightSplit<float> split = split_weight(m, d, ns, ng, h.entering);
+      if (split.total_internal_reflection) ++local.total_internal_reflections;
+      if (split.reflect > 0.0f) {
+        emit(above, mirror_direction(d, ns, ng), rays.pixel[i], weight * split.reflect, local.reflected);
+      }
+      if (split.refract > 0.0f) {
+        emit(below, split.refracted, rays.pixel[i], weight * split.refract, local.refracted);
+      }
+    }
+  }, 1);
+
+  std::vector<uint32_t> first(chunks + 1, 0);
+  SecondaryStats total;
+  for (uint32_t c = 0; c < chunks; ++c) {
+    first[c + 1] = first[c] + parts[c].rays.count();
+    const SecondaryStats& l = parts[c].stats;
+    total.reflected += l.reflected;
+    total.refracted += l.refracted;
+    total.total_internal_reflections += l.total_internal_reflections;
+    total.culled += l.culled;
+  }
   RayBatch next;
   next.width = rays.width;
-  const float absolute = absolute_offset(scene_bounds, settings.offset);
-  SecondaryStats local;
-  auto emit = [&](const glm::vec3& origin, const glm::vec3& direction, uint32_t pixel, const glm::vec3& w,
-                  uint32_t& counter) {
-    if (std::max(w.x, std::max(w.y, w.z)) < settings.min_weight) {
-      ++local.culled;
-      return;
-    }
-    next.push(Ray{origin, direction, 0.0f, kInfinity}, pixel, w);
-    ++counter;
-  };
-  for (uint32_t i = 0; i < rays.count(); ++i) {
-    const SurfaceHit& h = hits[i];
-    if (!h.valid()) continue;
-    const Material& m = scene.materials[h.material];
-    if (m.reflectance <= 0.0f && m.transmittance <= 0.0f) continue;
-    const glm::vec3 d = glm::normalize(glm::vec3(rays.direction[i]));
-    const glm::vec3 weight = rays.weight[i];
-    // Normals face the incoming ray (hits.h); the shading normal bends the directions, the
-    // geometric one decides which side of the surface each new ray starts on.
-    const glm::vec3& ng = h.geometric;
-    const glm::vec3& ns = h.normal;
-    // Wachter and Binder's offset starts from the point on the triangle (point_on_triangle()).
-    glm::vec3 p = h.position;
-    if (settings.offset.mode == OffsetMode::NormalUlp && size_t(h.prim) < scene.mesh.triangle_count()) {
-      const glm::vec3* v = &scene.mesh.positions[3 * size_t(h.prim)];
-      p = v[0] + h.u * (v[1] - v[0]) + h.v * (v[2] - v[0]);
-    }
-    const glm::vec3 above = offset_origin(p, ng, settings.offset.mode, absolute);
-    const glm::vec3 below = offset_origin(p, -ng, settings.offset.mode, absolute);
-
-    const WeightSplit<float> split = split_weight(m, d, ns, ng, h.entering);
-    if (split.total_internal_reflection) ++local.total_internal_reflections;
-    if (split.reflect > 0.0f) {
-      emit(above, mirror_direction(d, ns, ng), rays.pixel[i], weight * split.reflect, local.reflected);
-    }
-    if (split.refract > 0.0f) {
-      emit(below, split.refracted, rays.pixel[i], weight * split.refract, local.refracted);
-    }
-  }
-  if (stats) *stats = local;
+  next.origin.resize(first[chunks]);  // unwritten: every part is copied in below
+  next.direction.resize(first[chunks]);
+  next.pixel.resize(first[chunks]);
+  next.weight.resize(first[chunks]);
+  parallel_for(chunks, 0, [&](uint32_t c) {
+    const RayBatch& part = parts[c].rays;
+    std::copy(part.origin.begin(), part.origin.end(), next.origin.begin() + first[c]);
+    std::copy(part.direction.begin(), part.direction.end(), next.direction.begin() + first[c]);
+    std::copy(part.pixel.begin(), part.pixel.end(), next.pixel.begin() + first[c]);
+    std::copy(part.weight.begin(), part.weight.end(), next.weight.begin() + first[c]);
+  }, 1);
+  if (stats) *stats = total;
   return next;
 }
 
