@@ -154,7 +154,8 @@ TEST(RayTree, NextGenerationKeepsTheHitsOrderAcrossChunks) {
     want_stats.total_internal_reflections += s.total_internal_reflections;
     want_stats.culled += s.culled;
   }
-  ASSERT_GT(want.count(), 4096u);  // more rays than two chunks' hits make
+  ASSERT_GT(rays.count(), 2u * 2048u);  // three of next_generation's chunks
+  ASSERT_GT(want.count(), rays.count());  // most hits make a mirror and a refracted ray
   ASSERT_GT(want_stats.culled, 0u);
   ASSERT_EQ(next.count(), want.count());
   EXPECT_EQ(next.width, rays.width);

@@ -509,11 +509,25 @@ __attribute__((target("avx2"))) uint32_t decode_triangles_avx2(const Scene& scen
     }
   }
 
+  // Each field stored straight into its row: an array of the 15 registers was built on the stack
+  // and copied into the rows with `rep movsq`, 7 % of this function's samples (perf annotate).
   constexpr int kFields = 15;
   alignas(32) float lane[kFields][kLanes];
-  const __m256 out[kFields] = {t,        u,        v,        position.x,  position.y,  position.z, normal.x, normal.y,
-                               normal.z, geometric.x, geometric.y, geometric.z, entering, tu, tv};
-  for (int f = 0; f < kFields; ++f) _mm256_store_ps(lane[f], out[f]);
+  _mm256_store_ps(lane[0], t);
+  _mm256_store_ps(lane[1], u);
+  _mm256_store_ps(lane[2], v);
+  _mm256_store_ps(lane[3], position.x);
+  _mm256_store_ps(lane[4], position.y);
+  _mm256_store_ps(lane[5], position.z);
+  _mm256_store_ps(lane[6], normal.x);
+  _mm256_store_ps(lane[7], normal.y);
+  _mm256_store_ps(lane[8], normal.z);
+  _mm256_store_ps(lane[9], geometric.x);
+  _mm256_store_ps(lane[10], geometric.y);
+  _mm256_store_ps(lane[11], geometric.z);
+  _mm256_store_ps(lane[12], entering);
+  _mm256_store_ps(lane[13], tu);
+  _mm256_store_ps(lane[14], tv);
   for (int k = 0; k < count; ++k) {
     if (!((done >> k) & 1u)) continue;
     SurfaceHit& h = hits[ray[k]];

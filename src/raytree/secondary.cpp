@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
 #include <vector>
 
 #include "core/parallel.h"
@@ -32,8 +33,9 @@ RayBatch next_generation(const Scene& scene, const Aabb& scene_bounds, const Ray
   };
   std::vector<Part> parts(chunks);
   parallel_for(chunks, 0, [&](uint32_t c) {
-    RayBatch& out = parts[c].rays;
-    SecondaryStats& local = parts[c].stats;
+    // Made in locals and moved into the part at the end: neighbouring parts share cache lines.
+    RayBatch out;
+    SecondaryStats local;
     auto emit = [&](const glm::vec3& origin, const glm::vec3& direction, uint32_t pixel, const glm::vec3& w,
                     uint32_t& counter) {
       if (std::max(w.x, std::max(w.y, w.z)) < settings.min_weight) {
@@ -72,6 +74,8 @@ RayBatch next_generation(const Scene& scene, const Aabb& scene_bounds, const Ray
         emit(below, split.refracted, rays.pixel[i], weight * split.refract, local.refracted);
       }
     }
+    parts[c].rays = std::move(out);
+    parts[c].stats = local;
   }, 1);
 
   std::vector<uint32_t> first(chunks + 1, 0);
