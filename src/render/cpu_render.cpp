@@ -64,7 +64,7 @@ TracedGeneration CpuRayEngine::trace(const Scene& scene, const RayBatch& rays, G
   const FlatKdTree& texels = triangles();
   const std::span<const Light> lights(scene.lights);
   // Shadow rays counted per chunk of rays, one atomic add each: an add per hit, from both cores
-  // on one cache line, made this stage bimodal (the toaster's 5.8 or 7.2-7.6 ms run to run).
+  // on one cache line, made this stage vary from 5.9 to 7.7 ms on the toaster from run to run.
   constexpr uint32_t kChunk = 64;
   std::atomic<uint64_t> shadow_rays{0};
   start = std::chrono::steady_clock::now();
