@@ -578,7 +578,7 @@ SurfaceHits decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBat
 #endif
   const uint32_t triangles = uint32_t(scene.mesh.triangle_count());
   const uint32_t all_lights = lights.empty() ? 0u : (2u << (lights.size() - 1)) - 1u;
-  parallel_for((n + kChunk - 1) / kChunk, 0, [&](uint32_t c) {
+  parallel_for_chunks(n, kChunk, 0, [&](uint32_t, uint32_t begin, uint32_t end) {
     uint32_t chunk_hits = 0, chunk_capped = 0;
     uint64_t chunk_shadow = 0;
     // The last steps of a hit whose surface record is made: its mask and shadow-ray count.
@@ -622,8 +622,7 @@ SurfaceHits decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBat
       batch_size = 0;
     };
 #endif
-    const uint32_t end = std::min(n, (c + 1) * kChunk);
-    for (uint32_t i = c * kChunk; i < end; ++i) {
+    for (uint32_t i = begin; i < end; ++i) {
       const TraceTexel texel = unpack_trace(packing, texels[i]);
       if (texel.capped) {
         ++chunk_capped;
@@ -662,7 +661,7 @@ SurfaceHits decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBat
     hit_count.fetch_add(chunk_hits, std::memory_order_relaxed);
     capped_count.fetch_add(chunk_capped, std::memory_order_relaxed);
     shadow_count.fetch_add(chunk_shadow, std::memory_order_relaxed);
-  }, 1);
+  });
   DecodeStats local;
   local.hits = hit_count.load();
   local.capped = capped_count.load();

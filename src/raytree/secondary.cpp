@@ -26,13 +26,13 @@ RayBatch next_generation(const Scene& scene, const Aabb& scene_bounds, const Ray
   // long in every other column, which all make their rays here.)
   constexpr uint32_t kChunk = 2048;
   const uint32_t n = rays.count();
-  const uint32_t chunks = (n + kChunk - 1) / kChunk;
+  const uint32_t chunks = chunk_count(n, kChunk);
   struct Part {
     RayBatch rays;
     SecondaryStats stats;
   };
   std::vector<Part> parts(chunks);
-  parallel_for(chunks, 0, [&](uint32_t c) {
+  parallel_for_chunks(n, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
     // Made in locals and moved into the part at the end: neighbouring parts share cache lines.
     RayBatch out;
     SecondaryStats local;
@@ -45,7 +45,7 @@ RayBatch next_generation(const Scene& scene, const Aabb& scene_bounds, const Ray
       out.push(Ray{origin, direction, 0.0f, kInfinity}, pixel, w);
       ++counter;
     };
-    for (uint32_t i = c * kChunk, end = std::min(n, i + kChunk); i < end; ++i) {
+    for (uint32_t i = begin; i < end; ++i) {
       const SurfaceHit& h = hits[i];
       if (!h.valid()) continue;
       const Material& m = scene.materials[h.material];
@@ -76,7 +76,7 @@ RayBatch next_generation(const Scene& scene, const Aabb& scene_bounds, const Ray
     }
     parts[c].rays = std::move(out);
     parts[c].stats = local;
-  }, 1);
+  });
 
   std::vector<uint32_t> first(chunks + 1, 0);
   SecondaryStats total;

@@ -68,9 +68,9 @@ TracedGeneration CpuRayEngine::trace(const Scene& scene, const RayBatch& rays, G
   constexpr uint32_t kChunk = 64;
   std::atomic<uint64_t> shadow_rays{0};
   start = std::chrono::steady_clock::now();
-  parallel_for((n + kChunk - 1) / kChunk, threads_, [&](uint32_t c) {
+  parallel_for_chunks(n, kChunk, threads_, [&](uint32_t, uint32_t begin, uint32_t end) {
     uint64_t cast = 0;
-    for (uint32_t i = c * kChunk, end = std::min(n, i + kChunk); i < end; ++i) {
+    for (uint32_t i = begin; i < end; ++i) {
       if (!closest_hits[i].valid()) {
         traced.surfaces.set_miss(i);
         continue;
@@ -87,7 +87,7 @@ TracedGeneration CpuRayEngine::trace(const Scene& scene, const RayBatch& rays, G
                                 });
     }
     shadow_rays.fetch_add(cast, std::memory_order_relaxed);
-  }, 1);
+  });
   g.shadow_ms += elapsed_ms(start);
   traced.shadow_rays = shadow_rays.load();
   return traced;

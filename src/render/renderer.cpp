@@ -446,16 +446,16 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   prepare_atlas(scene);  // says whether the scene has textures
   auto stage = Clock::now();
   constexpr uint32_t kChunk = 1024;
-  const uint32_t chunks = (n + kChunk - 1) / kChunk;
+  const uint32_t chunks = chunk_count(n, kChunk);
   // first[c + 1]: the hits of chunk c, counted from the records' hit bytes (SurfaceHits), never
   // from the records, which exist for the hits only; chunks without a hit are skipped below.
   const uint8_t* hit = hits.hit_flags();
   std::vector<uint32_t> first(size_t(chunks) + 1, 0);
-  parallel_for(chunks, 0, [&](uint32_t c) {
+  parallel_for_chunks(n, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
     uint32_t count = 0;
-    for (uint32_t i = c * kChunk, end = std::min(n, i + kChunk); i < end; ++i) count += hit[i] != 0 ? 1u : 0u;
+    for (uint32_t i = begin; i < end; ++i) count += hit[i] != 0 ? 1u : 0u;
     first[c + 1] = count;
-  }, 1);
+  });
   for (uint32_t c = 0; c < chunks; ++c) first[c + 1] += first[c];
   const uint32_t hit_count = first[chunks];
   const bool any_miss = hit_count < n;
@@ -465,10 +465,10 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   const std::unique_ptr<glm::vec4[]> direction = std::make_unique_for_overwrite<glm::vec4[]>(shaded);
   const std::unique_ptr<HitTexcoordTexel[]> uv =
       d.has_atlas ? std::make_unique_for_overwrite<HitTexcoordTexel[]>(shaded) : nullptr;
-  parallel_for(chunks, 0, [&](uint32_t c) {
+  parallel_for_chunks(n, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
     if (first[c + 1] == first[c]) return;
     uint32_t k = first[c];
-    for (uint32_t i = c * kChunk, end = std::min(n, i + kChunk); i < end; ++i) {
+    for (uint32_t i = begin; i < end; ++i) {
       if (!hit[i]) continue;
       const SurfaceHit& h = hits[i];
       position[k] = HitPositionTexel{h.position, float(h.material)};
@@ -477,7 +477,7 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
       if (uv) uv[k] = HitTexcoordTexel{h.texcoord, glm::vec2(0.0f)};
       ++k;
     }
-  }, 1);
+  });
   if (any_miss) {
     position[hit_count] = HitPositionTexel::miss();
     normal[hit_count] = HitNormalTexel{glm::vec3(0.0f), 0.0f};
@@ -533,12 +533,10 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   };
   const glm::vec3 miss_colour = any_miss ? decoded(hit_count) : glm::vec3(0.0f);
   std::vector<glm::vec3> colors(n);
-  parallel_for(chunks, 0, [&](uint32_t c) {
+  parallel_for_chunks(n, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
     uint32_t k = first[c];
-    for (uint32_t i = c * kChunk, end = std::min(n, i + kChunk); i < end; ++i) {
-      colors[i] = hit[i] ? decoded(k++) : miss_colour;
-    }
-  }, 1);
+    for (uint32_t i = begin; i < end; ++i) colors[i] = hit[i] ? decoded(k++) : miss_colour;
+  });
   timings.accumulate_ms += elapsed_ms(stage);
   return colors;
 }

@@ -89,15 +89,15 @@ SurfaceHits decode_generation(const Scene& scene, const RenderSettings& settings
     constexpr uint32_t kChunk = 4096;
     const uint32_t n = uint32_t(hits.size());
     std::atomic<uint32_t> valid{0};
-    parallel_for((n + kChunk - 1) / kChunk, 0, [&](uint32_t c) {
+    parallel_for_chunks(n, kChunk, 0, [&](uint32_t, uint32_t begin, uint32_t end) {
       uint32_t chunk_valid = 0;
-      for (uint32_t i = c * kChunk, end = std::min(n, i + kChunk); i < end; ++i) {
+      for (uint32_t i = begin; i < end; ++i) {
         if (!hits.hit(i)) continue;
         ++chunk_valid;
         if (!settings.shadows) hits.record(i).mask = all_lights;
       }
       valid.fetch_add(chunk_valid, std::memory_order_relaxed);
-    }, 1);
+    });
     g.hits += valid.load();
   }
   if (hits.size() != rays.count()) throw Error(ErrorKind::Internal, "decode_generation: not one surface record per ray");
