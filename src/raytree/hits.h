@@ -129,7 +129,6 @@ class SurfaceHits {
     hit_.resize(n);
   }
   size_t size() const { return hit_.size(); }
-  bool empty() const { return hit_.empty(); }
 
   bool hit(uint32_t i) const { return hit_[i] != 0; }
   // Ray i's record; SurfaceHit{} for a miss.
