@@ -2,6 +2,7 @@
 // option or output is refused before the long run.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -26,6 +27,7 @@ TEST(Bench, OneSmallCellWithEveryColumn) {
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("Table 1"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("Embree 3."), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("CPU time per frame, ms (median)"), std::string::npos) << r.output;
   // One progress line per cell on stderr, with the cell, the count and each column's fps.
   for (const char* line : {"bench: [1/2] fish, + shadow: Vulkan ", "bench: [2/2] fish, + 2 bounces: Vulkan "}) {
     EXPECT_NE(r.output.find(line), std::string::npos) << line << "\n" << r.output;
@@ -73,6 +75,13 @@ TEST(Bench, OneSmallCellWithEveryColumn) {
       EXPECT_GT(s["trace"].get<double>(), 0.0);
       EXPECT_GT(s["trace_mrays"].get<double>(), 0.0);
       EXPECT_GT(s["shadow_rays"].get<double>(), 0.0);  // both levels cast shadow rays
+      // The process's CPU time in the frame: some, and no more than the cores could give in the
+      // frame's wall time (a median of values each below that bound is below it too; the slack
+      // covers what runs between the clocks, and the other threads' counts, which Linux brings up
+      // to date only at a scheduler tick, for frames of a millisecond or two).
+      const double cores = std::max(1.0, j["machine"]["cores"].get<double>());
+      EXPECT_GT(s["cpu"].get<double>(), 0.0);
+      EXPECT_LE(s["cpu"].get<double>(), 1.25 * s["frame"].get<double>() * cores + 5.0);
     }
     for (const char* column : {"mobirt", "mobirt_gles"}) {
       SCOPED_TRACE(column);
@@ -84,10 +93,14 @@ TEST(Bench, OneSmallCellWithEveryColumn) {
       EXPECT_EQ(gpu["pass0_bytes_read"].get<double>(),
                 4.0 * (gpu["pass0_rays"].get<double>() + gpu["pass0_shaded_rays"].get<double>()));
       EXPECT_GT(gpu["shaded_rays"].get<double>(), 0.0);
+      // The frame's CPU time holds the rendering thread's own (each frame's does, so the medians do).
+      EXPECT_GE(gpu["cpu"].get<double>(), gpu["render_cpu"].get<double>());
       EXPECT_LE(gpu["shaded_rays"].get<double>(), gpu["traced_rays"].get<double>());
       EXPECT_EQ(gpu["pass0_rays"].get<double>(), 64.0 * 40.0);
       EXPECT_GT(c["ratios"][column]["traversal_over_embree"].get<double>(), 0.0);
       EXPECT_GT(c["ratios"][column]["build_over_embree"].get<double>(), 0.0);
+      EXPECT_DOUBLE_EQ(c["ratios"][column]["cpu_over_embree"].get<double>(),
+                       gpu["cpu"].get<double>() / c["embree"]["stages_ms"]["cpu"].get<double>());
       if (ray_query) {
         EXPECT_GT(c["ratios"][column]["fps_over_ray_query"].get<double>(), 0.0);
         EXPECT_GT(c["ratios"][column]["traversal_over_ray_query"].get<double>(), 0.0);

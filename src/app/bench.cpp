@@ -27,6 +27,7 @@
 #include "baseline/embree_engine.h"
 #include "baseline/ray_query_engine.h"
 #include "baseline/ray_query_whitted.h"
+#include "core/cpu_time.h"
 #include "core/error.h"
 #include "render/cpu_render.h"
 #include "render/frame_pipeline.h"
@@ -155,10 +156,13 @@ nlohmann::json fps_json(const std::vector<double>& frame_ms) {
 // One frame of any column, GPU passes or CPU engine: each stage the engine does not have stays 0.
 // `step`: the frame came from a frame pipeline (render/frame_pipeline.h), whose step's wall clock
 // is the frame's time; pipelined, its animate and build stages ran on the worker during the
-// previous frame, so they are not parts of it.
-void add_frame(Samples& s, double animate_ms, const FrameTimings& t, const PipelineStep* step = nullptr) {
+// previous frame, so they are not parts of it. cpu_ms: the process's CPU time (all its threads:
+// the driver's, the build worker's, TBB's) in the frame, its posing included.
+void add_frame(Samples& s, double animate_ms, const FrameTimings& t, double cpu_ms,
+               const PipelineStep* step = nullptr) {
   const GenerationTimings& g = t.sum;
   s.add("animate", animate_ms);
+  s.add("cpu", cpu_ms);
   if (step) {
     s.add("render", step->render_ms);
     s.add("render_cpu", step->render_cpu_ms);
@@ -292,8 +296,10 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
     const bool timed = f >= o.warmup;
     const double t = double(f) / fps;
     auto start = std::chrono::steady_clock::now();
+    const double pose_cpu_start = process_cpu_ms();
     const Camera view = posed.at(t);
     const double animate_ms = elapsed_ms(start);
+    const double animate_cpu_ms = process_cpu_ms() - pose_cpu_start;  // part of every peer's frame
     if (!scene.shapes.empty() && (ray_query || compute || embree) && (!tessellated || animation.animated())) {
       tessellated = scene;
       tessellate_shapes(*tessellated);
@@ -303,32 +309,40 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
     for (size_t c = 0; c < columns.size(); ++c) {
       FrameTimings ft;
       double pose_ms = 0;
+      const double cpu_start = process_cpu_ms();
       const PipelineStep step = pipelines[c]->step(size_t(f), [&](PreparedFrame& prepared) {
         render_prepared(*renderers[c], prepared, &ft);
         pose_ms = prepared.pose_ms;
       });
+      const double cpu_ms = process_cpu_ms() - cpu_start;
       check_messages(columns[c].backend->take_debug_messages());
-      if (timed) add_frame(gpu[c], pose_ms, ft, &step);
+      if (timed) add_frame(gpu[c], pose_ms, ft, cpu_ms, &step);
     }
     // A GPU peer's frame: mobirt's loop with the peer tracing, its validation messages checked.
     auto peer_frame = [&](WhittedEngine& engine, std::vector<std::string> messages, Samples& samples) {
       FrameTimings ft;
+      const double cpu_start = process_cpu_ms();
       render_whitted(triangles_only, view, settings, engine, &ft);
+      const double cpu_ms = animate_cpu_ms + process_cpu_ms() - cpu_start;
       check_messages(std::move(messages));
       check_messages(peers.shading->take_debug_messages());
-      if (timed) add_frame(samples, animate_ms, ft);
+      if (timed) add_frame(samples, animate_ms, ft, cpu_ms);
     };
     if (ray_query) peer_frame(*ray_query, peers.rq->take_debug_messages(), rqs);
     if (compute) peer_frame(*compute, peers.compute->take_debug_messages(), cps);
     if (embree) {
       FrameTimings ct;
+      const double cpu_start = process_cpu_ms();
       render_whitted_cpu(triangles_only, view, settings, *embree, o.threads, &ct);
-      if (timed) add_frame(emb, animate_ms, ct);
+      const double cpu_ms = animate_cpu_ms + process_cpu_ms() - cpu_start;
+      if (timed) add_frame(emb, animate_ms, ct, cpu_ms);
     }
     if (kd) {
       FrameTimings ct;
+      const double cpu_start = process_cpu_ms();
       render_whitted_cpu(scene, view, settings, *kd, o.threads, &ct);
-      if (timed) add_frame(cpu, animate_ms, ct);
+      const double cpu_ms = animate_cpu_ms + process_cpu_ms() - cpu_start;
+      if (timed) add_frame(cpu, animate_ms, ct, cpu_ms);
       kd_stats = kd->tree().stats;
     }
   }
@@ -364,7 +378,8 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
     if (embree) {
       cell["ratios"][key] = {{"fps_over_embree", fps_over(emb)},
                              {"traversal_over_embree", traversal_over(emb)},
-                             {"build_over_embree", gpu[c].med("build") / std::max(emb.med("build"), 1e-9)}};
+                             {"build_over_embree", gpu[c].med("build") / std::max(emb.med("build"), 1e-9)},
+                             {"cpu_over_embree", gpu[c].med("cpu") / std::max(emb.med("cpu"), 1e-9)}};
     }
     if (ray_query) {
       cell["ratios"][key]["fps_over_ray_query"] = fps_over(rqs);
@@ -498,6 +513,33 @@ void print_tables(const nlohmann::json& result) {
     }
   }
   print_frame_loop(cells, gpus, result["settings"]["pipelined"].get<bool>());
+
+  // What each column costs the machine: on a machine whose cores every column keeps busy, the
+  // frame rate follows the CPU time a frame needs.
+  std::vector<std::string> engines = staged;
+  for (const char* key : {"embree", "cpu_kd"}) {
+    if (cells[0].contains(key)) engines.push_back(key);
+  }
+  const unsigned cores = std::max(1u, result["machine"]["cores"].get<unsigned>());
+  std::printf("\nCPU time per frame, ms (median): every thread of the process during the column's frame (the\n"
+              "driver's, the kd-tree worker's, the pools'), posing included; busy = CPU time / (frame x %u cores)\n",
+              cores);
+  std::printf("%-28s", "scene, level");
+  for (const std::string& e : engines) {
+    const std::string title = e == "embree" ? "Embree" : e == "cpu_kd" ? "CPU kd" : column_title(e);
+    std::printf("  %9s %5s", title.c_str(), "busy");
+  }
+  std::printf("\n");
+  for (const nlohmann::json& c : cells) {
+    std::printf("%-28s", label(c).c_str());
+    for (const std::string& e : engines) {
+      const nlohmann::json& s = c[e]["stages_ms"];
+      const double frame = s["frame"].get<double>();
+      std::printf("  %9.2f %4.0f%%", s["cpu"].get<double>(),
+                  frame > 0 ? 100.0 * s["cpu"].get<double>() / (frame * cores) : 0.0);
+    }
+    std::printf("\n");
+  }
   if (!baseline) return;
 
   std::printf("\nEmbree 3 and the CPU kd-tree on %u threads, per stage, ms (median): build, primary rays, closest\n"
@@ -520,13 +562,14 @@ void print_tables(const nlohmann::json& result) {
 
   std::printf("\nRatios mobirt / Embree, the same frames: fps; traversal alone (Mrays/s on the same rays: GPU\n"
               "traversal passes vs rtcIntersect1 + rtcOccluded1); build alone (kd-tree build ms / Embree BVH\n"
-              "build ms, >1 = slower); %s%sSAH cost of the kd-tree built\n",
+              "build ms, >1 = slower); cpu (CPU time per frame, all threads, >1 = more);\n"
+              "%s%sSAH cost of the kd-tree built\n",
               ray_query ? "mobirt / ray query (fps/rq, trc/rq): fps, traversal alone\n(Mrays/s on the same rays); "
                         : "",
               compute ? "mobirt / compute (fps/cp, trc/cp): the same; " : "");
   std::printf("%-28s", "scene, level");
   for (const std::string& g : gpus) {
-    std::printf(" | %-8s %7s %7s %7s", column_title(g), "fps", "trace", "build");
+    std::printf(" | %-8s %7s %7s %7s %7s", column_title(g), "fps", "trace", "build", "cpu");
     if (ray_query) std::printf(" %7s %7s", "fps/rq", "trc/rq");
     if (compute) std::printf(" %7s %7s", "fps/cp", "trc/cp");
   }
@@ -535,8 +578,9 @@ void print_tables(const nlohmann::json& result) {
     std::printf("%-28s", label(c).c_str());
     for (const std::string& g : gpus) {
       const nlohmann::json& r = c["ratios"][g];
-      std::printf(" | %-8s %6.2fx %6.2fx %6.1fx", "", r["fps_over_embree"].get<double>(),
-                  r["traversal_over_embree"].get<double>(), r["build_over_embree"].get<double>());
+      std::printf(" | %-8s %6.2fx %6.2fx %6.1fx %6.2fx", "", r["fps_over_embree"].get<double>(),
+                  r["traversal_over_embree"].get<double>(), r["build_over_embree"].get<double>(),
+                  r["cpu_over_embree"].get<double>());
       if (ray_query) {
         std::printf(" %6.2fx %6.2fx", r["fps_over_ray_query"].get<double>(),
                     r["traversal_over_ray_query"].get<double>());
