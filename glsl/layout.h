@@ -186,6 +186,13 @@
 #define MOBIRT_SPEC_ATLAS_PAGES 9  // shade: atlas pages, 0..MOBIRT_ATLAS_MAX_PAGES; code for pages beyond folds away
 #define MOBIRT_SPEC_ANALYTIC 10    // trace: 1 = the scene has analytic primitives (spheres, cones),
                                    // 0 = triangles only: no code for the others at all
+#define MOBIRT_SPEC_WIDE_INDICES 11  // trace, shade (Vulkan buffers): 1 = the pass binds a buffer of more
+                                     // than MOBIRT_NARROW_INDEX_TEXELS texels: data_index() converts up to 2^24
+// Element indices reach the shaders as exact floats: below 2^24 (a float's consecutive integers end
+// there), so no buffer holds more texels than that. Below 2^23 one add makes them ints
+// (prelude_vk.glsl's data_index()); a pass that binds a larger buffer is specialised to WIDE_INDICES.
+#define MOBIRT_NARROW_INDEX_TEXELS 8388608   // 2^23
+#define MOBIRT_MAX_INDEX_TEXELS 16777216     // 2^24
 
 // Ray/triangle test: Moller-Trumbore (1997), or the watertight test of Woop, Benthin and Wald
 // (JCGT 2013), which never lets a ray slip between two triangles that share an edge.

@@ -5,6 +5,8 @@
 //   xyz) along n (operand xyz); each texel channel is 1 where the result equals the CPU's
 //   (expected texture) bit for bit, else 0.
 //   2: pack_trace(input.x, input.y), the traversal pass's output texel (PACKING).
+//   3 (Vulkan: NUMERICS_DATA_INDEX): data_index(input.x), the int a buffer is indexed with, its four
+//   bytes in the output's (under WIDE_INDICES as the pass is specialised).
 #include "offset.glsl"
 #include "packing.glsl"
 
@@ -19,6 +21,13 @@ void main() {
     OUTPUT(pack_trace(x.x, x.y));
     return;
   }
+#ifdef NUMERICS_DATA_INDEX
+  if (function == 3.0) {
+    int i = data_index(x.x);
+    OUTPUT(vec4(float(i & 255), float((i >> 8) & 255), float((i >> 16) & 255), float((i >> 24) & 255)) / 255.0);
+    return;
+  }
+#endif
   vec4 r = vec4(f16_round(x.x), f16_round(x.y), f16_round(x.z), f16_round(x.w));
   if (function == 1.0) {
     vec4 n = RAY_TEXEL(u_operand);

@@ -45,6 +45,11 @@ precision highp sampler2D;
 #ifndef ANALYTIC
 #define ANALYTIC 0
 #endif
+// Vulkan's buffers only (prelude_vk.glsl's data_index); the data textures here index by 2D
+// coordinates, exact up to 2^24 either way.
+#ifndef WIDE_INDICES
+#define WIDE_INDICES 0
+#endif
 
 #define PRECISE
 #include "precision.glsl"

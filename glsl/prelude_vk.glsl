@@ -18,6 +18,7 @@ layout(constant_id = MOBIRT_SPEC_OFFSET) const int OFFSET_MODE = MOBIRT_OFFSET_S
 layout(constant_id = MOBIRT_SPEC_COLOUR) const int COLOUR = MOBIRT_COLOUR_8;
 layout(constant_id = MOBIRT_SPEC_ATLAS_PAGES) const int ATLAS_PAGES = 0;
 layout(constant_id = MOBIRT_SPEC_ANALYTIC) const int ANALYTIC = 0;
+layout(constant_id = MOBIRT_SPEC_WIDE_INDICES) const int WIDE_INDICES = 0;
 
 // No contraction into fused multiply-adds where an expression must round as the CPU's does
 // (precision.glsl) or the same way in every triangle that computes it (the watertight test).
@@ -55,11 +56,19 @@ ivec2 data_coord(float index) {
   return small_floats_to_ints(vec2(column, row));
 }
 // Data as one-dimensional arrays (texel buffers here, storage buffers in prelude_compute.glsl):
-// element i is texel i. Indices are exact floats below 2^23 (the backend refuses larger buffers),
-// so the same bit trick makes them ints.
+// element i is texel i. Indices are exact floats below 2^24 (the backend refuses larger buffers).
+// Below 2^23 the same bit trick makes them ints. A pass that binds a buffer of more than 2^23 texels
+// is specialised to WIDE_INDICES (the Vulkan backend refuses it otherwise): from 2^23 on, an exact
+// integer float's own bits are 0x4B000000 + (index - 2^23) (exponent 23, spacing 1), so index is
+// its bits - 0x4A800000. Selects, not a branch: llvmpipe runs both sides of an `if` anyway.
 int data_index(float index) {
-  precise float biased = index + 8388608.0;
-  return floatBitsToInt(biased) - 0x4B000000;
+  if (WIDE_INDICES == 0) {
+    precise float biased = index + 8388608.0;
+    return floatBitsToInt(biased) - 0x4B000000;
+  }
+  bool high = index >= 8388608.0;
+  precise float biased = high ? index : index + 8388608.0;
+  return floatBitsToInt(biased) - (high ? 0x4A800000 : 0x4B000000);
 }
 #ifdef MOBIRT_DATA_TEXEL_BUFFERS
 // Data textures as uniform texel buffers (trace_texel_buffers.frag, and the compute pass's
@@ -103,7 +112,7 @@ layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer Mo
 #ifndef MOBIRT_COMPUTE  // a compute shader reads its ray and writes its result itself
 #if defined(MOBIRT_DATA_TEXEL_BUFFERS) || defined(MOBIRT_DATA_STORAGE_BUFFERS) || defined(MOBIRT_DATA_DEVICE_ADDRESSES)
 // Per-ray data (rays, the shading pass's inputs) in buffers like the scene data, in the pass's
-// layout: this fragment's ray is element y * width + x (an exact float below 2^23), the width
+// layout: this fragment's ray is element y * width + x (an exact float below 2^24), the width
 // pushed by the backend with every pass. llvmpipe's 2D texelFetch is an indirect call with
 // mip-level work per fetch; a buffer's fetch is not.
 layout(push_constant) uniform PassConstants {

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "backend/backend.h"
+#include "layout.h"
 #include "core/half.h"
 #include "raytree/hits.h"
 #include "raytree/packing.h"
@@ -88,7 +89,8 @@ class NumericsOnGpu : public ::testing::TestWithParam<Api> {
 
   // Runs the numerics shader with `function` over one ray per input texel; returns the texels.
   std::vector<uint32_t> run(float function, const std::vector<glm::vec4>& input, const std::vector<glm::vec4>& operand,
-                            const std::vector<glm::vec4>& expected, Packing packing = Packing::Bits24_8) {
+                            const std::vector<glm::vec4>& expected, Packing packing = Packing::Bits24_8,
+                            bool wide_indices = false) {
     const uint32_t width = 256;
     const uint32_t count = uint32_t(input.size());
     const uint32_t rows = (count + width - 1) / width;
@@ -102,6 +104,7 @@ class NumericsOnGpu : public ::testing::TestWithParam<Api> {
     PassDesc desc;
     desc.shader = test_shader(TestShader::Numerics);
     desc.specialization = {{MOBIRT_SPEC_PACKING, int(packing)}};
+    if (wide_indices) desc.specialization.push_back({MOBIRT_SPEC_WIDE_INDICES, 1});
     desc.uniform_vec4s = 1;
     desc.texture_bindings = {1, 2, 3};
     const PassHandle pass = backend->create_pass(desc);
@@ -212,6 +215,40 @@ TEST_P(NumericsOnGpu, TraceTexelPackingAtThePrimitiveLimits) {
       EXPECT_EQ(t.prim_plus_one, uint32_t(input[i].x));
       EXPECT_EQ(t.mask, uint32_t(input[i].y));
     }
+  }
+}
+
+// The Vulkan buffers' index conversion (prelude_vk.glsl's data_index): every exact integer float
+// below 2^23 by one add, and up to 2^24 - 1 (the last a float holds exactly) under WIDE_INDICES,
+// which a pass binding a buffer of more than 2^23 texels gets; the narrow form on [0, 2^23) gives
+// the same ints. Around both powers of two, the first and last of every 2^16, and random ones.
+TEST_P(NumericsOnGpu, BufferIndicesConvertExactlyBelow2To24) {
+  if (GetParam() == Api::Gles) GTEST_SKIP() << "GLSL ES reads 2D textures by coordinates: no data_index()";
+  std::vector<uint32_t> indices;
+  for (uint32_t base : {0u, uint32_t(MOBIRT_NARROW_INDEX_TEXELS), uint32_t(MOBIRT_MAX_INDEX_TEXELS)}) {
+    for (int d = -300; d <= 300; ++d) {
+      if (int64_t(base) + d >= 0 && int64_t(base) + d < MOBIRT_MAX_INDEX_TEXELS) indices.push_back(uint32_t(int64_t(base) + d));
+    }
+  }
+  for (uint32_t i = 0; i < MOBIRT_MAX_INDEX_TEXELS; i += 1u << 16) {
+    indices.push_back(i);
+    indices.push_back(i + (1u << 16) - 1);
+  }
+  std::mt19937 rng(24);
+  std::uniform_int_distribution<uint32_t> any(0, MOBIRT_MAX_INDEX_TEXELS - 1);
+  for (int k = 0; k < 20000; ++k) indices.push_back(any(rng));
+  std::vector<glm::vec4> input;
+  for (uint32_t i : indices) input.emplace_back(float(i), 0.0f, 0.0f, 0.0f);
+  for (bool wide : {true, false}) {
+    SCOPED_TRACE(wide ? "WIDE_INDICES" : "narrow");
+    const std::vector<uint32_t> out = run(3.0f, input, input, input, Packing::Bits24_8, wide);
+    size_t bad = 0;
+    for (size_t k = 0; k < out.size(); ++k) {
+      if (!wide && indices[k] >= MOBIRT_NARROW_INDEX_TEXELS) continue;  // beyond the narrow form's range
+      if (out[k] == indices[k]) continue;  // all 32 bits: an index off by 2^24 is wrong too
+      if (++bad <= 10) ADD_FAILURE() << "data_index(" << indices[k] << ") = " << int32_t(out[k]);
+    }
+    EXPECT_EQ(bad, 0u) << "of " << out.size() << " indices";
   }
 }
 

@@ -12,6 +12,8 @@
 
 #include "accel/kdtree.h"
 #include "backend/backend.h"
+#include "core/camera.h"
+#include "layout.h"
 #include "core/error.h"
 #include "fuzz/scene_fuzz_one.h"
 #include "raytree/hits.h"
@@ -206,6 +208,72 @@ TEST(DataTextures, GrowToTheExactSizeWhereTheHeadroomPassesTheLimit) {
   } catch (const Error& e) {
     EXPECT_EQ(e.kind(), ErrorKind::BadInput);
   }
+  const std::vector<std::string> messages = vulkan->take_debug_messages();
+  EXPECT_TRUE(messages.empty()) << test::join(messages);
+}
+
+// A tree whose one reachable leaf lies past 2^23 texels of the leaf-entry and triangle arrays (the
+// size a scene of about 1M triangles at 3 references each fills): the root splits x at 0; its below
+// leaf holds `far` copies of a small triangle at x = -0.5, outside the scene box (x from 0.05), so
+// that no ray walks it; its above leaf, the arrays' last entries, the two triangles of a quad at
+// z = 0, x in [0.1, 0.9], y in [-0.4, 0.4] (primitives far and far + 1).
+FlatKdTree far_leaf_tree(uint32_t far) {
+  FlatKdTree tree;
+  tree.bounds = Aabb{glm::vec3(0.05f, -1.0f, -1.0f), glm::vec3(1.0f)};
+  tree.nodes = {node_texel::interior(0.0f, 2.0f, 0.0f), node_texel::leaf(0.0f, float(far)),
+                node_texel::leaf(float(far), 2.0f)};
+  const glm::vec4 tiny[3] = {glm::vec4(-0.5f, 0.0f, 0.0f, 0.0f), glm::vec4(-0.499f, 0.0f, 0.0f, 0.0f),
+                             glm::vec4(-0.5f, 0.001f, 0.0f, 0.0f)};
+  const glm::vec4 quad[2][3] = {
+      {glm::vec4(0.1f, -0.4f, 0.0f, 0.0f), glm::vec4(0.9f, -0.4f, 0.0f, 0.0f), glm::vec4(0.9f, 0.4f, 0.0f, 0.0f)},
+      {glm::vec4(0.1f, -0.4f, 0.0f, 0.0f), glm::vec4(0.9f, 0.4f, 0.0f, 0.0f), glm::vec4(0.1f, 0.4f, 0.0f, 0.0f)}};
+  tree.triangles.reserve(size_t(far + 2) * MOBIRT_TEXELS_PER_TRIANGLE);
+  tree.leaf_prims.resize(size_t(far + 2) * MOBIRT_TEXELS_PER_TRIANGLE);
+  for (uint32_t i = 0; i < far + 2; ++i) {
+    const glm::vec4* v = i < far ? tiny : quad[i - far];
+    for (int k = 0; k < MOBIRT_TEXELS_PER_TRIANGLE; ++k) tree.triangles.push_back(v[k]);
+    leaf_prim_texel::write(tree.leaf_prims.data() + size_t(i) * MOBIRT_TEXELS_PER_TRIANGLE, v, int32_t(i));
+  }
+  return tree;
+}
+
+// Buffers of more than 2^23 texels: the texel-buffer passes are specialised to WIDE_INDICES and
+// read the quad's entries and triangles (shadow rays) past 2^23 exactly, as the 2D images (indexed
+// by coordinates) do. Until this, such a scene was refused on the default --data. About 0.8 GB of
+// host memory at its peak (the arrays, the buffers, the images: lavapipe keeps all in host memory).
+TEST(DataTextures, BuffersBeyond2To23TexelsAreIndexedExactly) {
+  const std::unique_ptr<Backend> vulkan = create_vulkan_backend(test::validated_options());
+  const uint32_t far = MOBIRT_NARROW_INDEX_TEXELS / MOBIRT_TEXELS_PER_TRIANGLE + 100;
+  const FlatKdTree tree = far_leaf_tree(far);
+  ASSERT_GT(tree.leaf_prims.size(), size_t(MOBIRT_NARROW_INDEX_TEXELS));
+  ASSERT_GT(tree.triangles.size(), size_t(MOBIRT_NARROW_INDEX_TEXELS));
+  Scene scene = test::box_grid_scene();  // its lights and primitive count only; the tree is the geometry
+  Light light;
+  light.position = {0.5f, 0.0f, 5.0f};
+  light.intensity = 10.0f;
+  scene.lights = {light};
+  const RayBatch rays = primary_rays(Camera{{0.5f, 0.0f, 3.0f}, {0.5f, 0.0f, 0.0f}, {0.0f, 1.0f, 0.0f}, 0.3f, 0.0f}, 32, 24);
+  RenderSettings settings;
+  settings.data = DataReads::TexelBuffers;
+  Renderer buffers(*vulkan, settings);
+  settings.data = DataReads::Images;
+  Renderer images(*vulkan, settings);
+  const TraceResult got = buffers.trace(scene, tree, rays);
+  const TraceResult want = images.trace(scene, tree, rays);
+  ASSERT_EQ(got.texels.size(), rays.count());
+  ASSERT_EQ(want.texels.size(), rays.count());
+  uint32_t hits = 0;
+  for (uint32_t i = 0; i < rays.count(); ++i) {
+    EXPECT_EQ(got.texels[i], want.texels[i]) << "ray " << i;
+    const TraceTexel t = unpack_trace(got.packing, got.texels[i]);
+    EXPECT_FALSE(t.capped) << "ray " << i;
+    if (!t.hit()) continue;
+    ++hits;
+    EXPECT_TRUE(t.prim() == int32_t(far) || t.prim() == int32_t(far) + 1) << "ray " << i << " hit " << t.prim();
+    EXPECT_EQ(t.mask, 1u) << "ray " << i << ": the light faces the quad";
+  }
+  EXPECT_GT(hits, rays.count() / 4) << "the quad fills much of the view";
+  EXPECT_LT(hits, rays.count()) << "and not all of it";
   const std::vector<std::string> messages = vulkan->take_debug_messages();
   EXPECT_TRUE(messages.empty()) << test::join(messages);
 }

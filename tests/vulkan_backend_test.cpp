@@ -444,13 +444,49 @@ TEST_F(VulkanBackendTest, DeviceAddressTraversalBreaksOnlyTheNamedRule) {
   EXPECT_THROW(check_es2_constraints("device_address_store.frag", store, true), Error);
 }
 
+// A buffer of more than 2^23 texels is made (indices reach 2^24 exactly as floats), but only a
+// pass specialised to WIDE_INDICES may bind it: the narrow index conversion would read the wrong
+// texels past 2^23, so a pass without it is refused, naming the texture.
+TEST_F(VulkanBackendTest, BuffersBeyond2To23NeedWideIndices) {
+  const TextureHandle big = backend->create_texel_buffer(uint32_t(MOBIRT_NARROW_INDEX_TEXELS) + 4, TexelFormat::RGBA32F);
+  const TextureHandle small = backend->create_texel_buffer(16, TexelFormat::RGBA32F);
+  const std::vector<float> zeros(16 * 4, 0.0f);
+  backend->upload(small, zeros.data(), zeros.size() * sizeof(float));
+  PassDesc desc;
+  desc.shader = ShaderId::TraverseTexelBuffers;
+  desc.uniform_vec4s = MOBIRT_TP_LIGHTS;
+  desc.texture_bindings = {MOBIRT_BIND_NODES, MOBIRT_BIND_LEAF_PRIMS, MOBIRT_BIND_TRIANGLES,
+                           MOBIRT_BIND_RAY_ORIGIN, MOBIRT_BIND_RAY_DIRECTION};
+  desc.texture_kinds.assign(desc.texture_bindings.size(), TextureKind::TexelBuffer);
+  const PassHandle narrow = backend->create_pass(desc);
+  desc.specialization = {{MOBIRT_SPEC_WIDE_INDICES, 1}};
+  const PassHandle wide = backend->create_pass(desc);
+  const TextureHandle textures[] = {small, big, small, small, small};
+  const std::vector<float> uniforms(4 * MOBIRT_TP_LIGHTS, 0.0f);
+  std::vector<uint32_t> out(4);
+  try {
+    backend->run_pass(narrow, textures, uniforms, 4, 4, out);
+    ADD_FAILURE() << "a narrow pass bound a buffer of more than 2^23 texels";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::Internal);
+    EXPECT_NE(std::string(e.what()).find("texture 1 is a buffer of 8388612 texels"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("WIDE_INDICES"), std::string::npos) << e.what();
+  }
+  EXPECT_NO_THROW(backend->run_pass(wide, textures, uniforms, 4, 4, out));  // runs; what it finds is not the point
+  const TextureHandle all_small[] = {small, small, small, small, small};
+  EXPECT_NO_THROW(backend->run_pass(narrow, all_small, uniforms, 4, 4, out));
+  for (PassHandle p : {narrow, wide}) backend->destroy(p);
+  for (TextureHandle t : {big, small}) backend->destroy(t);
+}
+
 TEST_F(VulkanBackendTest, TexelBuffersRefuseBadUse) {
   EXPECT_TRUE(backend->device_info().texel_buffers);
   try {
-    backend->create_texel_buffer((uint32_t(1) << 23) + 1, TexelFormat::RGBA32F);
+    backend->create_texel_buffer(uint32_t(MOBIRT_MAX_INDEX_TEXELS) + 1, TexelFormat::RGBA32F);
     ADD_FAILURE() << "expected Error";
   } catch (const Error& e) {
     EXPECT_EQ(e.kind(), ErrorKind::BadInput);
+    EXPECT_NE(std::string(e.what()).find("at most 2^24"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("--data images"), std::string::npos) << e.what();
   }
   EXPECT_THROW(backend->create_texel_buffer(0, TexelFormat::R32F), Error);

@@ -47,7 +47,8 @@ const ShaderSource& shader(ComputeData data = ComputeData::StorageBuffers) {
 
 // The scene data's texel format (Nodes, LeafPrims, Triangles: RGBA32F all), for their texel-buffer views.
 constexpr VkFormat kDataFormat = VK_FORMAT_R32G32B32A32_SFLOAT;
-// data_index() turns an exact float into an int by its bits: below 2^23 (prelude_vk.glsl).
+// data_index() turns an exact float into an int by its bits: below 2^23 without WIDE_INDICES
+// (prelude_vk.glsl), which this peer's pass does not take.
 constexpr size_t kMaxDataElements = size_t(1) << 23;
 
 }  // namespace

@@ -71,7 +71,8 @@ class ComputeEngine {
 
   // The tree's nodes, leaf entries and triangles into the pass's buffers; returns the
   // milliseconds it took (CPU copies into mapped memory). Throws Error(BadInput) for an array over
-  // 2^23 elements (the shaders' index conversion, as on the fragment path).
+  // 2^23 elements (the shaders' narrow index conversion; its pass is not specialised to
+  // WIDE_INDICES, as mobirt's fragment passes are for larger buffers).
   double upload_tree(const FlatKdTree& tree);
 
   // One hit record per ray of `rays` into out[0, rays.count()), against the last uploaded tree,

@@ -132,8 +132,8 @@ struct Renderer::Data {
   bool tree_prebuilt = false;   // the next begin_frame uploads `tree`, built elsewhere in prebuilt_ms
   double prebuilt_ms = 0.0;
   uint32_t ray_width = 0;  // the ray textures' row width; a change recreates them
-  std::map<std::tuple<int, int, int>, PassHandle> trace_passes;  // (lights, packing, analytic)
-  std::map<std::tuple<int, int, int, int>, PassHandle> shade_passes;  // (lights, textures, pages, colour)
+  std::map<std::tuple<int, int, int, bool>, PassHandle> trace_passes;  // (lights, packing, analytic, wide)
+  std::map<std::tuple<int, int, int, int, bool>, PassHandle> shade_passes;  // (lights, textures, pages, colour, wide)
 };
 
 // The frame loop's view of the passes: the tree built or kept once per frame, one traversal and one
@@ -237,7 +237,7 @@ TextureHandle Renderer::ensure_texture(TextureHandle& handle, uint32_t& capacity
                                        uint32_t rows, TexelFormat format, TextureKind kind) {
   if (handle && capacity_rows >= rows) return handle;
   // Grow with headroom so that an animation whose tree changes size does not reallocate often;
-  // where the headroom alone passes the backend's limit (2^23 texels a texel buffer, the largest
+  // where the headroom alone passes the backend's limit (2^24 texels a buffer, the largest
   // 2D texture), the exact size, so that a frame that fits is never refused for its headroom.
   uint32_t grown = std::max(rows, capacity_rows + capacity_rows / 2);
   if (handle) backend_.destroy(handle);
@@ -264,8 +264,16 @@ TextureHandle Renderer::ensure_texture(TextureHandle& handle, uint32_t& capacity
   return handle;
 }
 
-PassHandle Renderer::trace_pass(int lights, Packing packing, bool analytic) {
-  auto key = std::make_tuple(lights, int(packing), int(analytic));
+bool Renderer::wide_indices(std::initializer_list<std::pair<uint32_t, uint32_t>> rows_and_widths) const {
+  // 2D images are indexed by coordinates (data_coord), exact up to 2^24 without the trick.
+  if (data_kind_ == TextureKind::Image2D) return false;
+  return std::any_of(rows_and_widths.begin(), rows_and_widths.end(), [](const std::pair<uint32_t, uint32_t>& t) {
+    return uint64_t(t.first) * t.second > MOBIRT_NARROW_INDEX_TEXELS;
+  });
+}
+
+PassHandle Renderer::trace_pass(int lights, Packing packing, bool analytic, bool wide) {
+  auto key = std::make_tuple(lights, int(packing), int(analytic), wide);
   auto it = data_->trace_passes.find(key);
   if (it != data_->trace_passes.end()) return it->second;
   PassDesc desc;
@@ -279,6 +287,7 @@ PassHandle Renderer::trace_pass(int lights, Packing packing, bool analytic) {
                          {MOBIRT_SPEC_PRECISION, int(settings_.shadow_rays.ray_test.precision)},
                          {MOBIRT_SPEC_OFFSET, int(settings_.shadow_rays.offset.mode)},
                          {MOBIRT_SPEC_ANALYTIC, int(analytic)}};
+  if (wide) desc.specialization.push_back({MOBIRT_SPEC_WIDE_INDICES, 1});
   desc.uniform_vec4s = MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * uint32_t(lights);
   desc.texture_bindings = {MOBIRT_BIND_NODES, MOBIRT_BIND_LEAF_PRIMS, MOBIRT_BIND_TRIANGLES,
                            MOBIRT_BIND_RAY_ORIGIN, MOBIRT_BIND_RAY_DIRECTION};
@@ -288,8 +297,8 @@ PassHandle Renderer::trace_pass(int lights, Packing packing, bool analytic) {
   return pass;
 }
 
-PassHandle Renderer::shade_pass(int lights, int textures, int pages, int colour) {
-  const auto key = std::make_tuple(lights, textures, pages, colour);
+PassHandle Renderer::shade_pass(int lights, int textures, int pages, int colour, bool wide) {
+  const auto key = std::make_tuple(lights, textures, pages, colour, wide);
   auto it = data_->shade_passes.find(key);
   if (it != data_->shade_passes.end()) return it->second;
   PassDesc desc;
@@ -299,6 +308,7 @@ PassHandle Renderer::shade_pass(int lights, int textures, int pages, int colour)
                          {MOBIRT_SPEC_TEXTURE_COUNT, textures},
                          {MOBIRT_SPEC_ATLAS_PAGES, pages},
                          {MOBIRT_SPEC_COLOUR, colour}};
+  if (wide) desc.specialization.push_back({MOBIRT_SPEC_WIDE_INDICES, 1});
   desc.uniform_vec4s = MOBIRT_SP_TEXTURES(uint32_t(lights)) + MOBIRT_SP_VEC4S_PER_TEXTURE * uint32_t(textures);
   // The pages get the units that the data textures leave (layout.h counts both).
   constexpr uint32_t data_slots[] = {MOBIRT_BIND_HIT_POSITION, MOBIRT_BIND_HIT_NORMAL, MOBIRT_BIND_MATERIALS,
@@ -394,9 +404,12 @@ TraceResult Renderer::trace_uploaded(const Scene& scene, const FlatKdTree& tree,
   result.packing = choose_packing(scene.primitive_count(), lights, scene.source);
   upload_rays(rays);
   // A general pass carries the sphere and cone tests; a specialised one only where the scene has them.
-  const PassHandle pass = trace_pass(lights, result.packing, !settings_.specialize || !scene.shapes.empty());
-  const std::vector<float> uniforms = trace_uniforms(tree, shadow_lights(scene), settings_.shadow_rays, lights);
   const Data& d = *data_;
+  const bool wide = wide_indices({{d.nodes.rows, kDataWidth}, {d.leaf_prims.rows, kDataWidth},
+                                  {d.triangles.rows, kDataWidth}, {d.ray_origin.rows, rays.width},
+                                  {d.ray_direction.rows, rays.width}});
+  const PassHandle pass = trace_pass(lights, result.packing, !settings_.specialize || !scene.shapes.empty(), wide);
+  const std::vector<float> uniforms = trace_uniforms(tree, shadow_lights(scene), settings_.shadow_rays, lights);
   const TextureHandle textures[] = {d.nodes.handle, d.leaf_prims.handle, d.triangles.handle,
                                     d.ray_origin.handle, d.ray_direction.handle};
   result.texels.resize(rays.count());
@@ -513,13 +526,16 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   const auto page = [&](size_t i) { return d.atlas_pages[std::min(i, d.atlas_pages.size() - 1)]; };
   const TextureHandle textures[] = {d.hit_position.handle, d.hit_normal.handle, d.materials.handle,
                                     d.shade_direction.handle, texcoords, page(0), page(1), page(2)};
+  const bool wide = wide_indices({{d.hit_position.rows, rays.width}, {d.hit_normal.rows, rays.width},
+                                  {d.materials.rows, kDataWidth}, {d.shade_direction.rows, rays.width},
+                                  {uv ? d.hit_texcoord.rows : 0u, rays.width}});
   // 16-bit colour: the same shading twice, the high bytes, then the low bytes of each channel.
   const bool deep = settings_.colour == ColourDepth::Bits16;
   std::vector<uint32_t> texels[2];
   for (int half = 0; half < (deep ? 2 : 1); ++half) {
     const int colour = !deep ? MOBIRT_COLOUR_8 : half == 0 ? MOBIRT_COLOUR_16_HIGH : MOBIRT_COLOUR_16_LOW;
     texels[half].resize(shaded);
-    const PassTiming pass = backend_.run_pass(shade_pass(lights, texture_count, pages, colour), textures, uniforms,
+    const PassTiming pass = backend_.run_pass(shade_pass(lights, texture_count, pages, colour, wide), textures, uniforms,
                                               rays.width, shaded, texels[half]);
     timings.upload_ms += pass.upload_ms;
     timings.shade_ms += pass.gpu_ms;

@@ -5,9 +5,11 @@
 #pragma once
 
 #include <cstdint>
+#include <initializer_list>
 #include <memory>
 #include <span>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "accel/kdtree.h"
@@ -112,8 +114,12 @@ class Renderer {
   class Engine;  // the passes as the frame loop drives them
   TextureHandle ensure_texture(TextureHandle& handle, uint32_t& capacity_rows, uint32_t width,
                                uint32_t rows, TexelFormat format, TextureKind kind = TextureKind::Image2D);
-  PassHandle trace_pass(int lights, Packing packing, bool analytic);
-  PassHandle shade_pass(int lights, int textures, int pages, int colour);
+  // Whether a pass that binds buffers of these rows x widths (the capacities: a buffer's texels)
+  // must be specialised to WIDE_INDICES: one of more than 2^23 texels (glsl/layout.h).
+  bool wide_indices(std::initializer_list<std::pair<uint32_t, uint32_t>> rows_and_widths) const;
+  // wide: the pass binds such a buffer.
+  PassHandle trace_pass(int lights, Packing packing, bool analytic, bool wide);
+  PassHandle shade_pass(int lights, int textures, int pages, int colour, bool wide);
   void prepare_atlas(const Scene& scene);
   void upload_tree(const FlatKdTree& tree);
   // The textures laid out in rows of the rays' width (rays and shading inputs), made again when

@@ -315,19 +315,19 @@ TextureHandle Impl::create_buffer(uint32_t texels, TexelFormat format, TextureKi
   const bool storage = kind == TextureKind::StorageBuffer;
   const char* what = storage ? "storage buffer" : "texel buffer";
   if (texels == 0) throw Error(ErrorKind::Internal, std::string("create_buffer: empty ") + what);
-  // The shaders turn indices into ints with a bit trick that holds below 2^23 (prelude_vk.glsl's
-  // data_index), so that is a limit too.
+  // The shaders index buffers by exact floats, below 2^24 (glsl/layout.h), so that is a limit too.
+  // Passes that bind more than 2^23 texels are specialised to WIDE_INDICES (run_pass checks it).
   const VkPhysicalDeviceLimits& l = device_.properties().limits;
   const uint32_t device_limit =
       storage ? uint32_t(std::min<uint64_t>(l.maxStorageBufferRange / texel_bytes(format), UINT32_MAX))
               : l.maxTexelBufferElements;
-  const uint32_t limit = std::min(device_limit, uint32_t(1) << 23);
+  const uint32_t limit = std::min(device_limit, uint32_t(MOBIRT_MAX_INDEX_TEXELS));
   if (texels > limit) {
     throw Error(ErrorKind::BadInput, std::string("a ") + what + " of " + std::to_string(texels) + " " +
                                          vk::format_name(format) + " texels exceeds the limit of " +
                                          std::to_string(limit) +
                                          (storage ? " (maxStorageBufferRange" : " (maxTexelBufferElements") +
-                                         ", at most 2^23): render with --data images");
+                                         ", at most 2^24): render with --data images");
   }
   vk::Texture texture;
   texture.width = texels;
@@ -518,6 +518,9 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
   const int32_t ray_width = int32_t(width);
   std::memcpy(constants, &ray_width, sizeof(ray_width));
   if (!bound.empty()) {
+    const bool wide_indices =
+        std::any_of(pass.desc.specialization.begin(), pass.desc.specialization.end(),
+                    [](const Specialization& s) { return s.id == MOBIRT_SPEC_WIDE_INDICES && s.value != 0; });
     std::vector<VkDescriptorImageInfo> image_infos(bound.size());
     std::vector<VkBufferView> buffer_views(bound.size());
     std::vector<VkDescriptorBufferInfo> buffer_infos(bound.size());
@@ -531,6 +534,12 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
         throw Error(ErrorKind::Internal, "pass " + name + ": texture " + std::to_string(i) + " is a " +
                                              texture_kind_name(bound[i]->kind) + " where the pass reads a " +
                                              texture_kind_name(kind));
+      }
+      if (resource != TextureKind::Image2D && bound[i]->width > MOBIRT_NARROW_INDEX_TEXELS && !wide_indices) {
+        throw Error(ErrorKind::Internal, "pass " + name + ": texture " + std::to_string(i) + " is a buffer of " +
+                                             std::to_string(bound[i]->width) +
+                                             " texels, more than 2^23, but the pass is not specialised to "
+                                             "WIDE_INDICES (its indices would be wrong)");
       }
       if (kind == TextureKind::DeviceAddress) {
         const VkDeviceAddress address = bound[i]->buffer.address;
