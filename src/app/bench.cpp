@@ -49,10 +49,12 @@ the driver's own ray queries (lavapipe's BVH built every frame, rayQueryEXT in a
 same ray tree, hit decoding and shading pass as mobirt's; skipped with the reason where the driver
 lacks VK_KHR_ray_query), and by mobirt's own kd-tree traversal as a Vulkan compute shader over
 storage buffers with a wide hit record (the paper's future work; the same kd-tree, rays, ray tree
-and shading pass). Prints the table, the stages, and the ratios mobirt / Embree, mobirt / ray query
-and mobirt / compute per cell, for the traversal alone (Mrays/s over the same rays) and for the
-build alone (kd-tree vs Embree BVH). mobirt's frames are pipelined (frame N+1 posed and its kd-tree
-built on a worker while frame N renders; the frame time is the loop's period) unless --serial.
+and shading pass). Prints the table, the stages, every column's CPU time per frame (all threads,
+and the share of the cores it kept busy), and the ratios mobirt / Embree, mobirt / ray query and
+mobirt / compute per cell, for the traversal alone (Mrays/s over the same rays), for the build
+alone (kd-tree vs Embree BVH) and for the CPU time per frame. mobirt's frames are pipelined
+(frame N+1 posed and its kd-tree built on a worker while frame N renders; the frame time is the
+loop's period) unless --serial.
 
 Without SCENE: the paper's scenes (scenes/toaster.gltf 400x240, marbles 240x400, fish 400x240)
 and, when ../shared/scenes has them, the real Utah toasters and the wood doll.
