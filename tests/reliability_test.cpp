@@ -213,26 +213,24 @@ TEST(DataTextures, GrowToTheExactSizeWhereTheHeadroomPassesTheLimit) {
 }
 
 // A tree whose one reachable leaf lies past 2^23 texels of the leaf-entry and triangle arrays (the
-// size a scene of about 1M triangles at 3 references each fills): the root splits x at 0; its below
-// leaf holds `far` copies of a small triangle at x = -0.5, outside the scene box (x from 0.05), so
-// that no ray walks it; its above leaf, the arrays' last entries, the two triangles of a quad at
-// z = 0, x in [0.1, 0.9], y in [-0.4, 0.4] (primitives far and far + 1).
+// size a scene of about 1M triangles at 3 references each fills): one_leaf_tree(far)'s entries and
+// triangles, then the two triangles of a quad at z = 0, x in [0.1, 0.9], y in [-0.4, 0.4]
+// (primitives far and far + 1). The root splits x at 0; its below leaf holds the `far` copies of
+// the small triangle at the origin, outside the scene box (x from 0.05), so that no ray walks it;
+// its above leaf, the arrays' last entries, the quad.
 FlatKdTree far_leaf_tree(uint32_t far) {
-  FlatKdTree tree;
+  FlatKdTree tree = one_leaf_tree(far);
   tree.bounds = Aabb{glm::vec3(0.05f, -1.0f, -1.0f), glm::vec3(1.0f)};
   tree.nodes = {node_texel::interior(0.0f, 2.0f, 0.0f), node_texel::leaf(0.0f, float(far)),
                 node_texel::leaf(float(far), 2.0f)};
-  const glm::vec4 tiny[3] = {glm::vec4(-0.5f, 0.0f, 0.0f, 0.0f), glm::vec4(-0.499f, 0.0f, 0.0f, 0.0f),
-                             glm::vec4(-0.5f, 0.001f, 0.0f, 0.0f)};
   const glm::vec4 quad[2][3] = {
       {glm::vec4(0.1f, -0.4f, 0.0f, 0.0f), glm::vec4(0.9f, -0.4f, 0.0f, 0.0f), glm::vec4(0.9f, 0.4f, 0.0f, 0.0f)},
       {glm::vec4(0.1f, -0.4f, 0.0f, 0.0f), glm::vec4(0.9f, 0.4f, 0.0f, 0.0f), glm::vec4(0.1f, 0.4f, 0.0f, 0.0f)}};
-  tree.triangles.reserve(size_t(far + 2) * MOBIRT_TEXELS_PER_TRIANGLE);
-  tree.leaf_prims.resize(size_t(far + 2) * MOBIRT_TEXELS_PER_TRIANGLE);
-  for (uint32_t i = 0; i < far + 2; ++i) {
-    const glm::vec4* v = i < far ? tiny : quad[i - far];
-    for (int k = 0; k < MOBIRT_TEXELS_PER_TRIANGLE; ++k) tree.triangles.push_back(v[k]);
-    leaf_prim_texel::write(tree.leaf_prims.data() + size_t(i) * MOBIRT_TEXELS_PER_TRIANGLE, v, int32_t(i));
+  for (uint32_t q = 0; q < 2; ++q) {
+    for (const glm::vec4& t : quad[q]) tree.triangles.push_back(t);
+    tree.leaf_prims.resize(tree.leaf_prims.size() + MOBIRT_TEXELS_PER_TRIANGLE);
+    leaf_prim_texel::write(tree.leaf_prims.data() + tree.leaf_prims.size() - MOBIRT_TEXELS_PER_TRIANGLE, quad[q],
+                           int32_t(far + q));
   }
   return tree;
 }
