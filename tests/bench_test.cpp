@@ -107,6 +107,34 @@ TEST(Bench, OneSmallCellWithEveryColumn) {
       }
       EXPECT_GT(c["ratios"][column]["fps_over_compute"].get<double>(), 0.0);
       EXPECT_GT(c["ratios"][column]["traversal_over_compute"].get<double>(), 0.0);
+      // The serial twin: the same frames again, serially (the same ray tree: shadow rays and the
+      // bounces' rays depend on the pose and the tree); its traversal passes' Mrays/s over each
+      // peer's, its build over Embree's and the pipelined fps over its fps are the quotients of
+      // the medians.
+      ASSERT_TRUE(c[column].contains("serial"));
+      const nlohmann::json& twin = c[column]["serial"];
+      const nlohmann::json& ratios = c["ratios"][column];
+      ASSERT_TRUE(ratios.contains("serial_traversal_over_embree")) << ratios;
+      ASSERT_TRUE(ratios.contains("serial_traversal_over_compute")) << ratios;
+      for (const char* count : {"traced_rays", "shadow_rays", "shaded_rays", "bytes_read"}) {
+        EXPECT_EQ(twin["stages_ms"][count], gpu[count]) << count;
+      }
+      EXPECT_FALSE(twin["pipelined"].get<bool>());
+      EXPECT_GT(twin["stages_ms"]["trace_mrays"].get<double>(), 0.0);
+      EXPECT_DOUBLE_EQ(ratios["serial_build_over_embree"].get<double>(),
+                       twin["stages_ms"]["build"].get<double>() / c["embree"]["stages_ms"]["build"].get<double>());
+      EXPECT_DOUBLE_EQ(ratios["serial_traversal_over_embree"].get<double>(),
+                       twin["stages_ms"]["trace_mrays"].get<double>() / c["embree"]["stages_ms"]["trace_mrays"].get<double>());
+      EXPECT_DOUBLE_EQ(ratios["serial_traversal_over_compute"].get<double>(),
+                       twin["stages_ms"]["trace_mrays"].get<double>() / c["compute"]["stages_ms"]["trace_mrays"].get<double>());
+      if (ray_query) {
+        ASSERT_TRUE(ratios.contains("serial_traversal_over_ray_query")) << ratios;
+        EXPECT_DOUBLE_EQ(ratios["serial_traversal_over_ray_query"].get<double>(),
+                         twin["stages_ms"]["trace_mrays"].get<double>() /
+                             c["ray_query"]["stages_ms"]["trace_mrays"].get<double>());
+      }
+      EXPECT_DOUBLE_EQ(twin["pipelined_fps_over_serial"].get<double>(),
+                       c[column]["fps"]["median"].get<double>() / twin["fps"]["median"].get<double>());
     }
     // The compute peer traces mobirt's rays with mobirt's tree: a wide record per ray from its
     // traversal pass, 4 bytes per ray from the shading pass.
@@ -165,14 +193,17 @@ TEST(Bench, NoBaselineSkipsEveryPeer) {
 }
 
 // mobirt's frames are pipelined unless --serial, and the table and the JSON say which; pipelined,
-// the next frame was prepared on the worker during each frame but the last.
+// the next frame was prepared on the worker during each frame but the last, and each frame was
+// rendered a second time serially unless --no-serial-twin.
 TEST(Bench, SaysWhetherItsFramesArePipelined) {
-  for (const bool serial : {false, true}) {
-    SCOPED_TRACE(serial ? "--serial" : "pipelined");
+  for (const std::string mode : {"", " --serial", " --no-serial-twin"}) {
+    SCOPED_TRACE(mode.empty() ? "pipelined" : mode);
+    const bool serial = mode == " --serial";
+    const bool twin_expected = mode.empty();
     const fs::path json = test::temp_dir() / "bench.json";
     const test::CommandResult r = test::run_mobirt(
         "bench " MOBIRT_SOURCE_DIR "/scenes/fish.gltf --size 32x20 --frames 3 --warmup 0 --levels cast "
-        "--backend vulkan --no-baseline --build-threads 1 --json '" + json.string() + "'" + (serial ? " --serial" : ""));
+        "--backend vulkan --no-baseline --build-threads 1 --json '" + json.string() + "'" + mode);
     ASSERT_EQ(r.exit_code, 0) << r.output;
     EXPECT_NE(r.output.find(serial ? "mobirt's frames serial (--serial)" : "mobirt's frames pipelined"), std::string::npos)
         << r.output;
@@ -181,10 +212,24 @@ TEST(Bench, SaysWhetherItsFramesArePipelined) {
     std::ifstream in(json);
     const nlohmann::json j = nlohmann::json::parse(in);
     EXPECT_EQ(j["settings"]["pipelined"].get<bool>(), !serial);
+    EXPECT_EQ(j["settings"]["serial_twin"].get<bool>(), twin_expected);
     EXPECT_EQ(j["settings"]["build_threads"].get<int>(), 1);
     const nlohmann::json& mobirt = j["cells"][0]["mobirt"];
     EXPECT_EQ(mobirt["pipelined"].get<bool>(), !serial);
     const nlohmann::json& s = mobirt["stages_ms"];
+    // The serial twin, and the output's table of it; serial, the column is that loop already.
+    EXPECT_EQ(r.output.find("mobirt's frames again, serial") != std::string::npos, twin_expected) << r.output;
+    ASSERT_EQ(mobirt.contains("serial"), twin_expected);
+    if (twin_expected) {
+      // The same frames (the hits, and so the shaded rays and the bytes read back, depend on the
+      // pose; OneSmallCellWithEveryColumn compares shadow rays and bounces), a serial loop's stages.
+      const nlohmann::json& twin = mobirt["serial"]["stages_ms"];
+      for (const char* count : {"traced_rays", "shaded_rays", "bytes_read"}) EXPECT_EQ(twin[count], s[count]) << count;
+      EXPECT_EQ(twin["pass0_rays"].get<double>(), 32.0 * 20.0);
+      EXPECT_EQ(twin["ahead"].get<double>(), 0.0);
+      EXPECT_GT(twin["build"].get<double>(), 0.0);
+      EXPECT_GE(twin["frame"].get<double>(), twin["build"].get<double>());  // pose, build and passes
+    }
     EXPECT_GT(s["build"].get<double>(), 0.0);
     EXPECT_GE(s["render"].get<double>(), s["render_cpu"].get<double>() * 0.999);  // one thread's CPU time
     if (serial) {

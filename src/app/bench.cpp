@@ -54,7 +54,9 @@ and the share of the cores it kept busy), and the ratios mobirt / Embree, mobirt
 mobirt / compute per cell, for the traversal alone (Mrays/s over the same rays), for the build
 alone (kd-tree vs Embree BVH) and for the CPU time per frame. mobirt's frames are pipelined
 (frame N+1 posed and its kd-tree built on a worker while frame N renders; the frame time is the
-loop's period) unless --serial.
+loop's period) unless --serial; pipelined, each GPU column also renders every frame a second time
+serially, so that its traversal passes are timed with the cores to themselves, as the peers' are,
+and a table gives those passes and their ratios to the peers' (unless --no-serial-twin).
 
 Without SCENE: the paper's scenes (scenes/toaster.gltf 400x240, marbles 240x400, fish 400x240)
 and, when ../shared/scenes has them, the real Utah toasters and the wood doll.
@@ -213,6 +215,11 @@ struct BenchOptions {
   // mobirt's columns through the frame pipeline: frame N+1 posed and its kd-tree built on a worker
   // (in an arena of build_threads) while frame N renders; --serial: one after the other.
   bool pipelined = true;
+  // Pipelined, every GPU column also renders each frame a second time, serially (pose, build, then
+  // the passes, with the cores to themselves as the peers have them): its traversal passes are not
+  // slowed by the next frame's build beside them, so their Mrays/s compare with the peers' on equal
+  // terms (--no-serial-twin: not).
+  bool serial_twin = true;
   unsigned build_threads = 0;  // 0: --threads
   VulkanOptions backend_options;  // the pipeline cache is Vulkan's
   RenderSettings settings;  // kd, stack, max_steps
@@ -278,17 +285,28 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
   // Each GPU column's frames go through a frame pipeline of its own (serial with --serial), posing
   // into two scenes of its own, one per slot; the peers render the shared posed scene.
   std::vector<std::unique_ptr<PosedScene>> slots;
-  std::vector<std::unique_ptr<FramePipeline>> pipelines;
-  for (size_t c = 0; c < columns.size(); ++c) {
+  const auto make_pipeline = [&](bool pipelined) {
     PosedScene* mine[2];
     for (PosedScene*& p : mine) p = slots.emplace_back(std::make_unique<PosedScene>(animation, bs.edits, bs.width, bs.height)).get();
-    pipelines.push_back(std::make_unique<FramePipeline>(
+    return std::make_unique<FramePipeline>(
         size_t(o.warmup + o.frames),
         [mine, fps](int slot, size_t index) {
           const Camera view = mine[slot]->at(double(index) / fps);
           return std::make_pair(static_cast<const Scene*>(&mine[slot]->scene), view);
         },
-        settings.kd, settings.always_rebuild, o.pipelined));
+        settings.kd, settings.always_rebuild, pipelined);
+  };
+  std::vector<std::unique_ptr<FramePipeline>> pipelines;
+  for (size_t c = 0; c < columns.size(); ++c) pipelines.push_back(make_pipeline(o.pipelined));
+  // The serial twins (BenchOptions::serial_twin): a renderer and a serial pipeline of their own per
+  // GPU column, on the column's backend, rendering the same frames.
+  const bool twins = o.pipelined && o.serial_twin;
+  std::vector<std::unique_ptr<Renderer>> twin_renderers;
+  std::vector<std::unique_ptr<FramePipeline>> twin_pipelines;
+  std::vector<Samples> twin(columns.size());
+  for (size_t c = 0; twins && c < columns.size(); ++c) {
+    twin_renderers.push_back(std::make_unique<Renderer>(*columns[c].backend, settings));
+    twin_pipelines.push_back(make_pipeline(false));
   }
   KdBuildStats kd_stats;
   // Embree and the driver's ray queries take triangles only: they get the analytic shapes
@@ -308,17 +326,23 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
     }
     const Scene& triangles_only = tessellated ? *tessellated : scene;
 
-    for (size_t c = 0; c < columns.size(); ++c) {
+    // Frame f of GPU column c through a pipeline and a renderer of the column's backend.
+    const auto gpu_frame = [&](size_t c, FramePipeline& pipeline, Renderer& renderer, Samples& samples) {
       FrameTimings ft;
       double pose_ms = 0;
       const double cpu_start = process_cpu_ms();
-      const PipelineStep step = pipelines[c]->step(size_t(f), [&](PreparedFrame& prepared) {
-        render_prepared(*renderers[c], prepared, &ft);
+      const PipelineStep step = pipeline.step(size_t(f), [&](PreparedFrame& prepared) {
+        render_prepared(renderer, prepared, &ft);
         pose_ms = prepared.pose_ms;
       });
       const double cpu_ms = process_cpu_ms() - cpu_start;
       check_messages(columns[c].backend->take_debug_messages());
-      if (timed) add_frame(gpu[c], pose_ms, ft, cpu_ms, &step);
+      if (timed) add_frame(samples, pose_ms, ft, cpu_ms, &step);
+    };
+    for (size_t c = 0; c < columns.size(); ++c) {
+      gpu_frame(c, *pipelines[c], *renderers[c], gpu[c]);
+      // The same frame again, serially (the pipelined step returned after its worker finished).
+      if (twins) gpu_frame(c, *twin_pipelines[c], *twin_renderers[c], twin[c]);
     }
     // A GPU peer's frame: mobirt's loop with the peer tracing, its validation messages checked.
     auto peer_frame = [&](WhittedEngine& engine, std::vector<std::string> messages, Samples& samples) {
@@ -391,6 +415,24 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
       cell["ratios"][key]["fps_over_compute"] = fps_over(cps);
       cell["ratios"][key]["traversal_over_compute"] = traversal_over(cps);
     }
+    if (twins) {
+      cell[key]["serial"] = {
+          {"fps", fps_json(twin[c].all("frame"))}, {"stages_ms", twin[c].medians()}, {"pipelined", false}};
+      // The serial twin's traversal passes over a peer's, on the same rays; its build over
+      // Embree's, both with the cores to themselves; the pipelined fps over the twin's (what
+      // pipelining buys).
+      auto serial_traversal_over = [&](const Samples& peer_samples) {
+        return twin[c].med("trace_mrays") / std::max(peer_samples.med("trace_mrays"), 1e-9);
+      };
+      cell[key]["serial"]["pipelined_fps_over_serial"] =
+          gpu_fps / std::max(cell[key]["serial"]["fps"]["median"].get<double>(), 1e-9);
+      if (embree) {
+        cell["ratios"][key]["serial_traversal_over_embree"] = serial_traversal_over(emb);
+        cell["ratios"][key]["serial_build_over_embree"] = twin[c].med("build") / std::max(emb.med("build"), 1e-9);
+      }
+      if (ray_query) cell["ratios"][key]["serial_traversal_over_ray_query"] = serial_traversal_over(rqs);
+      if (compute) cell["ratios"][key]["serial_traversal_over_compute"] = serial_traversal_over(cps);
+    }
   }
   cell["meets_target"] = std::isnan(paper) ? nlohmann::json(nullptr) : nlohmann::json(best_fps >= 2 * paper);
   if (embree) cell["embree"] = {{"fps", fps_json(emb.all("frame"))}, {"stages_ms", emb.medians()}};
@@ -437,6 +479,46 @@ void print_frame_loop(const nlohmann::json& cells, const std::vector<std::string
                   column_title(g), s["render"].get<double>(), s["render_cpu"].get<double>(), s["ahead"].get<double>(),
                   s["build_wait"].get<double>(), s["frame"].get<double>());
     }
+  }
+}
+
+// The serial twins (BenchOptions::serial_twin): the traversal passes with the cores to themselves.
+void print_serial_twins(const nlohmann::json& cells, const std::vector<std::string>& gpus, bool baseline,
+                        bool ray_query, bool compute) {
+  if (gpus.empty() || !cells[0][gpus[0]].contains("serial")) return;
+  std::string peers;
+  for (const auto& [on, name] : {std::pair<bool, const char*>{baseline, "Embree's (trc/emb)"},
+                                 {ray_query, "the ray queries' (trc/rq)"},
+                                 {compute, "the compute pass's (trc/cp)"}}) {
+    if (on) peers += std::string(peers.empty() ? "" : ", ") + name;
+  }
+  std::printf("\nmobirt's frames again, serial: each GPU column renders every frame a second time, posing, build\n"
+              "and passes one after the other, as the peers render theirs, so that nothing else runs beside\n"
+              "its traversal passes (pipelined, the next frame's build does). fps and pipe/ser: the serial\n"
+              "loop's frame rate and the pipelined one's over it; trace: the traversal passes, ms and Mrays/s%s.\n",
+              peers.empty() ? "" : (";\nthen those Mrays/s over each peer's on the same rays: " + peers).c_str());
+  std::printf("%-28s", "scene, level");
+  for (const std::string& g : gpus) {
+    std::printf(" | %-8s %6s %8s %7s %7s", column_title(g), "fps", "pipe/ser", "trace", "Mrays/s");
+    if (baseline) std::printf(" %7s", "trc/emb");
+    if (ray_query) std::printf(" %7s", "trc/rq");
+    if (compute) std::printf(" %7s", "trc/cp");
+  }
+  std::printf("\n");
+  for (const nlohmann::json& c : cells) {
+    std::printf("%-28s", (c["scene"].get<std::string>() + ", " + c["level_name"].get<std::string>()).c_str());
+    for (const std::string& g : gpus) {
+      const nlohmann::json& serial = c[g]["serial"];
+      std::printf(" | %-8s %6.1f %7.2fx %7.2f %7.2f", "", serial["fps"]["median"].get<double>(),
+                  serial["pipelined_fps_over_serial"].get<double>(), serial["stages_ms"]["trace"].get<double>(),
+                  serial["stages_ms"]["trace_mrays"].get<double>());
+      if (!baseline && !ray_query && !compute) continue;
+      const nlohmann::json& r = c["ratios"][g];
+      if (baseline) std::printf(" %6.2fx", r["serial_traversal_over_embree"].get<double>());
+      if (ray_query) std::printf(" %6.2fx", r["serial_traversal_over_ray_query"].get<double>());
+      if (compute) std::printf(" %6.2fx", r["serial_traversal_over_compute"].get<double>());
+    }
+    std::printf("\n");
   }
 }
 
@@ -515,6 +597,7 @@ void print_tables(const nlohmann::json& result) {
     }
   }
   print_frame_loop(cells, gpus, result["settings"]["pipelined"].get<bool>());
+  print_serial_twins(cells, gpus, baseline, ray_query, compute);
 
   // What each column costs the machine: on a machine whose cores every column keeps busy, the
   // frame rate follows the CPU time a frame needs.
@@ -663,6 +746,10 @@ int cmd_bench(const std::vector<std::string>& args) {
           "mobirt's frames one stage after the other (pose, build, passes) instead of\n"
           "pipelined (frame N+1 posed and built on a worker while frame N renders)",
           [&] { o.pipelined = false; });
+  cl.flag("--no-serial-twin",
+          "pipelined: render each frame once, without the second, serial rendering and\n"
+          "its table (mobirt's frames again, serial); the run takes about a third less time",
+          [&] { o.serial_twin = false; });
   cl.flag("--no-baseline", "leave out the peers: the ray-query, compute, Embree and CPU kd-tree columns",
           [&] { o.baseline = false; });
   cl.flag("--no-cpu", "leave out the CPU kd-tree column only", [&] { o.cpu = false; });
@@ -780,14 +867,17 @@ int cmd_bench(const std::vector<std::string>& args) {
                         {"compute_data", compute_data_name(o.compute_data)},
                         {"kd_rebuilt_every_frame", true},
                         {"pipelined", o.pipelined},
+                        {"serial_twin", o.pipelined && o.serial_twin},
                         {"build_threads", o.settings.kd.threads},
                         {"driver_threads_pinned", pinned}};
   result["settings"].update(cli::kd_settings_json(o.settings.kd));
   std::printf("mobirt bench: %d frames per cell after %d warm-up frames, animation playing, kd-tree rebuilt every frame\n",
               o.frames, o.warmup);
   std::printf("%s; kd-tree build on %d threads\n",
-              o.pipelined ? "mobirt's frames pipelined: frame N+1 posed and its kd-tree built on a worker while\n"
-                            "frame N renders (--serial: one after the other)"
+              o.pipelined ? (std::string("mobirt's frames pipelined: frame N+1 posed and its kd-tree built on a worker while\n"
+                                         "frame N renders (--serial: one after the other)") +
+                             (o.serial_twin ? "; every frame also rendered a second time,\nserially (--no-serial-twin: not)" : ""))
+                                .c_str()
                           : "mobirt's frames serial (--serial): pose, build, passes, one after the other",
               o.settings.kd.threads);
   std::printf("machine: %u cores; %s, %s, %s, LP_NUM_THREADS=%s, %d rasterizer threads pinned one per CPU%s; %s on %u threads\n",
