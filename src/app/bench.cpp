@@ -394,18 +394,19 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
     cell[key] = {{"fps", fps_json(gpu[c].all("frame"))}, {"stages_ms", gpu[c].medians()}, {"pipelined", o.pipelined}};
     const double gpu_fps = cell[key]["fps"]["median"];
     best_fps = std::max(best_fps, gpu_fps);
-    // fps over a peer's fps; traversal: Mrays/s over the peer's on the same rays.
+    // fps over a peer's fps; a stage's median over the peer's (traversal: Mrays/s on the same rays).
     auto fps_over = [&](const Samples& peer_samples) {
       return gpu_fps / (1000.0 / std::max(median(peer_samples.all("frame")), 1e-9));
     };
-    auto traversal_over = [&](const Samples& peer_samples) {
-      return gpu[c].med("trace_mrays") / std::max(peer_samples.med("trace_mrays"), 1e-9);
+    auto stage_over = [](const Samples& mine, const Samples& peer_samples, const char* stage) {
+      return mine.med(stage) / std::max(peer_samples.med(stage), 1e-9);
     };
+    auto traversal_over = [&](const Samples& peer_samples) { return stage_over(gpu[c], peer_samples, "trace_mrays"); };
     if (embree) {
       cell["ratios"][key] = {{"fps_over_embree", fps_over(emb)},
                              {"traversal_over_embree", traversal_over(emb)},
-                             {"build_over_embree", gpu[c].med("build") / std::max(emb.med("build"), 1e-9)},
-                             {"cpu_over_embree", gpu[c].med("cpu") / std::max(emb.med("cpu"), 1e-9)}};
+                             {"build_over_embree", stage_over(gpu[c], emb, "build")},
+                             {"cpu_over_embree", stage_over(gpu[c], emb, "cpu")}};
     }
     if (ray_query) {
       cell["ratios"][key]["fps_over_ray_query"] = fps_over(rqs);
@@ -422,13 +423,13 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
       // Embree's, both with the cores to themselves; the pipelined fps over the twin's (what
       // pipelining buys).
       auto serial_traversal_over = [&](const Samples& peer_samples) {
-        return twin[c].med("trace_mrays") / std::max(peer_samples.med("trace_mrays"), 1e-9);
+        return stage_over(twin[c], peer_samples, "trace_mrays");
       };
       cell[key]["serial"]["pipelined_fps_over_serial"] =
           gpu_fps / std::max(cell[key]["serial"]["fps"]["median"].get<double>(), 1e-9);
       if (embree) {
         cell["ratios"][key]["serial_traversal_over_embree"] = serial_traversal_over(emb);
-        cell["ratios"][key]["serial_build_over_embree"] = twin[c].med("build") / std::max(emb.med("build"), 1e-9);
+        cell["ratios"][key]["serial_build_over_embree"] = stage_over(twin[c], emb, "build");
       }
       if (ray_query) cell["ratios"][key]["serial_traversal_over_ray_query"] = serial_traversal_over(rqs);
       if (compute) cell["ratios"][key]["serial_traversal_over_compute"] = serial_traversal_over(cps);
@@ -461,6 +462,11 @@ const char* column_title(const std::string& key) {
   return key == "mobirt" ? "Vulkan" : key == "mobirt_gles" ? "GLES 2.0" : key == "compute" ? "compute" : "ray query";
 }
 
+// A cell's row label: "scene, level".
+std::string cell_label(const nlohmann::json& c) {
+  return c["scene"].get<std::string>() + ", " + c["level_name"].get<std::string>();
+}
+
 // mobirt's frame loop: what the rendering thread did and, pipelined, what the worker did beside it.
 void print_frame_loop(const nlohmann::json& cells, const std::vector<std::string>& gpus, bool pipelined) {
   std::printf("\nmobirt's frame loop, %s, ms (median): render = upload, passes, decoding and ray tree on\n"
@@ -475,7 +481,7 @@ void print_frame_loop(const nlohmann::json& cells, const std::vector<std::string
     for (const std::string& g : gpus) {
       const nlohmann::json& s = c[g]["stages_ms"];
       std::printf("%-28s %-8s %7.2f %7.2f %7.2f %7.2f %7.2f\n",
-                  (c["scene"].get<std::string>() + ", " + c["level_name"].get<std::string>()).c_str(),
+                  cell_label(c).c_str(),
                   column_title(g), s["render"].get<double>(), s["render_cpu"].get<double>(), s["ahead"].get<double>(),
                   s["build_wait"].get<double>(), s["frame"].get<double>());
     }
@@ -506,7 +512,7 @@ void print_serial_twins(const nlohmann::json& cells, const std::vector<std::stri
   }
   std::printf("\n");
   for (const nlohmann::json& c : cells) {
-    std::printf("%-28s", (c["scene"].get<std::string>() + ", " + c["level_name"].get<std::string>()).c_str());
+    std::printf("%-28s", cell_label(c).c_str());
     for (const std::string& g : gpus) {
       const nlohmann::json& serial = c[g]["serial"];
       std::printf(" | %-8s %6.1f %7.2fx %7.2f %7.2f", "", serial["fps"]["median"].get<double>(),
@@ -533,9 +539,6 @@ void print_tables(const nlohmann::json& result) {
   const bool cpu = cells[0].contains("cpu_kd");
   const bool ray_query = cells[0].contains("ray_query");
   const bool compute = cells[0].contains("compute");
-  auto label = [](const nlohmann::json& c) {
-    return c["scene"].get<std::string>() + ", " + c["level_name"].get<std::string>();
-  };
 
   std::printf("\nTable 1: frames per second, median [min-max]; paper = the MobiRT paper, target = 2x paper; mobirt's\n"
               "frames %s\n", result["settings"]["pipelined"].get<bool>() ? "pipelined (next frame posed and built meanwhile)"
@@ -548,7 +551,7 @@ void print_tables(const nlohmann::json& result) {
   if (cpu) std::printf("  %-18s", "CPU kd-tree");
   std::printf("\n");
   for (const nlohmann::json& c : cells) {
-    std::printf("%-28s %-8s %5s %6s", label(c).c_str(), c["size"].get<std::string>().c_str(),
+    std::printf("%-28s %-8s %5s %6s", cell_label(c).c_str(), c["size"].get<std::string>().c_str(),
                 opt(c, "paper_fps", "%.0f").c_str(), opt(c, "target_fps", "%.0f").c_str());
     for (const std::string& g : gpus) std::printf("  %-18s", cell_fps(c[g]["fps"]).c_str());
     if (ray_query) std::printf("  %-18s", cell_fps(c["ray_query"]["fps"]).c_str());
@@ -577,7 +580,7 @@ void print_tables(const nlohmann::json& result) {
     for (const nlohmann::json& c : cells) {
       const nlohmann::json& s = c[g]["stages_ms"];
       std::printf("%-28s %6.2f %6.2f %5.2f %6.2f %7.2f %6.2f %6.2f %6.2f %5.2f %6.2f %7.2f %7.2f %6.0f\n",
-                  label(c).c_str(), s["animate"].get<double>(), s["build"].get<double>(), s["rays"].get<double>(),
+                  cell_label(c).c_str(), s["animate"].get<double>(), s["build"].get<double>(), s["rays"].get<double>(),
                   s["upload"].get<double>(), s["trace"].get<double>(), s["readback"].get<double>(),
                   s["decode"].get<double>(), s["shade"].get<double>(), s["accumulate"].get<double>(),
                   s["secondary"].get<double>(), s["frame"].get<double>(), s["trace_mrays"].get<double>(),
@@ -586,7 +589,7 @@ void print_tables(const nlohmann::json& result) {
     std::printf("traversal passes, median per pass [generation] rays+shadow rays, ms, Mrays/s, KB read back:\n");
     for (const nlohmann::json& c : cells) {
       const nlohmann::json& s = c[g]["stages_ms"];
-      std::printf("%-28s", label(c).c_str());
+      std::printf("%-28s", cell_label(c).c_str());
       for (int k = 0; s.contains("pass" + std::to_string(k) + "_rays"); ++k) {
         const std::string p = "pass" + std::to_string(k) + "_";
         std::printf("  [%d] %.0f+%.0f %.1f ms %.2f %.0f", k, s[p + "rays"].get<double>(),
@@ -616,7 +619,7 @@ void print_tables(const nlohmann::json& result) {
   }
   std::printf("\n");
   for (const nlohmann::json& c : cells) {
-    std::printf("%-28s", label(c).c_str());
+    std::printf("%-28s", cell_label(c).c_str());
     for (const std::string& e : engines) {
       const nlohmann::json& s = c[e]["stages_ms"];
       const double frame = s["frame"].get<double>();
@@ -636,7 +639,7 @@ void print_tables(const nlohmann::json& result) {
     for (const char* key : {"embree", "cpu_kd"}) {
       if (!c.contains(key)) continue;
       const nlohmann::json& s = c[key]["stages_ms"];
-      std::printf("%-28s %-7s %6.2f %5.2f %7.2f %7.2f %6.2f %6.2f %7.2f %7.2f\n", label(c).c_str(),
+      std::printf("%-28s %-7s %6.2f %5.2f %7.2f %7.2f %6.2f %6.2f %7.2f %7.2f\n", cell_label(c).c_str(),
                   std::string(key) == "embree" ? "Embree" : "CPU kd", s["build"].get<double>(),
                   s["rays"].get<double>(), s["trace"].get<double>(), s["shadow"].get<double>(),
                   s["shade"].get<double>() + s["accumulate"].get<double>(), s["secondary"].get<double>(),
@@ -660,7 +663,7 @@ void print_tables(const nlohmann::json& result) {
   }
   std::printf(" | %8s\n", "SAH");
   for (const nlohmann::json& c : cells) {
-    std::printf("%-28s", label(c).c_str());
+    std::printf("%-28s", cell_label(c).c_str());
     for (const std::string& g : gpus) {
       const nlohmann::json& r = c["ratios"][g];
       std::printf(" | %-8s %6.2fx %6.2fx %6.1fx %6.2fx", "", r["fps_over_embree"].get<double>(),
@@ -682,7 +685,7 @@ void print_tables(const nlohmann::json& result) {
 // many of the run's cells are done, and each column's median fps in it.
 void print_progress(const nlohmann::json& cell, size_t done, size_t total, double seconds) {
   std::string line = "bench: [" + std::to_string(done) + "/" + std::to_string(total) + "] " +
-                     cell["scene"].get<std::string>() + ", " + cell["level_name"].get<std::string>() + ":";
+                     cell_label(cell) + ":";
   for (const auto& [key, title] : {std::pair<const char*, const char*>{"mobirt", "Vulkan"},
                                    {"mobirt_gles", "GLES 2.0"}, {"ray_query", "ray query"}, {"compute", "compute"},
                                    {"embree", "Embree 3"}, {"cpu_kd", "CPU kd-tree"}}) {
