@@ -79,5 +79,19 @@ TEST(Packing, RefusesScenesOverTheLimits) {
   expect_error(10, 17, "17 lights");
 }
 
+// decode_colour's table gives what dividing each byte by 255 gives, bit for bit, in every
+// channel, and ignores the alpha byte.
+TEST(Packing, ColourDecodingIsTheByteOver255) {
+  for (uint32_t b = 0; b < 256; ++b) {
+    const float expected = float(b) / 255.0f;
+    const glm::vec3 c = decode_colour(b | ((255u - b) << 8) | ((b ^ 0x5Au) << 16) | (b << 24));
+    ASSERT_EQ(c.x, expected) << b;
+    ASSERT_EQ(c.y, float(255u - b) / 255.0f) << b;
+    ASSERT_EQ(c.z, float(b ^ 0x5Au) / 255.0f) << b;
+  }
+  EXPECT_EQ(decode_colour(0xFFFFFFFFu), glm::vec3(1.0f));
+  EXPECT_EQ(decode_colour(0xFF000000u), glm::vec3(0.0f));
+}
+
 }  // namespace
 }  // namespace mobirt

@@ -79,22 +79,32 @@ TEST(RayOrder, ACoherentBatchIsOnlyTiled) {
 
 TEST(RayOrder, SortsByOctantThenOriginStably) {
   const Aabb box{glm::vec3(-10.0f), glm::vec3(10.0f)};
-  RayBatch batch = random_batch(5000, 40, 3);
-  // Duplicates: the same ray twice must keep its order (stable).
-  for (uint32_t i = 0; i < 100; ++i) batch.push(batch.ray(i), 5000 + i, glm::vec3(1.0f));
-  const std::vector<uint32_t> order = coherent_ray_order(batch, box);
-  ASSERT_EQ(order.size(), batch.count());
-  auto key = [&](uint32_t i) {
-    return ray_order_key(glm::vec3(batch.origin[i]), glm::vec3(batch.direction[i]), box);
-  };
-  for (size_t k = 1; k < order.size(); ++k) {
-    ASSERT_LE(key(order[k - 1]), key(order[k])) << "at " << k;
-    if (key(order[k - 1]) == key(order[k])) {
-      EXPECT_LT(order[k - 1], order[k]) << "not stable at " << k;
+  // 5,100 rays sort in one part; 70,000 in five, counted and scattered on all cores.
+  for (const uint32_t count : {5000u, 70000u}) {
+    SCOPED_TRACE(testing::Message() << count << " rays");
+    RayBatch batch = random_batch(count, 40, 3);
+    // Duplicates: the same ray twice must keep its order (stable); in the large batch they lie in
+    // other parts than their twins.
+    for (uint32_t i = 0; i < 100; ++i) batch.push(batch.ray(i * (count / 100)), count + i, glm::vec3(1.0f));
+    const std::vector<uint32_t> order = coherent_ray_order(batch, box);
+    ASSERT_EQ(order.size(), batch.count());
+    auto key = [&](uint32_t i) {
+      return ray_order_key(glm::vec3(batch.origin[i]), glm::vec3(batch.direction[i]), box);
+    };
+    for (size_t k = 1; k < order.size(); ++k) {
+      ASSERT_LE(key(order[k - 1]), key(order[k])) << "at " << k;
+      if (key(order[k - 1]) == key(order[k])) {
+        ASSERT_LT(order[k - 1], order[k]) << "not stable at " << k;
+      }
     }
+    // The order a serial stable sort gives, exactly.
+    std::vector<uint32_t> expected(batch.count());
+    for (uint32_t i = 0; i < batch.count(); ++i) expected[i] = i;
+    std::stable_sort(expected.begin(), expected.end(), [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
+    EXPECT_EQ(order, expected);
+    // The octant is the top of the key: all rays going -x, -y, -z come last.
+    EXPECT_EQ(key(order.back()) >> 21, 7u);
   }
-  // The octant is the top of the key: all rays going -x, -y, -z come last.
-  EXPECT_EQ(key(order.back()) >> 21, 7u);
   EXPECT_EQ(ray_order_key(glm::vec3(-10.0f), glm::vec3(1.0f), box), 0u);
   EXPECT_EQ(ray_order_key(glm::vec3(10.0f), glm::vec3(-1.0f), box), (7u << 21) | ((1u << 21) - 1));
   // Origins outside the box (or NaN) clamp to it instead of wrapping.

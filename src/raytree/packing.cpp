@@ -25,10 +25,6 @@ Packing choose_packing(uint64_t prims, int lights, const std::string& scene) {
   return Packing::Bits16_16;
 }
 
-glm::vec3 decode_colour(uint32_t texel) {
-  return glm::vec3(float(texel & 0xFFu), float((texel >> 8) & 0xFFu), float((texel >> 16) & 0xFFu)) / 255.0f;
-}
-
 glm::vec3 decode_colour(uint32_t high, uint32_t low) {
   glm::vec3 c;
   for (int i = 0; i < 3; ++i) {

@@ -4,6 +4,7 @@
 
 #include <glm/glm.hpp>
 
+#include <array>
 #include <cstdint>
 #include <string>
 
@@ -36,7 +37,17 @@ Packing choose_packing(uint64_t prims, int lights, const std::string& scene);
 // The shading pass's colour (glsl/colour.glsl): 8 bits per channel in one RGBA8 texel, or 16 bits
 // per channel from two passes, one writing the high bytes and one the low bytes.
 enum class ColourDepth { Bits8 = 8, Bits16 = 16 };
-glm::vec3 decode_colour(uint32_t texel);                     // rgb / 255
+// rgb / 255, inline and from a table of the 256 quotients (the same floats as dividing): the
+// shading pass's colours are decoded once per shaded ray, and three divisions and a call per ray
+// were most of the time between its read-back and the image.
+inline constexpr auto kByteOver255 = [] {
+  std::array<float, 256> t{};
+  for (int i = 0; i < 256; ++i) t[size_t(i)] = float(i) / 255.0f;
+  return t;
+}();
+inline glm::vec3 decode_colour(uint32_t texel) {
+  return glm::vec3(kByteOver255[texel & 0xFFu], kByteOver255[(texel >> 8) & 0xFFu], kByteOver255[(texel >> 16) & 0xFFu]);
+}
 glm::vec3 decode_colour(uint32_t high, uint32_t low);        // (high x 256 + low) / 65535
 // c clamped to [0, 1] and rounded to the depth's steps, as the shading pass writes it.
 glm::vec3 quantize_colour(const glm::vec3& c, ColourDepth depth);

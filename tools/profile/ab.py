@@ -28,6 +28,8 @@ def main():
     parser.add_argument("--repeat", type=int, default=5, help="frames per run (mobirt --repeat)")
     parser.add_argument("--csv", help="write every run to this CSV file")
     parser.add_argument("--env", action="append", default=[], help="NAME=VALUE for every run")
+    parser.add_argument("--stages", help="comma-separated stages to print instead of the default "
+                        "(any of: build,rays_gen,upload,traversal,read-back,decoding,shading,accumulate,secondary,frame)")
     parser.add_argument("variants", nargs="+", help="NAME=COMMAND ... -- RENDER ARGS")
     argv = sys.argv[1:]
     if "--" not in argv:
@@ -51,7 +53,9 @@ def main():
             runs[name].append(parse_timings(out.stdout))
             sys.stderr.write(f"\rround {r + 1}/{args.rounds} {name}   ")
     sys.stderr.write("\n")
-    stages = ["build", "traversal", "read-back", "decoding", "shading", "frame"]
+    stages = args.stages.split(",") if args.stages else ["build", "traversal", "read-back", "decoding", "shading", "frame"]
+    if "traversal" not in stages:
+        stages.append("traversal")  # the Mrays/s and the ratio need it
     print("%-12s" % "variant" + "".join("%12s" % s for s in stages) + "%10s" % "Mrays/s" + "  (median of %d rounds)" % args.rounds)
     base = None
     for name, _ in variants:
