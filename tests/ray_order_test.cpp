@@ -79,7 +79,7 @@ TEST(RayOrder, ACoherentBatchIsOnlyTiled) {
 
 TEST(RayOrder, SortsByOctantThenOriginStably) {
   const Aabb box{glm::vec3(-10.0f), glm::vec3(10.0f)};
-  // 5,100 rays sort in one part; 70,000 in five, counted and scattered on all cores.
+  // 5,100 rays sort in one part; 70,100 in five, counted and scattered on all cores.
   for (const uint32_t count : {5000u, 70000u}) {
     SCOPED_TRACE(testing::Message() << count << " rays");
     RayBatch batch = random_batch(count, 40, 3);
@@ -105,6 +105,8 @@ TEST(RayOrder, SortsByOctantThenOriginStably) {
     // The octant is the top of the key: all rays going -x, -y, -z come last.
     EXPECT_EQ(key(order.back()) >> 21, 7u);
   }
+  EXPECT_TRUE(coherent_ray_order(random_batch(0, 8, 1), box).empty());
+  EXPECT_EQ(coherent_ray_order(random_batch(1, 8, 1), box), std::vector<uint32_t>{0});
   EXPECT_EQ(ray_order_key(glm::vec3(-10.0f), glm::vec3(1.0f), box), 0u);
   EXPECT_EQ(ray_order_key(glm::vec3(10.0f), glm::vec3(-1.0f), box), (7u << 21) | ((1u << 21) - 1));
   // Origins outside the box (or NaN) clamp to it instead of wrapping.

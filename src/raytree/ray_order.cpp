@@ -94,15 +94,16 @@ std::vector<uint32_t> coherent_ray_order(const RayBatch& batch, const Aabb& boun
   // offsets of its digits, so the result is the serial sort's for any number of parts or threads.
   // A ray travels as key << 32 | index, one array to scatter instead of two.
   const uint32_t n = batch.count();
-  const uint32_t part_rays = std::max(16384u, (n + 31) / 32);  // at most 32 parts of counts
+  // Parts of 16,384 rays or more, at most 32 (512 KiB of counts). (Parts of 8,192, which two
+  // cores share more evenly, measured no faster on the fish's 72,531 rays.)
+  const uint32_t part_rays = std::max(16384u, (n + 31) / 32);
   const uint32_t parts = chunk_count(n, part_rays);
   const MortonFrame frame(bounds);
   const std::unique_ptr<uint64_t[]> keyed = std::make_unique_for_overwrite<uint64_t[]>(n);
   const std::unique_ptr<uint64_t[]> by_low = std::make_unique_for_overwrite<uint64_t[]>(n);
   std::vector<DigitCounts> counts(parts);
   parallel_for_chunks(n, part_rays, 0, [&](uint32_t p, uint32_t begin, uint32_t end) {
-    DigitCounts& c = counts[p];
-    c.fill(0);
+    DigitCounts& c = counts[p];  // zeros: made by the vector
     for (uint32_t i = begin; i < end; ++i) {
       const uint32_t key = frame.key(glm::vec3(batch.origin[i]), glm::vec3(batch.direction[i]));
       keyed[i] = uint64_t(key) << 32 | i;

@@ -30,10 +30,11 @@ std::vector<uint32_t> coherent_ray_order(const RayBatch& batch, const Aabb& boun
 float octant_change_rate(const RayBatch& batch);
 
 // order_for_traversal sorts only a batch whose octant_change_rate reaches this: a batch made in
-// a coherent order (its parents' tiles) keeps it, because the sort (about 25 ns a ray on this
-// machine's 2 cores when this was measured; 12 ns since the sort runs on all cores:
-// OrderRays/fish/coherent:1 minus coherent:0 in mobirt_microbench) then costs more than the few
+// a coherent order (its parents' tiles) keeps it, because the sort then costs more than the few
 // traversal steps it saves (toaster, marbles: 1-4 % fewer node-loop iterations; fish: 14-24 %).
+// The sort's cost, keys, radix passes and the sorted gather (mobirt_microbench
+// OrderRays/fish/coherent:1 minus coherent:0, 2 cores): about 18 ns a ray with the radix passes
+// on one core, 12 ns on all cores with the keys from a table (session 19, alternated runs).
 inline constexpr float kSortAboveOctantChanges = 0.1f;
 
 // Reorders the batch by coherent_ray_order and then lays it out in SIMD tiles

@@ -9,7 +9,7 @@ prints the median over rounds of each stage (each run already reports the median
   tools/profile/ab.py --rounds 5 'stack4=build/mobirt --stack 4' 'stack8=build/mobirt --stack 8' -- SCENE ...
 
 Each variant is NAME=COMMAND: a binary, optionally followed by extra options. --csv FILE writes
-every run (variant, round, stage, ms).
+every run (variant, round, stage, ms) for the printed stages.
 """
 import argparse
 import os
@@ -36,6 +36,12 @@ def main():
         parser.error("give the render arguments after --")
     cut = argv.index("--")
     args = parser.parse_args(argv[:cut])
+    known = ["build", "rays_gen", "upload", "traversal", "read-back", "decoding", "shading", "accumulate",
+             "secondary", "frame"]
+    if args.stages:
+        unknown = [x for x in args.stages.split(",") if x.strip() not in known]
+        if unknown:
+            parser.error("unknown stage(s) %s; choose from %s" % (", ".join(unknown), ",".join(known)))
     variants = [v.split("=", 1) for v in args.variants]
     render_args = argv[cut + 1:]
     env = dict(os.environ)
@@ -53,7 +59,7 @@ def main():
             runs[name].append(parse_timings(out.stdout))
             sys.stderr.write(f"\rround {r + 1}/{args.rounds} {name}   ")
     sys.stderr.write("\n")
-    stages = args.stages.split(",") if args.stages else ["build", "traversal", "read-back", "decoding", "shading", "frame"]
+    stages = [x.strip() for x in args.stages.split(",")] if args.stages else ["build", "traversal", "read-back", "decoding", "shading", "frame"]
     if "traversal" not in stages:
         stages.append("traversal")  # the Mrays/s and the ratio need it
     print("%-12s" % "variant" + "".join("%12s" % s for s in stages) + "%10s" % "Mrays/s" + "  (median of %d rounds)" % args.rounds)
