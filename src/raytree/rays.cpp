@@ -17,6 +17,13 @@ void RayBatch::push(const Ray& ray, uint32_t pixel_index, const glm::vec3& ray_w
   unique_pixels = false;  // the pushed ray's pixel may have one already
 }
 
+void RayBatch::reserve(uint32_t n) {
+  origin.reserve(n);
+  direction.reserve(n);
+  pixel.reserve(n);
+  weight.reserve(n);
+}
+
 void RayBatch::clear() {
   origin.clear();
   direction.clear();

@@ -36,6 +36,7 @@ struct RayBatch {
     return Ray{glm::vec3(origin[i]), glm::vec3(direction[i]), origin[i].w, direction[i].w};
   }
   void push(const Ray& ray, uint32_t pixel_index, const glm::vec3& ray_weight);
+  void reserve(uint32_t n);  // room for n rays in every array, none written
   void clear();
 };
 

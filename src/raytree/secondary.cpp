@@ -34,7 +34,10 @@ RayBatch next_generation(const Scene& scene, const Aabb& scene_bounds, const Ray
   std::vector<Part> parts(chunks);
   parallel_for_chunks(n, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
     // Made in locals and moved into the part at the end: neighbouring parts share cache lines.
+    // Room for a mirror and a refracted ray per hit: four arrays grown by doubling copied each
+    // ray about twice more.
     RayBatch out;
+    out.reserve(2 * (end - begin));
     SecondaryStats local;
     auto emit = [&](const glm::vec3& origin, const glm::vec3& direction, uint32_t pixel, const glm::vec3& w,
                     uint32_t& counter) {
