@@ -387,6 +387,8 @@ int run(int argc, char** argv) {
                 (unsigned long long)s.tiled.node, occupancy(s.tiled.lane_node, s.tiled.node),
                 (unsigned long long)s.tiled.leaf, occupancy(s.tiled.lane_leaf, s.tiled.leaf),
                 (unsigned long long)s.linear.node, occupancy(s.linear.lane_node, s.linear.node));
+    std::printf("    short stack: per ray %.3f pops, %.3f entries dropped, %.3f kd-restarts from the root\n",
+                double(s.steps.pops) / n, double(s.steps.dropped) / n, double(s.steps.restarts) / n);
     // Weighted 1 to 2: a node iteration is one texel fetch and the split decision, a leaf
     // iteration three fetches and the intersection (the toaster's JIT samples, jit_dump.sh, put
     // about 65 % in the node loop and 35 % in the triangle loop over 497K and 160K group
