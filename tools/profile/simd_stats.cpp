@@ -21,6 +21,8 @@
 //                     lane kept the leaf it reached and walked on (speculative traversal), with
 //                     and without a vote between the lanes, against the pass as it is; see
 //                     simulate_postponed() below
+//   short stack       per ray (closest-hit and shadow walks): short-stack entries popped, the
+//                     oldest entries a full stack dropped, and kd-restarts from the root
 //   entry nodes       (primary rays) the leading steps from the root that every ray of a 4x2
 //                     tile takes to one child, its interval unchanged: what a pass that started
 //                     each tile's rays below the root could skip at most; see entry_chain() below
