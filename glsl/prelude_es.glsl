@@ -21,6 +21,11 @@ precision highp sampler2D;
 #ifndef MAX_STEPS
 #define MAX_STEPS 4096
 #endif
+// A loop that only its body ends: GLSL ES 1.00 (Appendix A) allows for loops with a constant
+// bound only, so it keeps an index, bounded by `limit` (the cap, or one more).
+#define UNBOUNDED_LOOP(i, limit) for (int i = 0; i < limit; ++i)
+// traverse()'s short stack with a count of its entries (see there).
+#define STACK_COUNTED 1
 #ifndef PACKING
 #define PACKING MOBIRT_PACKING_24_8
 #endif

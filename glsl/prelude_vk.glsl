@@ -20,6 +20,12 @@ layout(constant_id = MOBIRT_SPEC_ATLAS_PAGES) const int ATLAS_PAGES = 0;
 layout(constant_id = MOBIRT_SPEC_ANALYTIC) const int ANALYTIC = 0;
 layout(constant_id = MOBIRT_SPEC_WIDE_INDICES) const int WIDE_INDICES = 0;
 
+// A loop that only its body ends (a break, a return or the step cap MAX_STEPS checked inside):
+// GLSL 450 needs no index, and llvmpipe adds a counter of its own to every loop anyway.
+#define UNBOUNDED_LOOP(i, limit) for (;;)
+// traverse()'s short stack without a count of its entries (see there).
+#define STACK_COUNTED 0
+
 // No contraction into fused multiply-adds where an expression must round as the CPU's does
 // (precision.glsl) or the same way in every triangle that computes it (the watertight test).
 #define PRECISE precise
