@@ -400,7 +400,7 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
     // The leaf's triangles, one test per iteration. (Only lanes that reached a leaf: llvmpipe's
     // own loop limit may have ended the node loop early. On ES the loop's bound is one iteration
     // more than the cap, so that a leaf that needs more steps than are left ends at the cap check,
-    // not at the bound.) The entries' texels run from base to leaf_end, exact integers (at most
+    // not at the bound.) The entries' texels run from base to leaf_end, exact integers (below
     // kKdIndexLimit, 2^24): no loop index, and no multiply per triangle.
     float base = leaf_first * float(MOBIRT_TEXELS_PER_TRIANGLE);
     float leaf_end = base + leaf_count * float(MOBIRT_TEXELS_PER_TRIANGLE);
