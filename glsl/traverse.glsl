@@ -3,10 +3,12 @@
 //
 // The same algorithm as src/accel/kdtree_traverse.cpp, step for step, so that the CPU traversal
 // is an oracle for this shader. Written in the common subset of GLSL 450 and GLSL ES 1.00: no
-// integer bit operations, no `%`, loops with constant bounds (the cap MAX_STEPS).
+// integer bit operations, no `%`; the walk's loops are UNBOUNDED_LOOP, which ES bounds by the cap
+// MAX_STEPS (its loops need constant bounds) and GLSL 450 does not (the cap is checked inside).
 //
 // Needs from the prelude: DATA_TEXEL, PARAM, STACK_DEPTH, MAX_STEPS, LIGHT_COUNT, INTERSECT,
-// PRECISION, OFFSET_MODE, PRECISE, add_float_bits and precision.glsl (mp, mp_cross, mp_dot).
+// PRECISION, OFFSET_MODE, PRECISE, add_float_bits, UNBOUNDED_LOOP, STACK_COUNTED and
+// precision.glsl (mp, mp_cross, mp_dot).
 #include "offset.glsl"
 
 // Scene data: 2D textures, or texel buffers where the prelude says so (DATA_SAMPLER).
