@@ -38,8 +38,8 @@ Packing choose_packing(uint64_t prims, int lights, const std::string& scene);
 // per channel from two passes, one writing the high bytes and one the low bytes.
 enum class ColourDepth { Bits8 = 8, Bits16 = 16 };
 // rgb / 255, inline and from a table of the 256 quotients (the same floats as dividing): the
-// shading pass's colours are decoded once per shaded ray, and three divisions and a call per ray
-// were most of the time between its read-back and the image.
+// shading pass's colours are decoded once per shaded ray, where the division was three divisions
+// and a call per ray.
 inline constexpr auto kByteOver255 = [] {
   std::array<float, 256> t{};
   for (int i = 0; i < 256; ++i) t[size_t(i)] = float(i) / 255.0f;

@@ -65,6 +65,11 @@ uint32_t octant(const glm::vec4& d) {
 // where the part's next ray of each digit goes.
 using DigitCounts = std::array<uint32_t, kBuckets>;
 
+// The two digits of a ray as the sort carries it (key << 32 | index): the key's low and high
+// kRadixBits.
+uint32_t low_digit(uint64_t keyed) { return uint32_t(keyed >> 32) & (kBuckets - 1); }
+uint32_t high_digit(uint64_t keyed) { return uint32_t(keyed >> (32 + kRadixBits)); }
+
 // Counts to offsets: digit by digit, part by part within a digit, the order a stable pass over
 // the whole array would place them in.
 void exclusive_offsets(std::vector<DigitCounts>& counts) {
@@ -107,24 +112,24 @@ std::vector<uint32_t> coherent_ray_order(const RayBatch& batch, const Aabb& boun
     for (uint32_t i = begin; i < end; ++i) {
       const uint32_t key = frame.key(glm::vec3(batch.origin[i]), glm::vec3(batch.direction[i]));
       keyed[i] = uint64_t(key) << 32 | i;
-      ++c[key & (kBuckets - 1)];
+      ++c[low_digit(keyed[i])];
     }
   });
   exclusive_offsets(counts);
   parallel_for_chunks(n, part_rays, 0, [&](uint32_t p, uint32_t begin, uint32_t end) {
     DigitCounts& next = counts[p];
-    for (uint32_t i = begin; i < end; ++i) by_low[next[(keyed[i] >> 32) & (kBuckets - 1)]++] = keyed[i];
+    for (uint32_t i = begin; i < end; ++i) by_low[next[low_digit(keyed[i])]++] = keyed[i];
   });
   parallel_for_chunks(n, part_rays, 0, [&](uint32_t p, uint32_t begin, uint32_t end) {
     DigitCounts& c = counts[p];
     c.fill(0);
-    for (uint32_t i = begin; i < end; ++i) ++c[by_low[i] >> (32 + kRadixBits)];
+    for (uint32_t i = begin; i < end; ++i) ++c[high_digit(by_low[i])];
   });
   exclusive_offsets(counts);
   std::vector<uint32_t> order(n);
   parallel_for_chunks(n, part_rays, 0, [&](uint32_t p, uint32_t begin, uint32_t end) {
     DigitCounts& next = counts[p];
-    for (uint32_t i = begin; i < end; ++i) order[next[by_low[i] >> (32 + kRadixBits)]++] = uint32_t(by_low[i]);
+    for (uint32_t i = begin; i < end; ++i) order[next[high_digit(by_low[i])]++] = uint32_t(by_low[i]);
   });
   return order;
 }

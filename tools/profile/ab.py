@@ -19,7 +19,7 @@ import subprocess
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from timings import parse_timings  # noqa: E402
+from timings import STAGE_KEYS, parse_timings  # noqa: E402
 
 
 def main():
@@ -29,19 +29,17 @@ def main():
     parser.add_argument("--csv", help="write every run to this CSV file")
     parser.add_argument("--env", action="append", default=[], help="NAME=VALUE for every run")
     parser.add_argument("--stages", help="comma-separated stages to print instead of the default "
-                        "(any of: build,rays_gen,upload,traversal,read-back,decoding,shading,accumulate,secondary,frame)")
+                        "(any of: %s)" % ",".join(STAGE_KEYS))
     parser.add_argument("variants", nargs="+", help="NAME=COMMAND ... -- RENDER ARGS")
     argv = sys.argv[1:]
     if "--" not in argv:
         parser.error("give the render arguments after --")
     cut = argv.index("--")
     args = parser.parse_args(argv[:cut])
-    known = ["build", "rays_gen", "upload", "traversal", "read-back", "decoding", "shading", "accumulate",
-             "secondary", "frame"]
     if args.stages:
-        unknown = [x for x in args.stages.split(",") if x.strip() not in known]
+        unknown = [x for x in args.stages.split(",") if x.strip() not in STAGE_KEYS]
         if unknown:
-            parser.error("unknown stage(s) %s; choose from %s" % (", ".join(unknown), ",".join(known)))
+            parser.error("unknown stage(s) %s; choose from %s" % (", ".join(unknown), ",".join(STAGE_KEYS)))
     variants = [v.split("=", 1) for v in args.variants]
     render_args = argv[cut + 1:]
     env = dict(os.environ)

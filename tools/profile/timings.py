@@ -16,6 +16,10 @@ _STAGES = {
 }
 
 
+# The stage keys parse_timings() returns, in the order the table prints them.
+STAGE_KEYS = list(_STAGES.values())
+
+
 def parse_timings(text):
     """Returns {stage: ms, 'rays': n, 'shadow_rays': n, 'generations': [...]}"""
     out = {v: 0.0 for v in _STAGES.values()}
