@@ -224,6 +224,12 @@ float component(vec3 v, float axis) {
   return axis < 0.5 ? v.x : (axis < 1.5 ? v.y : v.z);
 }
 
+// The stack entry at index `slot` (0 = newest) after a push: kept where the stack has that slot,
+// else dropped (zeros, which read as empty).
+vec2 inside_stack(int slot, vec2 entry) {
+  return slot < STACK_DEPTH ? entry : vec2(0.0);
+}
+
 // Result of one traversal: x = primitive index (-1 = miss), y = t, z = 1 when the loop cap stopped
 // it before it could decide (the CPU then traces the ray itself).
 // any_hit: stop at the first hit in [tmin, tmax] (shadow rays).
@@ -359,43 +365,28 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
       strict = strict && !skip_near;
       leaf_done = leaf || (near_only && near_empty) || (far_only && far_empty) || (skip_near && far_empty);
       if (STACK_DEPTH > 0 && push) {
-        // Push (the far child, tmax); the guards fold away with the constant STACK_DEPTH.
-        if (STACK_DEPTH > 30) s15 = vec4(s14.zw, s15.xy);
-        if (STACK_DEPTH > 28) s14 = vec4(s13.zw, s14.xy);
-        if (STACK_DEPTH > 26) s13 = vec4(s12.zw, s13.xy);
-        if (STACK_DEPTH > 24) s12 = vec4(s11.zw, s12.xy);
-        if (STACK_DEPTH > 22) s11 = vec4(s10.zw, s11.xy);
-        if (STACK_DEPTH > 20) s10 = vec4(s9.zw, s10.xy);
-        if (STACK_DEPTH > 18) s9 = vec4(s8.zw, s9.xy);
-        if (STACK_DEPTH > 16) s8 = vec4(s7.zw, s8.xy);
-        if (STACK_DEPTH > 14) s7 = vec4(s6.zw, s7.xy);
-        if (STACK_DEPTH > 12) s6 = vec4(s5.zw, s6.xy);
-        if (STACK_DEPTH > 10) s5 = vec4(s4.zw, s5.xy);
-        if (STACK_DEPTH > 8) s4 = vec4(s3.zw, s4.xy);
-        if (STACK_DEPTH > 6) s3 = vec4(s2.zw, s3.xy);
-        if (STACK_DEPTH > 4) s2 = vec4(s1.zw, s2.xy);
-        if (STACK_DEPTH > 2) s1 = vec4(s0.zw, s1.xy);
-        s0 = vec4(far_child, tmax, s0.xy);
+        // Push (the far child, tmax): entry j moves to j + 1, and one that lands at STACK_DEPTH or
+        // beyond is dropped (an odd depth's last vec4 keeps no entry in its zw). The guards fold
+        // away with the constant STACK_DEPTH.
+        if (STACK_DEPTH > 30) s15 = vec4(s14.zw, inside_stack(31, s15.xy));
+        if (STACK_DEPTH > 28) s14 = vec4(s13.zw, inside_stack(29, s14.xy));
+        if (STACK_DEPTH > 26) s13 = vec4(s12.zw, inside_stack(27, s13.xy));
+        if (STACK_DEPTH > 24) s12 = vec4(s11.zw, inside_stack(25, s12.xy));
+        if (STACK_DEPTH > 22) s11 = vec4(s10.zw, inside_stack(23, s11.xy));
+        if (STACK_DEPTH > 20) s10 = vec4(s9.zw, inside_stack(21, s10.xy));
+        if (STACK_DEPTH > 18) s9 = vec4(s8.zw, inside_stack(19, s9.xy));
+        if (STACK_DEPTH > 16) s8 = vec4(s7.zw, inside_stack(17, s8.xy));
+        if (STACK_DEPTH > 14) s7 = vec4(s6.zw, inside_stack(15, s7.xy));
+        if (STACK_DEPTH > 12) s6 = vec4(s5.zw, inside_stack(13, s6.xy));
+        if (STACK_DEPTH > 10) s5 = vec4(s4.zw, inside_stack(11, s5.xy));
+        if (STACK_DEPTH > 8) s4 = vec4(s3.zw, inside_stack(9, s4.xy));
+        if (STACK_DEPTH > 6) s3 = vec4(s2.zw, inside_stack(7, s3.xy));
+        if (STACK_DEPTH > 4) s2 = vec4(s1.zw, inside_stack(5, s2.xy));
+        if (STACK_DEPTH > 2) s1 = vec4(s0.zw, inside_stack(3, s1.xy));
+        s0 = vec4(far_child, tmax, inside_stack(1, s0.xy));
 #if STACK_COUNTED
         if (size < STACK_DEPTH) size = size + 1;  // a full stack dropped its oldest entry
 #endif
-        // An odd depth drops the entry the shift moved past it into its last vec4's zw.
-        if (STACK_DEPTH == 1) s0.zw = vec2(0.0);
-        if (STACK_DEPTH == 3) s1.zw = vec2(0.0);
-        if (STACK_DEPTH == 5) s2.zw = vec2(0.0);
-        if (STACK_DEPTH == 7) s3.zw = vec2(0.0);
-        if (STACK_DEPTH == 9) s4.zw = vec2(0.0);
-        if (STACK_DEPTH == 11) s5.zw = vec2(0.0);
-        if (STACK_DEPTH == 13) s6.zw = vec2(0.0);
-        if (STACK_DEPTH == 15) s7.zw = vec2(0.0);
-        if (STACK_DEPTH == 17) s8.zw = vec2(0.0);
-        if (STACK_DEPTH == 19) s9.zw = vec2(0.0);
-        if (STACK_DEPTH == 21) s10.zw = vec2(0.0);
-        if (STACK_DEPTH == 23) s11.zw = vec2(0.0);
-        if (STACK_DEPTH == 25) s12.zw = vec2(0.0);
-        if (STACK_DEPTH == 27) s13.zw = vec2(0.0);
-        if (STACK_DEPTH == 29) s14.zw = vec2(0.0);
-        if (STACK_DEPTH == 31) s15.zw = vec2(0.0);
       }
       tmax = push ? tsplit : tmax;
     }
