@@ -26,6 +26,8 @@ precision highp sampler2D;
 #define UNBOUNDED_LOOP(i, limit) for (int i = 0; i < limit; ++i)
 // traverse()'s short stack with a count of its entries (see there).
 #define STACK_COUNTED 1
+// GLSL ES 1.00 has no control-flow attributes: the compiler decides (see prelude_vk.glsl).
+#define KEEP_BRANCH
 #ifndef PACKING
 #define PACKING MOBIRT_PACKING_24_8
 #endif

@@ -3,6 +3,7 @@
 //   #extension GL_GOOGLE_include_directive : require
 //   #include "prelude_vk.glsl"
 // followed by the shared bodies. The GLSL ES 1.00 prelude provides the same names.
+#extension GL_EXT_control_flow_attributes : require
 #include "layout.h"
 
 // Scene specialisation: specialization constants, so that one SPIR-V module serves every scene
@@ -25,6 +26,9 @@ layout(constant_id = MOBIRT_SPEC_WIDE_INDICES) const int WIDE_INDICES = 0;
 #define UNBOUNDED_LOOP(i, limit) for (;;)
 // traverse()'s short stack without a count of its entries (see there).
 #define STACK_COUNTED 0
+// An `if` kept a branch (GL_EXT_control_flow_attributes' dont_flatten, which Mesa's NIR honours)
+// rather than turned into selects: llvmpipe skips a branch that no lane of a SIMD group takes.
+#define KEEP_BRANCH [[dont_flatten]]
 
 // No contraction into fused multiply-adds where an expression must round as the CPU's does
 // (precision.glsl) or the same way in every triangle that computes it (the watertight test).
@@ -66,7 +70,8 @@ ivec2 data_coord(float index) {
 // Below 2^23 the same bit trick makes them ints. A pass that binds a buffer of more than 2^23 texels
 // is specialised to WIDE_INDICES (the Vulkan backend refuses it otherwise): from 2^23 on, an exact
 // integer float's own bits are 0x4B000000 + (index - 2^23) (exponent 23, spacing 1), so index is
-// its bits - 0x4A800000. Selects, not a branch: llvmpipe runs both sides of an `if` anyway.
+// its bits - 0x4A800000. Selects, not a branch: NIR would turn so small an `if` into selects
+// anyway.
 int data_index(float index) {
   if (WIDE_INDICES == 0) {
     precise float biased = index + 8388608.0;

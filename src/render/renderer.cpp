@@ -444,7 +444,8 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   // The shading pass shades the hits only, compacted, and one miss: a miss's colour is the
   // background's, the same for every miss (glsl/shade_main.glsl), so the one texel the pass writes
   // for it serves them all, bit for bit. A pass over every ray ran the whole Phong code for groups
-  // of 8 fragments that all missed (llvmpipe runs an `if` under a mask, not around it) and
+  // of 8 fragments that all missed (the shader has no branch around it; llvmpipe skips an `if`
+  // only when no lane of a group takes it, and a group with one hit runs it for all 8) and
   // uploaded, read back and decoded a texel per miss: the Utah wood doll's rays mostly miss.
   //
   // Its inputs, one texel per shaded ray: position and material, normal and shadow bits, the ray's
