@@ -1,9 +1,9 @@
 // mobirt_simd_stats: how well the traversal pass's rays fill llvmpipe's SIMD lanes.
 //
 // llvmpipe runs a fragment shader on 8 fragments at once (256-bit vectors): the two 2x2 quads
-// side by side of one half of a 4x4 block, a 4x2 pixel tile of the pass. Its `if` never branches:
-// both sides run under an execution mask, every iteration of a loop runs the whole body, and a
-// loop runs until the last of its lanes is done (at least once). The traversal pass therefore
+// side by side of one half of a 4x4 block, a 4x2 pixel tile of the pass. Both sides of an `if` run
+// under an execution mask (Mesa 25 skips a side that no lane takes), and a loop runs until the last
+// of its lanes is done (at least once). The traversal pass therefore
 // costs loop iterations per 8-lane group, not ray steps. This tool replays the CPU traversal
 // (src/accel/kdtree_traverse.cpp, which the shader follows step for step) for the rays of one
 // frame, groups the rays as llvmpipe does and counts, per generation of rays:
@@ -23,6 +23,9 @@
 //                     simulate_postponed() below
 //   short stack       per ray (closest-hit and shadow walks): short-stack entries popped, the
 //                     oldest entries a full stack dropped, and kd-restarts from the root
+//   leaf steps in     the node-loop iterations if a parent's texel said where a child leaf's
+//   their parents     entries are, so that a walk went from the parent's step to the triangle
+//                     loop without the leaf's own step (not built; see node_iterations() below)
 //   entry nodes       (primary rays) the leading steps from the root that every ray of a 4x2
 //                     tile takes to one child, its interval unchanged: what a pass that started
 //                     each tile's rays below the root could skip at most; see entry_chain() below
@@ -67,8 +70,17 @@ struct LoopCounts {
   }
 };
 
+// The node-loop iterations of a segment. fold_leaf_steps: as if a parent's texel said where a
+// child leaf's entries are, so that a segment that walked down to its leaf (2 iterations or more)
+// ends at the parent's step, without the leaf's own; a leaf taken from the stack or reached by a
+// restart keeps that iteration (its pop or restart needs it).
+uint32_t node_iterations(const TraversalTrace::Segment& seg, bool fold_leaf_steps) {
+  const bool folds = fold_leaf_steps && seg.triangle_tests > 0 && seg.node_iterations >= 2;
+  return seg.node_iterations - (folds ? 1 : 0);
+}
+
 // One traverse() call run by a group in lock step (see TraversalTrace for the segments).
-LoopCounts simulate_walk(const std::vector<const TraversalTrace*>& lanes) {
+LoopCounts simulate_walk(const std::vector<const TraversalTrace*>& lanes, bool fold_leaf_steps = false) {
   LoopCounts c;
   size_t outer = 1;  // a loop runs at least once, even with every lane masked off
   for (const TraversalTrace* t : lanes) outer = std::max(outer, t->segments.size());
@@ -76,9 +88,10 @@ LoopCounts simulate_walk(const std::vector<const TraversalTrace*>& lanes) {
     uint32_t node = 1, leaf = 1;
     for (const TraversalTrace* t : lanes) {
       if (k >= t->segments.size()) continue;
-      node = std::max(node, t->segments[k].node_iterations);
+      const uint32_t steps = node_iterations(t->segments[k], fold_leaf_steps);
+      node = std::max(node, steps);
       leaf = std::max(leaf, t->segments[k].triangle_tests);
-      c.lane_node += t->segments[k].node_iterations;
+      c.lane_node += steps;
       c.lane_leaf += t->segments[k].triangle_tests;
     }
     c.node += node;
@@ -193,13 +206,14 @@ LoopCounts simulate_postponed(const std::vector<const TraversalTrace*>& lanes, b
 }
 
 // A group's traversal pass: the closest-hit walk, then the light loop.
-// mode 0: the pass as it is; 1: postponed leaves without a vote; 2: with a vote.
+// mode 0: the pass as it is; 1: postponed leaves without a vote; 2: with a vote; 3: leaf steps
+// folded into their parents (node_iterations()).
 LoopCounts simulate_group(const std::vector<const RayWalks*>& lanes, size_t lights, int mode = 0) {
   LoopCounts c;
   for (size_t w = 0; w <= lights; ++w) {
     std::vector<const TraversalTrace*> walks;
     for (const RayWalks* r : lanes) walks.push_back(&r->walks[w]);
-    c += mode == 0 ? simulate_walk(walks) : simulate_postponed(walks, mode == 2);
+    c += mode == 1 || mode == 2 ? simulate_postponed(walks, mode == 2) : simulate_walk(walks, mode == 3);
   }
   return c;
 }
@@ -209,6 +223,7 @@ struct PassStats {
   TraversalStats steps;
   LoopCounts tiled, linear;  // 4x2 tiles of the ray texture; 8 consecutive rays
   LoopCounts postponed, voted;  // 4x2 tiles, postponed leaves without and with a vote
+  LoopCounts folded;            // 4x2 tiles, leaf steps folded into their parents
 };
 
 // primary_stats, when given: each ray's own closest-hit walk statistics, in ray order.
@@ -254,6 +269,7 @@ PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& r
       s.tiled += simulate_group(group, lights);
       s.postponed += simulate_group(group, lights, 1);
       s.voted += simulate_group(group, lights, 2);
+      s.folded += simulate_group(group, lights, 3);
     }
   }
   for (uint64_t i0 = 0; i0 < rays.count(); i0 += 8) {
@@ -402,6 +418,9 @@ int run(int argc, char** argv) {
                   (unsigned long long)counts->leaf, double(counts->leaf) / double(s.tiled.leaf),
                   double(counts->node + 2 * counts->leaf) / double(s.tiled.node + 2 * s.tiled.leaf));
     }
+    std::printf("    leaf steps in their parents: node iter. %12llu (x%.3f), lanes' node iter. x%.3f\n",
+                (unsigned long long)s.folded.node, double(s.folded.node) / double(s.tiled.node),
+                double(s.folded.lane_node) / double(std::max<uint64_t>(s.tiled.lane_node, 1)));
     if (out) {
       std::fprintf(out, "%d,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%.4f,%.4f,%llu,%llu,%.4f\n", g,
                    (unsigned long long)s.rays, (unsigned long long)s.shadow_rays,
