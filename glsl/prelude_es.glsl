@@ -68,9 +68,11 @@ precision highp sampler2D;
 // The float whose bits, read as a signed integer, are x's plus k (an integer value): x moved by k
 // units in the last place, away from zero for k > 0, across a power of two where the ulp doubles
 // (or halves). Exact for normal x and |k| < 2^23; Wachter and Binder's offset (offset.glsl) calls it
-// only for |x| >= 1/32, traverse()'s kd-restart with k = 1 for a restart point tmax > 0 (a tmax
-// below 2^-126, which no ray reaches in practice, would only change where a tie goes; the step cap
-// still ends the walk).
+// only for |x| >= 1/32, traverse()'s kd-restart with k = 1 for a restart point tmax > 0. Below
+// x = 2^-103 its ulp, exp2(e - 23), is subnormal: where subnormals flush, the result is <= x (NaN
+// below 2^-126), so splits up to that tmax are walked on both sides: no hit is lost, but the walk
+// may leave the CPU's steps or run to the cap (the CPU then traces the ray). No ray reaches such
+// a restart point in practice.
 float add_float_bits(float x, float k) {
   float m = abs(x);
   float e = float_binade(m);

@@ -38,7 +38,8 @@ layout(constant_id = MOBIRT_SPEC_WIDE_INDICES) const int WIDE_INDICES = 0;
 // The numeric primitive that GLSL ES 1.00 lacks (prelude_es.glsl emulates it arithmetically, to
 // the same bits).
 // The float whose bits, read as a signed integer, are x's plus k (an integer value): x moved by k
-// units in the last place, away from zero for k > 0. Wachter and Binder's offset (offset.glsl).
+// units in the last place, away from zero for k > 0. Wachter and Binder's offset (offset.glsl), and
+// traverse()'s kd-restart (k = 1: the next float up).
 float add_float_bits(float x, float k) {
   return intBitsToFloat(floatBitsToInt(x) + int(k));
 }

@@ -117,6 +117,18 @@ TEST_P(PerBackend, TraversalMatchesCpuOnABoxGrid) {
   check_traversal_against_cpu(*backend, test::box_grid_scene(), 160, 120);
 }
 
+// Short stacks and pure kd-restart on both backends. A restart at the previous restart point
+// sends ties at tmin to the far side, as the CPU's walk does (the shader keeps that rule in tmin,
+// one ulp up; without it the box grid's walks restart at the same point until the cap).
+TEST_P(PerBackend, TraversalMatchesCpuAtSmallStackDepths) {
+  for (int depth : {0, 1, 2}) {
+    SCOPED_TRACE(depth);
+    RenderSettings settings;
+    settings.stack_depth = depth;
+    check_traversal_against_cpu(*backend, test::box_grid_scene(), 96, 64, settings);
+  }
+}
+
 TEST_P(PerBackend, TraversalMatchesCpuOnTheToaster) {
   check_traversal_against_cpu(*backend, load_scene(MOBIRT_SOURCE_DIR "/scenes/toaster.gltf"), 200, 120);
 }

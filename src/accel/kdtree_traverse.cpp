@@ -50,7 +50,8 @@
 //   the previous restart point) sets `strict`: ties go to the far side until the next pop, which
 //   reaches a leaf that ends beyond t_b. Restart points therefore increase at least every second
 //   restart and traversal always terminates (without a step cap). The only cost: with tiny stacks,
-//   a second degenerate [t_b, t_b] leaf may be skipped in this tie-of-ties case.
+//   a second degenerate [t_b, t_b] leaf may be skipped in this tie-of-ties case. (The shader keeps
+//   `strict` as tmin = the next float above t_b, where `tsplit < tmin` decides the same.)
 // - tsplit == tmax visits both (the far side with [tmax, tmax]): conservative, rare.
 // - A ray lying in a split plane (o[a] == s, d[a] == 0) gives tsplit = 0 * inf = NaN: near only,
 //   and below_first picks the below side; the builder references every triangle that touches a
