@@ -325,8 +325,9 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
           // A restart at the previous restart point sends ties at tmin to the far side until the
           // next pop or skipped near side (the CPU's `strict`): here tmin one ulp up, so that
           // `tsplit < tmin` holds for tsplit equal to the restart point, as `tsplit < tmin ||
-          // (strict && tsplit == tmin)` does, and no loop-carried flag is needed (-3.2 to -3.4 % of the Vulkan passes'
-          // JIT instructions, -1.8 % on ES). Only for tmax > 0: a tsplit <= 0 is near only anyway.
+          // (strict && tsplit == tmin)` does, and no loop-carried flag is needed (-3.2 to -3.4 %
+          // of the Vulkan passes' JIT instructions, -1.8 % on ES). Only for tmax > 0: a tsplit
+          // <= 0 is near only anyway.
           tmin = tmax == restart_t && tmax > 0.0 ? add_float_bits(tmax, 1.0) : tmax;
           restart_t = tmax;
           tmax = scene_tmax;

@@ -3,8 +3,8 @@
 // llvmpipe runs a fragment shader on 8 fragments at once (256-bit vectors): the two 2x2 quads
 // side by side of one half of a 4x4 block, a 4x2 pixel tile of the pass. Both sides of an `if` run
 // under an execution mask (Mesa 25 skips a side that no lane takes), and a loop runs until the last
-// of its lanes is done (at least once). The traversal pass therefore
-// costs loop iterations per 8-lane group, not ray steps. This tool replays the CPU traversal
+// of its lanes is done (at least once). The traversal pass therefore costs loop iterations per
+// 8-lane group, not ray steps. This tool replays the CPU traversal
 // (src/accel/kdtree_traverse.cpp, which the shader follows step for step) for the rays of one
 // frame, groups the rays as llvmpipe does and counts, per generation of rays:
 //   steps/ray         the rays' own steps (interior nodes / triangle tests per ray)
@@ -205,15 +205,19 @@ LoopCounts simulate_postponed(const std::vector<const TraversalTrace*>& lanes, b
   return c;
 }
 
+// What simulate_group() simulates: the pass as it is, postponed leaves without or with a vote
+// (simulate_postponed()), or leaf steps folded into their parents (node_iterations()).
+enum class Walk { AsIs, Postponed, PostponedVote, FoldedLeaves };
+
 // A group's traversal pass: the closest-hit walk, then the light loop.
-// mode 0: the pass as it is; 1: postponed leaves without a vote; 2: with a vote; 3: leaf steps
-// folded into their parents (node_iterations()).
-LoopCounts simulate_group(const std::vector<const RayWalks*>& lanes, size_t lights, int mode = 0) {
+LoopCounts simulate_group(const std::vector<const RayWalks*>& lanes, size_t lights, Walk walk = Walk::AsIs) {
   LoopCounts c;
   for (size_t w = 0; w <= lights; ++w) {
     std::vector<const TraversalTrace*> walks;
     for (const RayWalks* r : lanes) walks.push_back(&r->walks[w]);
-    c += mode == 1 || mode == 2 ? simulate_postponed(walks, mode == 2) : simulate_walk(walks, mode == 3);
+    const bool postponed = walk == Walk::Postponed || walk == Walk::PostponedVote;
+    c += postponed ? simulate_postponed(walks, walk == Walk::PostponedVote)
+                   : simulate_walk(walks, walk == Walk::FoldedLeaves);
   }
   return c;
 }
@@ -267,9 +271,9 @@ PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& r
         for (uint32_t x = x0; x < std::min(x0 + 4, w); ++x) group.push_back(lane(uint64_t(y) * w + x));
       }
       s.tiled += simulate_group(group, lights);
-      s.postponed += simulate_group(group, lights, 1);
-      s.voted += simulate_group(group, lights, 2);
-      s.folded += simulate_group(group, lights, 3);
+      s.postponed += simulate_group(group, lights, Walk::Postponed);
+      s.voted += simulate_group(group, lights, Walk::PostponedVote);
+      s.folded += simulate_group(group, lights, Walk::FoldedLeaves);
     }
   }
   for (uint64_t i0 = 0; i0 < rays.count(); i0 += 8) {
