@@ -26,8 +26,28 @@ precision highp sampler2D;
 #define UNBOUNDED_LOOP(i, limit) for (int i = 0; i < limit; ++i)
 // traverse()'s short stack with a count of its entries (see there).
 #define STACK_COUNTED 1
-// GLSL ES 1.00 has no control-flow attributes: the compiler decides (see prelude_vk.glsl).
+// GLSL ES 1.00 has no control-flow attributes (see prelude_vk.glsl). What keeps an `if` a branch
+// here is its size: Mesa's GL front end turns an `if` of at most 8 ALU instructions into selects
+// (nir_opt_peephole_select(nir, 8, ...) in gl_nir_opts), which then run on every step.
 #define KEEP_BRANCH
+// x (at least -3e38, not NaN) through 10 max() with smaller constants: enough ALU instructions
+// in an `if` that keeps the rest of it small for the front end to leave it a branch. One
+// assignment each: as one nested expression the GLSL compiler's min/max pruning drops all but one.
+float es_branch_weight(float x) {
+  float y = x;
+  y = max(y, -3.0e38);
+  y = max(y, -3.1e38);
+  y = max(y, -3.2e38);
+  y = max(y, -3.3e38);
+  y = max(y, -3.35e38);
+  y = max(y, -3.36e38);
+  y = max(y, -3.37e38);
+  y = max(y, -3.38e38);
+  y = max(y, -3.39e38);
+  y = max(y, -3.395e38);
+  return y;
+}
+#define BRANCH_WEIGHT(x) es_branch_weight(x)
 #ifndef PACKING
 #define PACKING MOBIRT_PACKING_24_8
 #endif

@@ -7,8 +7,8 @@
 // MAX_STEPS (its loops need constant bounds) and GLSL 450 does not (the cap is checked inside).
 //
 // Needs from the prelude: DATA_TEXEL, PARAM, STACK_DEPTH, MAX_STEPS, LIGHT_COUNT, INTERSECT,
-// PRECISION, OFFSET_MODE, PRECISE, add_float_bits, UNBOUNDED_LOOP, STACK_COUNTED, KEEP_BRANCH
-// and precision.glsl (mp, mp_cross, mp_dot).
+// PRECISION, OFFSET_MODE, PRECISE, add_float_bits, UNBOUNDED_LOOP, STACK_COUNTED, KEEP_BRANCH,
+// BRANCH_WEIGHT and precision.glsl (mp, mp_cross, mp_dot).
 #include "offset.glsl"
 
 // Scene data: 2D textures, or texel buffers where the prelude says so (DATA_SAMPLER).
@@ -371,8 +371,9 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
       // pushes. Without it the compiler turns this small `if` into selects, and every node step
       // paid a select, a blend under the loop's mask and a store for each stack component. -6.7 to
       // -7.6 % of the Vulkan passes' JIT instructions, the time within noise (x1.01 in two
-      // interleaved A/B runs). ES has no attribute (unchanged). The pop, behind the `if`s above, is
-      // a branch already.
+      // interleaved A/B runs). ES has no attribute: BRANCH_WEIGHT gives the body the size at which
+      // Mesa's GL front end leaves it a branch (prelude_es.glsl), -3.2 to -3.9 % of the ES passes'
+      // JIT instructions. The pop, behind the `if`s above, is a branch already.
       KEEP_BRANCH if (STACK_DEPTH > 0 && push) {
         // Push (the far child, tmax): entry j moves to j + 1, and one that lands at STACK_DEPTH or
         // beyond is dropped (an odd depth's last vec4 keeps no entry in its zw). The guards fold
@@ -392,7 +393,8 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
         if (STACK_DEPTH > 6) s3 = vec4(s2.zw, inside_stack(7, s3.xy));
         if (STACK_DEPTH > 4) s2 = vec4(s1.zw, inside_stack(5, s2.xy));
         if (STACK_DEPTH > 2) s1 = vec4(s0.zw, inside_stack(3, s1.xy));
-        s0 = vec4(far_child, tmax, inside_stack(1, s0.xy));
+        // tmax is a number above 0 here (a push needs 0 < tsplit <= tmax), as BRANCH_WEIGHT needs.
+        s0 = vec4(far_child, BRANCH_WEIGHT(tmax), inside_stack(1, s0.xy));
 #if STACK_COUNTED
         if (size < STACK_DEPTH) size = size + 1;  // a full stack dropped its oldest entry
 #endif
