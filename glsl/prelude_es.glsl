@@ -27,27 +27,10 @@ precision highp sampler2D;
 // traverse()'s short stack with a count of its entries (see there).
 #define STACK_COUNTED 1
 // GLSL ES 1.00 has no control-flow attributes (see prelude_vk.glsl). What keeps an `if` a branch
-// here is its size: Mesa's GL front end turns an `if` of at most 8 ALU instructions into selects
-// (nir_opt_peephole_select(nir, 8, ...) in gl_nir_opts), which then run on every step.
+// here is its size: KEEP_BRANCH_PAD(x) returns x through enough ALU instructions
+// (es_keep_branch_pad below).
 #define KEEP_BRANCH
-// x (at least -3e38, not NaN) through 10 max() with smaller constants: enough ALU instructions
-// in an `if` that keeps the rest of it small for the front end to leave it a branch. One
-// assignment each: as one nested expression the GLSL compiler's min/max pruning drops all but one.
-float es_branch_weight(float x) {
-  float y = x;
-  y = max(y, -3.0e38);
-  y = max(y, -3.1e38);
-  y = max(y, -3.2e38);
-  y = max(y, -3.3e38);
-  y = max(y, -3.35e38);
-  y = max(y, -3.36e38);
-  y = max(y, -3.37e38);
-  y = max(y, -3.38e38);
-  y = max(y, -3.39e38);
-  y = max(y, -3.395e38);
-  return y;
-}
-#define BRANCH_WEIGHT(x) es_branch_weight(x)
+#define KEEP_BRANCH_PAD(x) es_keep_branch_pad(x)
 #ifndef PACKING
 #define PACKING MOBIRT_PACKING_24_8
 #endif
@@ -106,6 +89,29 @@ float add_float_bits(float x, float k) {
     r = low + steps * 0.5 * ulp;
   }
   return x < 0.0 ? -r : r;
+}
+
+// x itself, for x >= -3e38 and not NaN, through 9 max() with distinct constants below it: what
+// KEEP_BRANCH_PAD is on ES. Mesa's GL front end turns an `if` into selects when its body has at
+// most 8 counted ALU instructions (nir_opt_peephole_select(nir, 8, ...) in gl_nir_opts; moves and
+// vec2/3/4 do not count), and these 9 count. One assignment each: as one nested expression the
+// GLSL compiler's min/max pass prunes all but one, and equal constants NIR folds. Measured on
+// Mesa 25.0.7 with traverse()'s push, whose other instructions count 1: 7 max() left it selects
+// (toaster, GLES, 200x120, depth 2: 144.57M JIT instructions a frame against 137.19M without
+// them), 8 made it a branch (132.12M), 9 keep one in reserve (132.30M). Another Mesa may flatten
+// it again: the same image, only slower.
+float es_keep_branch_pad(float x) {
+  float y = x;
+  y = max(y, -3.0e38);
+  y = max(y, -3.1e38);
+  y = max(y, -3.2e38);
+  y = max(y, -3.3e38);
+  y = max(y, -3.35e38);
+  y = max(y, -3.36e38);
+  y = max(y, -3.37e38);
+  y = max(y, -3.38e38);
+  y = max(y, -3.39e38);
+  return y;
 }
 
 // The pass's uniforms: one vec4 array (indices in layout.h).

@@ -30,7 +30,7 @@ layout(constant_id = MOBIRT_SPEC_WIDE_INDICES) const int WIDE_INDICES = 0;
 // rather than turned into selects: llvmpipe skips a branch that no lane of a SIMD group takes.
 #define KEEP_BRANCH [[dont_flatten]]
 // ES keeps a branch by the size of its body (prelude_es.glsl); here x as it is.
-#define BRANCH_WEIGHT(x) (x)
+#define KEEP_BRANCH_PAD(x) (x)
 
 // No contraction into fused multiply-adds where an expression must round as the CPU's does
 // (precision.glsl) or the same way in every triangle that computes it (the watertight test).

@@ -8,7 +8,7 @@
 //
 // Needs from the prelude: DATA_TEXEL, PARAM, STACK_DEPTH, MAX_STEPS, LIGHT_COUNT, INTERSECT,
 // PRECISION, OFFSET_MODE, PRECISE, add_float_bits, UNBOUNDED_LOOP, STACK_COUNTED, KEEP_BRANCH,
-// BRANCH_WEIGHT and precision.glsl (mp, mp_cross, mp_dot).
+// KEEP_BRANCH_PAD and precision.glsl (mp, mp_cross, mp_dot).
 #include "offset.glsl"
 
 // Scene data: 2D textures, or texel buffers where the prelude says so (DATA_SAMPLER).
@@ -279,11 +279,11 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
 
   // Loops nested the way llvmpipe runs them cheaply (Aila and Laine's while-while). llvmpipe runs
   // an `if` under a lane mask, skipping it only when no lane of the SIMD group takes it (the
-  // compiler turns small ones into selects that always run, unless marked KEEP_BRANCH), and a loop
-  // until the last of the 8 lanes of a group is done. One loop with a node step and a triangle test
-  // in each iteration paid for both (four texel fetches and the intersection) on every step, when 3
-  // in 4 steps are interior nodes. Here an iteration of the inner node loop costs one node fetch,
-  // one of the triangle loop one triangle test.
+  // compiler turns small ones into selects that always run, unless marked KEEP_BRANCH or, on ES,
+  // padded with KEEP_BRANCH_PAD), and a loop until the last of the 8 lanes of a group is done. One
+  // loop with a node step and a triangle test in each iteration paid for both (four texel fetches
+  // and the intersection) on every step, when 3 in 4 steps are interior nodes. Here an iteration
+  // of the inner node loop costs one node fetch, one of the triangle loop one triangle test.
   UNBOUNDED_LOOP(leaf, MAX_STEPS) {
     // Down to the next leaf with primitives, one node per iteration; empty leaves are closed on
     // the way.
@@ -371,9 +371,9 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
       // pushes. Without it the compiler turns this small `if` into selects, and every node step
       // paid a select, a blend under the loop's mask and a store for each stack component. -6.7 to
       // -7.6 % of the Vulkan passes' JIT instructions, the time within noise (x1.01 in two
-      // interleaved A/B runs). ES has no attribute: BRANCH_WEIGHT gives the body the size at which
-      // Mesa's GL front end leaves it a branch (prelude_es.glsl), -3.2 to -3.9 % of the ES passes'
-      // JIT instructions. The pop, behind the `if`s above, is a branch already.
+      // interleaved A/B runs). ES has no attribute: KEEP_BRANCH_PAD gives the body the size at
+      // which Mesa's GL front end leaves it a branch (prelude_es.glsl), -3.4 to -4.0 % of the ES
+      // passes' JIT instructions. The pop, behind the `if`s above, is a branch already.
       KEEP_BRANCH if (STACK_DEPTH > 0 && push) {
         // Push (the far child, tmax): entry j moves to j + 1, and one that lands at STACK_DEPTH or
         // beyond is dropped (an odd depth's last vec4 keeps no entry in its zw). The guards fold
@@ -393,8 +393,8 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
         if (STACK_DEPTH > 6) s3 = vec4(s2.zw, inside_stack(7, s3.xy));
         if (STACK_DEPTH > 4) s2 = vec4(s1.zw, inside_stack(5, s2.xy));
         if (STACK_DEPTH > 2) s1 = vec4(s0.zw, inside_stack(3, s1.xy));
-        // tmax is a number above 0 here (a push needs 0 < tsplit <= tmax), as BRANCH_WEIGHT needs.
-        s0 = vec4(far_child, BRANCH_WEIGHT(tmax), inside_stack(1, s0.xy));
+        // A push needs 0 < tsplit <= tmax: tmax is a number above 0, KEEP_BRANCH_PAD's domain.
+        s0 = vec4(far_child, KEEP_BRANCH_PAD(tmax), inside_stack(1, s0.xy));
 #if STACK_COUNTED
         if (size < STACK_DEPTH) size = size + 1;  // a full stack dropped its oldest entry
 #endif
