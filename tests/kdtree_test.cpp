@@ -505,6 +505,7 @@ TEST(KdTree, EveryBuildOptionTraversesCorrectly) {
             o.bins = bins;
             o.max_leaf_prims = leaf;
             o.max_depth = depth;
+            o.deep_levels = 0;  // the limit exactly (KdDeepLevels below tests the levels past it)
             o.split_clipping = clip;
             const std::string what = scene.name + " bins " + std::to_string(bins) + " leaf " +
                                      std::to_string(leaf) + " depth " + std::to_string(depth) +
@@ -1097,6 +1098,61 @@ TEST(KdTree, ClusterRuleKeepsVertexFansTogetherAndStaysExact) {
   }
 }
 
+// Past the depth limit only nodes of more than deep_refs references split: deep_refs beyond any
+// node's count gives the tree of the limit alone, deep_refs at the leaf size the tree of the limit
+// raised by deep_levels; either way the walks stay exact, and fewer triangle tests are left.
+TEST(KdTree, DeepLevelsSplitOnlyLargeNodesPastTheDepthLimit) {
+  KdBuildOptions fast, quality, none;
+  quality.build = KdBuildMode::Quality;
+  none.deep_levels = 0;
+  EXPECT_EQ(std::vector<int>({kd_deep_levels(fast), kd_deep_levels(quality), kd_deep_levels(none)}),
+            std::vector<int>({4, 0, 0}));
+  const Positions mesh = terrain(48);
+  const Positions soup = random_soup(1500, 41);
+  for (const Positions* p : {&mesh, &soup}) {
+    SCOPED_TRACE(p == &mesh ? "terrain" : "soup");
+    const int limit = kdtree_depth_limit(p->size() / 3, -1);
+    KdBuildOptions huge = fast;
+    huge.deep_refs = 1 << 20;
+    const FlatKdTree plain = build_kdtree(*p, none);
+    EXPECT_EQ(plain.max_depth, limit);
+    const FlatKdTree same = build_kdtree(*p, huge);
+    expect_same_nodes(plain, same);
+    EXPECT_EQ(same.max_depth, limit + 4);
+
+    KdBuildOptions every = fast;  // every node the leaf size lets split may split past the limit
+    every.deep_refs = kd_leaf_size(fast);
+    KdBuildOptions raised = none;
+    raised.max_depth = limit + 4;
+    expect_same_nodes(build_kdtree(*p, every), build_kdtree(*p, raised));
+
+    const FlatKdTree deep = build_kdtree(*p, fast);
+    check_layout(deep, *p, fast);
+    EXPECT_LE(deep.stats.max_depth_reached, limit + 4);
+    const std::vector<Ray> rays = make_rays(plain, *p, 1500 / test::sanitizer_stride(4), 43);
+    ASSERT_EQ(check_rays(deep, rays, "deep"), 0);
+    const TraversalStats a = traversal_totals(plain, rays);
+    const TraversalStats b = traversal_totals(deep, rays);
+    std::printf("deep levels: nodes %zu -> %zu, triangle tests per ray %.2f -> %.2f\n", plain.stats.nodes,
+                deep.stats.nodes, double(a.triangles_tested) / rays.size(), double(b.triangles_tested) / rays.size());
+    EXPECT_GE(deep.stats.nodes, plain.stats.nodes);
+    EXPECT_LE(b.triangles_tested, a.triangles_tested);
+  }
+  expect_same_nodes(build_kdtree(mesh, quality), [&] {
+    KdBuildOptions q = quality;
+    q.deep_levels = 0;
+    return build_kdtree(mesh, q);
+  }());
+  for (int bad : {-2, 33}) {
+    KdBuildOptions o;
+    o.deep_levels = bad;
+    test::expect_bad_input([&] { build_kdtree(soup, o); }, {"deep_levels"});
+  }
+  KdBuildOptions o;
+  o.deep_refs = -1;
+  test::expect_bad_input([&] { build_kdtree(soup, o); }, {"deep_refs"});
+}
+
 // The plane sweeps (SSE2, and AVX2 where the CPU has it; the sparse sweep of small nodes, which
 // SSE2 takes for more of them) choose the same planes: the same tree on any CPU.
 TEST(KdTree, SameTreeForEverySweep) {
@@ -1205,9 +1261,15 @@ TEST(KdTree, DepthLimitFollowsPbrt) {
   EXPECT_EQ(kdtree_depth_limit(11141, -1), 25);      // 8 + 1.3 * 13 = 24.9
   EXPECT_EQ(kdtree_depth_limit(1000000, -1), 33);    // 8 + 1.3 * 19 = 32.7
   EXPECT_EQ(kdtree_depth_limit(1000, 5), 5);
-  const FlatKdTree tree = build_kdtree(random_soup(1024, 5));
+  KdBuildOptions pbrt;
+  pbrt.deep_levels = 0;
+  const FlatKdTree tree = build_kdtree(random_soup(1024, 5), pbrt);
   EXPECT_EQ(tree.max_depth, 21);
   EXPECT_LE(tree.stats.max_depth_reached, 21);
+  // fast's default: large nodes split up to 4 levels further (DeepLevelsSplitOnlyLargeNodes...)
+  const FlatKdTree deep = build_kdtree(random_soup(1024, 5));
+  EXPECT_EQ(deep.max_depth, 25);
+  EXPECT_LE(deep.stats.max_depth_reached, 25);
 }
 
 TEST(KdTree, StepCapStopsAndReportsCapped) {

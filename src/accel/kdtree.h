@@ -75,6 +75,13 @@ struct KdBuildOptions {
   // builder's rule).
   int cluster_refs = -1;
   int max_depth = -1;            // -1: 8 + 1.3 log2(N), pbrt's rule
+  // Past max_depth, nodes of more than deep_refs references keep splitting for up to deep_levels
+  // more levels; smaller ones become leaves at max_depth as before. The depth limit bounds the
+  // build, but the leaves it forces on large nodes cost every ray that enters them a long triangle
+  // loop: this splits those few nodes only. -1: the build mode's (kd_deep_levels: fast 4,
+  // quality 0, the first builder's rule). The tree's max_depth is the limit plus these levels.
+  int deep_levels = -1;
+  int deep_refs = 10;
   bool split_clipping = true;    // clip each triangle to the child boxes (tighter references)
   // Split clipping clips the triangle polygon against the child boxes (Sutherland-Hodgman, in
   // double, bounds rounded outwards), which also drops references whose triangle misses a child
@@ -97,6 +104,10 @@ int kd_leaf_size(const KdBuildOptions& options);
 // The cluster rule a build uses (KdBuildOptions::cluster_refs): options.cluster_refs when >= 0,
 // else the build mode's: fast 6 (measured: kdtree_build.cpp, kFastClusterRefs), quality 0 (none).
 int kd_cluster_refs(const KdBuildOptions& options);
+
+// The levels past the depth limit a build gives large nodes (KdBuildOptions::deep_levels):
+// options.deep_levels when >= 0, else the build mode's: fast 4, quality 0 (none).
+int kd_deep_levels(const KdBuildOptions& options);
 
 // Every index that reaches a shader is an exact float below 2^24: node indices, triangle texels,
 // leaf-primitive texels. build_kdtree throws Error(BadInput) when a tree would need more.

@@ -116,6 +116,13 @@ const Setting kSettings[] = {
      [](CommonOptions& o, const Value& v) { o.settings.kd.empty_bonus = v.real(0.0f, 0.9f); }},
     {"--max-depth", "N", kFrames, "kd-tree depth limit, -1 = 8 + 1.3 log2(triangles) (default -1)",
      [](CommonOptions& o, const Value& v) { o.settings.kd.max_depth = v.integer(-1, 128); }},
+    {"--deep-levels", "N", kFrames,
+     "levels past the depth limit in which nodes of more than --deep-refs\n"
+     "references keep splitting (default: the build's: fast 4, quality 0)",
+     [](CommonOptions& o, const Value& v) { o.settings.kd.deep_levels = v.integer(0, 32); }},
+    {"--deep-refs", "N", kFrames,
+     "past the depth limit, nodes of more than N references split (default 10)",
+     [](CommonOptions& o, const Value& v) { o.settings.kd.deep_refs = v.integer(0, 1 << 20); }},
     {"--offset", "MODE", kFrames,
      "how shadow, mirror and refracted rays leave a surface, along its normal:\n"
      "fixed (--epsilon in scene units), scaled (--epsilon x the scene's\n"
@@ -379,7 +386,9 @@ nlohmann::json kd_settings_json(const KdBuildOptions& kd) {
           {"leaf_size", kd_leaf_size(kd)},
           {"cluster_refs", kd_cluster_refs(kd)},
           {"empty_bonus", kd.empty_bonus},
-          {"max_depth", kd.max_depth}};
+          {"max_depth", kd.max_depth},
+          {"deep_levels", kd_deep_levels(kd)},
+          {"deep_refs", kd.deep_refs}};
 }
 
 }  // namespace mobirt::cli
