@@ -64,6 +64,9 @@ int main(int argc, char** argv) {
   // sweep only (the same tree: the hash says so).
   if (const char* cluster = std::getenv("MOBIRT_KD_CLUSTER")) options.cluster_refs = std::atoi(cluster);
   if (const char* empty = std::getenv("MOBIRT_KD_EMPTY")) options.empty_bonus = std::strtof(empty, nullptr);
+  // MOBIRT_KD_DEEP (deep_levels: 0 = the depth limit alone), MOBIRT_KD_DEEP_REFS (deep_refs).
+  if (const char* deep = std::getenv("MOBIRT_KD_DEEP")) options.deep_levels = std::atoi(deep);
+  if (const char* deep_refs = std::getenv("MOBIRT_KD_DEEP_REFS")) options.deep_refs = std::atoi(deep_refs);
   if (env_on("MOBIRT_KD_SSE2")) {
     options.sweep_simd = KdSweepSimd::Sse2;
   }
