@@ -505,7 +505,7 @@ TEST(KdTree, EveryBuildOptionTraversesCorrectly) {
             o.bins = bins;
             o.max_leaf_prims = leaf;
             o.max_depth = depth;
-            o.deep_levels = 0;  // the limit exactly (KdDeepLevels below tests the levels past it)
+            o.deep_levels = 0;  // the limit exactly (levels past it: DeepLevelsSplitOnly...)
             o.split_clipping = clip;
             const std::string what = scene.name + " bins " + std::to_string(bins) + " leaf " +
                                      std::to_string(leaf) + " depth " + std::to_string(depth) +
