@@ -514,7 +514,7 @@ class Builder {
     max_leaf_prims_ = size_t(kd_leaf_size(options));
     subtree_refs_ = std::clamp(triangle_count_ / 4, kMinSubtreeRefs, kSubtreeRefs);
     cluster_refs_ = size_t(kd_cluster_refs(options));
-    soft_refs_ = size_t(std::max(options.deep_refs, 0));
+    deep_refs_ = size_t(std::max(options.deep_refs, 0));
   }
 
   // Into `tree`, whose arrays keep their memory: emptied first, so that resizing them writes
@@ -525,7 +525,7 @@ class Builder {
     const size_t n = triangle_count_;
     tree.max_depth = kdtree_depth_limit(n, options_.max_depth);
     // Past pbrt's limit only nodes of more than deep_refs references split (kd_deep_levels).
-    soft_depth_ = tree.max_depth;
+    depth_limit_ = tree.max_depth;
     tree.max_depth += kd_deep_levels(options_);
     max_depth_ = tree.max_depth;
     std::unique_ptr<Part> root;
@@ -625,7 +625,7 @@ class Builder {
   }
 
   bool can_split(size_t n, int depth, double box_area) const {
-    return n > max_leaf_prims_ && depth < max_depth_ && box_area > 0.0 && (depth < soft_depth_ || n > soft_refs_);
+    return n > max_leaf_prims_ && depth < max_depth_ && box_area > 0.0 && (depth < depth_limit_ || n > deep_refs_);
   }
 
   // ---- Top nodes -------------------------------------------------------------------------------
@@ -1383,15 +1383,15 @@ class Builder {
   const KdBuildOptions& options_;
   int bins_;
   size_t triangle_count_;
-  int max_depth_ = 0;   // the hard limit: pbrt's depth limit plus kd_deep_levels
-  int soft_depth_ = 0;  // pbrt's depth limit, past which only nodes of more than soft_refs_ split
+  int max_depth_ = 0;    // the hard limit: pbrt's depth limit plus kd_deep_levels
+  int depth_limit_ = 0;  // pbrt's depth limit, past which only nodes of more than deep_refs_ split
   float min_width_ = std::numeric_limits<float>::min();
   bool avx2_ = false;  // the CPU runs sweep_avx2
   size_t sparse_refs_ = kSparseSweepRefs;
   float small_split_gain_ = 0.0f;  // options_.small_split_gain, the mode's when -1
   size_t max_leaf_prims_ = 1;      // kd_leaf_size(options_)
   size_t cluster_refs_ = 0;        // kd_cluster_refs(options_)
-  size_t soft_refs_ = 0;           // options_.deep_refs
+  size_t deep_refs_ = 0;           // options_.deep_refs
   size_t subtree_refs_ = kSubtreeRefs;  // smaller nodes are built by one task with their subtree
   BufferPool pool_;
   tbb::enumerable_thread_specific<SubtreeScratch> scratch_;
