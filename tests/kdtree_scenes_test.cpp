@@ -120,7 +120,7 @@ void check_scene(const std::filesystem::path& path, size_t expected_triangles, c
   int failures = 0;
   size_t hits = 0;
   size_t checked = 0;
-  for (size_t i = 0; i < rays.size(); i += test::sanitizer_stride(4)) {
+  for (size_t i = 0; i < rays.size(); i += test::sanitizer_stride(8)) {
     const Ray& ray = rays[i];
     ++checked;
     const Hit expected = brute_force(tree, ray);

@@ -496,7 +496,7 @@ TEST(KdTree, EveryBuildOptionTraversesCorrectly) {
   unsigned seed = 200;
   for (const NamedScene& scene : scenes) {
     const FlatKdTree reference = build_kdtree(scene.positions);
-    const std::vector<Ray> rays = make_rays(reference, scene.positions, 600 / test::sanitizer_stride(4), seed++);
+    const std::vector<Ray> rays = make_rays(reference, scene.positions, 600 / test::sanitizer_stride(8), seed++);
     for (int bins : {4, 8, 32, 128}) {
       for (int leaf : {1, 4, 16}) {
         for (int depth : {0, 3, -1}) {
@@ -796,7 +796,7 @@ TEST(KdTree, EveryBuildModeTraversesCorrectly) {
     const FlatKdTree fast_tree = build_kdtree(scene.positions, fast);
     EXPECT_LE(fast_tree.stats.sah_cost, 1.10 * quality_tree.stats.sah_cost + 1e-6);
     EXPECT_LE(quality_tree.stats.sah_cost, 1.10 * fast_tree.stats.sah_cost + 1e-6);
-    const std::vector<Ray> rays = make_rays(quality_tree, scene.positions, 3000 / test::sanitizer_stride(4), seed++);
+    const std::vector<Ray> rays = make_rays(quality_tree, scene.positions, 3000 / test::sanitizer_stride(8), seed++);
     for (KdBuildMode mode : {KdBuildMode::Quality, KdBuildMode::Fast}) {
       for (bool clip : {true, false}) {
         for (int leaf : {1, 4}) {
@@ -874,7 +874,7 @@ TEST(KdTree, SameTreeForAnyThreadCount) {
 TEST(KdTree, TraceLeavesTheWalkUnchanged) {
   const Positions positions = random_soup(3000, 61);
   const FlatKdTree tree = build_kdtree(positions);
-  const std::vector<Ray> rays = make_rays(tree, positions, 2000 / test::sanitizer_stride(4), 62);
+  const std::vector<Ray> rays = make_rays(tree, positions, 2000 / test::sanitizer_stride(8), 62);
   auto same_stats = [](const TraversalStats& a, const TraversalStats& b) {
     return a.nodes_visited == b.nodes_visited && a.leaves_visited == b.leaves_visited &&
            a.triangles_tested == b.triangles_tested && a.steps == b.steps && a.pops == b.pops &&
@@ -1027,7 +1027,7 @@ TEST(KdTree, FastLeafSizeMakesFewerNodesAndStaysExact) {
     const FlatKdTree tree = build_kdtree(scene.positions, fast);
     check_layout(tree, scene.positions, fast);
     EXPECT_LE(tree.stats.nodes, small.stats.nodes);
-    const std::vector<Ray> rays = make_rays(small, scene.positions, 2000 / test::sanitizer_stride(4), seed++);
+    const std::vector<Ray> rays = make_rays(small, scene.positions, 2000 / test::sanitizer_stride(8), seed++);
     ASSERT_EQ(check_rays(tree, rays, scene.name), 0);
     const TraversalStats with_small = traversal_totals(small, rays);
     const TraversalStats with_fast = traversal_totals(tree, rays);
@@ -1056,7 +1056,7 @@ TEST(KdTree, ClusterRuleKeepsVertexFansTogetherAndStaysExact) {
   // (this smooth height field: 10 % and 8 % fewer; the toaster's meshes: 33 % and 27 %)
   EXPECT_LT(double(tree.stats.nodes), 0.95 * double(plain.stats.nodes));
   EXPECT_LT(double(tree.stats.prim_references), 0.95 * double(plain.stats.prim_references));
-  const std::vector<Ray> rays = make_rays(plain, mesh, 2000 / test::sanitizer_stride(4), 31);
+  const std::vector<Ray> rays = make_rays(plain, mesh, 2000 / test::sanitizer_stride(8), 31);
   const TraversalStats with_plain = traversal_totals(plain, rays);
   const TraversalStats with_rule = traversal_totals(tree, rays);
   std::printf("terrain: nodes %zu -> %zu, references %zu -> %zu, steps per ray %.2f -> %.2f\n",
@@ -1129,7 +1129,7 @@ TEST(KdTree, DeepLevelsSplitOnlyLargeNodesPastTheDepthLimit) {
     const FlatKdTree deep = build_kdtree(*p, fast);
     check_layout(deep, *p, fast);
     EXPECT_LE(deep.stats.max_depth_reached, limit + 4);
-    const std::vector<Ray> rays = make_rays(plain, *p, 1500 / test::sanitizer_stride(4), 43);
+    const std::vector<Ray> rays = make_rays(plain, *p, 1500 / test::sanitizer_stride(8), 43);
     ASSERT_EQ(check_rays(deep, rays, "deep"), 0);
     const TraversalStats a = traversal_totals(plain, rays);
     const TraversalStats b = traversal_totals(deep, rays);
