@@ -228,6 +228,8 @@ struct PassStats {
   LoopCounts tiled, linear;  // 4x2 tiles of the ray texture; 8 consecutive rays
   LoopCounts postponed, voted;  // 4x2 tiles, postponed leaves without and with a vote
   LoopCounts folded;            // 4x2 tiles, leaf steps folded into their parents
+  LoopCounts shadow_tiled;      // 4x2 tiles, the light loop's walks alone
+  LoopCounts shadow_dense;      // the same walks packed 8 to a group, in tile order
 };
 
 // primary_stats, when given: each ray's own closest-hit walk statistics, in ray order.
@@ -280,6 +282,33 @@ PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& r
     std::vector<const RayWalks*> group;
     for (uint64_t i = i0; i < i0 + 8; ++i) group.push_back(lane(i));
     s.linear += simulate_group(group, lights);
+  }
+  // Shadow walks compacted (an estimate, not built): a pass of its own over the shadow rays
+  // alone, packed 8 to a group in the 4x2 tiles' order, against the light loop as it runs in the
+  // tiles now (lanes without a shadow ray idle).
+  const TraversalTrace none;
+  for (size_t l = 0; l < lights; ++l) {
+    std::vector<const TraversalTrace*> packed;
+    for (uint32_t y0 = 0; y0 < rows; y0 += 2) {
+      for (uint32_t x0 = 0; x0 < w; x0 += 4) {
+        std::vector<const TraversalTrace*> tile;
+        for (uint32_t y = y0; y < std::min(y0 + 2, rows); ++y) {
+          for (uint32_t x = x0; x < std::min(x0 + 4, w); ++x) {
+            const RayWalks* r = lane(uint64_t(y) * w + x);
+            tile.push_back(r->active ? &r->walks[l + 1] : &none);
+            if (r->active && !r->walks[l + 1].segments.empty()) packed.push_back(&r->walks[l + 1]);
+          }
+        }
+        bool any = false;
+        for (const TraversalTrace* t : tile) any = any || !t->segments.empty();
+        if (any) s.shadow_tiled += simulate_walk(tile);  // a group with no shadow ray skips the loop
+      }
+    }
+    for (size_t i0 = 0; i0 < packed.size(); i0 += 8) {
+      std::vector<const TraversalTrace*> group(packed.begin() + long(i0),
+                                               packed.begin() + long(std::min(packed.size(), i0 + 8)));
+      s.shadow_dense += simulate_walk(group);
+    }
   }
   return s;
 }
@@ -421,6 +450,17 @@ int run(int argc, char** argv) {
                   label, (unsigned long long)counts->node, double(counts->node) / double(s.tiled.node),
                   (unsigned long long)counts->leaf, double(counts->leaf) / double(s.tiled.leaf),
                   double(counts->node + 2 * counts->leaf) / double(s.tiled.node + 2 * s.tiled.leaf));
+    }
+    if (s.shadow_rays > 0) {
+      std::printf("    shadow walks: in the tiles node iter. %llu (occ. %.2f), leaf iter. %llu (occ. %.2f); packed 8 to a "
+                  "group node iter. %llu (x%.3f), leaf iter. %llu (x%.3f); of all the pass's node iter. %.1f %%\n",
+                  (unsigned long long)s.shadow_tiled.node, occupancy(s.shadow_tiled.lane_node, s.shadow_tiled.node),
+                  (unsigned long long)s.shadow_tiled.leaf, occupancy(s.shadow_tiled.lane_leaf, s.shadow_tiled.leaf),
+                  (unsigned long long)s.shadow_dense.node,
+                  double(s.shadow_dense.node) / double(std::max<uint64_t>(s.shadow_tiled.node, 1)),
+                  (unsigned long long)s.shadow_dense.leaf,
+                  double(s.shadow_dense.leaf) / double(std::max<uint64_t>(s.shadow_tiled.leaf, 1)),
+                  100.0 * double(s.shadow_tiled.node) / double(std::max<uint64_t>(s.tiled.node, 1)));
     }
     std::printf("    leaf steps in their parents: node iter. %12llu (x%.3f), lanes' node iter. x%.3f\n",
                 (unsigned long long)s.folded.node, double(s.folded.node) / double(s.tiled.node),
