@@ -26,6 +26,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -121,10 +122,12 @@ int run(int argc, char** argv) {
   const Scene& scene = p.scene;
   const int width = p.width, height = p.height;
   const size_t triangles = scene.mesh.triangle_count();
-  if (triangles + 1 >= (size_t(1) << 24)) throw Error(ErrorKind::BadInput, "more triangles than 24 bits index");
+  if (triangles > (size_t(1) << 24) - 1) throw Error(ErrorKind::BadInput, "more triangles than 24 bits index (index + 1)");
   make_context();
-  const char* renderer = reinterpret_cast<const char*>(glGetString(GL_RENDERER));
-  const std::string extensions = reinterpret_cast<const char*>(glGetString(GL_EXTENSIONS));
+  const GLubyte* renderer_name = glGetString(GL_RENDERER);
+  const GLubyte* extension_list = glGetString(GL_EXTENSIONS);
+  const std::string renderer = renderer_name ? reinterpret_cast<const char*>(renderer_name) : "?";
+  const std::string extensions = extension_list ? reinterpret_cast<const char*>(extension_list) : "";
   const bool depth24 = extensions.find("GL_OES_depth24") != std::string::npos;
 
   // The target: RGBA8 colour (a texture: ES 2.0 has no RGBA8 renderbuffer without an extension)
@@ -148,20 +151,29 @@ int run(int argc, char** argv) {
   glAttachShader(program, compile(GL_FRAGMENT_SHADER, kFragmentShader));
   glBindAttribLocation(program, 0, "a_vertex");
   glLinkProgram(program);
+  GLint linked = 0;
+  glGetProgramiv(program, GL_LINK_STATUS, &linked);
+  if (!linked) {
+    char log[2048] = {};
+    glGetProgramInfoLog(program, sizeof(log), nullptr, log);
+    throw Error(ErrorKind::Internal, std::string("program link failed: ") + log);
+  }
   glUseProgram(program);
 
   // The projection of CameraBasis::ray: pixel x's centre at ndc 2 (x + 0.5) / width - 1, row y
   // (0 at the top) at 1 - 2 (y + 0.5) / height, so that each pixel centre samples the primary ray
-  // through it. Depth from near to far around the scene box.
+  // through it. Depth from just before the nearest vertex in front of the eye to just past the
+  // farthest: the depth buffer's resolution spent where the triangles are.
   const CameraBasis basis(p.camera, width, height);
-  const Aabb box = scene.bounds();
-  float far_distance = 0.0f;
-  for (int c = 0; c < 8; ++c) {
-    const glm::vec3 corner((c & 1) ? box.hi.x : box.lo.x, (c & 2) ? box.hi.y : box.lo.y, (c & 4) ? box.hi.z : box.lo.z);
-    far_distance = std::max(far_distance, glm::dot(corner - basis.eye, basis.forward));
+  float nearest = std::numeric_limits<float>::max(), farthest = 0.0f;
+  for (const glm::vec3& v : scene.mesh.positions) {
+    const float z = glm::dot(v - basis.eye, basis.forward);
+    farthest = std::max(farthest, z);
+    if (z > 0.0f) nearest = std::min(nearest, z);
   }
-  far_distance *= 1.01f;
-  const float near_distance = std::max(p.camera.znear, far_distance * 1e-4f);
+  if (!(farthest > 0.0f)) throw Error(ErrorKind::BadInput, "every triangle lies behind the camera");
+  const float far_distance = farthest * 1.01f;
+  const float near_distance = std::max({p.camera.znear, nearest * 0.99f, far_distance * 1e-6f});
   const float a = (far_distance + near_distance) / (far_distance - near_distance);
   const float b = -2.0f * far_distance * near_distance / (far_distance - near_distance);
   glUniform4f(glGetUniformLocation(program, "u_projection"), 1.0f / (basis.tan_half * basis.aspect),
@@ -213,7 +225,7 @@ int run(int argc, char** argv) {
   // (within 1e-4 of it, relative: two triangles that meet there, an edge or a vertex they
   // share, or coplanar ones), hits it farther, or misses it (the rasterizer's sample fell inside
   // the triangle where the ray test, rounded differently, does not).
-  size_t tie = 0, farther = 0, missed = 0;
+  size_t tie = 0, farther = 0, nearer = 0, missed = 0;
   for (int y = 0; y < height; ++y) {
     for (int x = 0; x < width; ++x) {
       const size_t i = size_t(y) * size_t(width) + size_t(x);
@@ -221,6 +233,7 @@ int run(int argc, char** argv) {
       const int64_t raster = int64_t(px[0]) + 256 * int64_t(px[1]) + 65536 * int64_t(px[2]) - 1;
       const Hit traced = traverse(p.tree, rays.ray(uint32_t(i)));
       hits += traced.valid() ? 1 : 0;
+      if (raster >= int64_t(triangles)) throw Error(ErrorKind::Internal, "a pixel holds no triangle's index");
       if (raster == traced.prim) {
         ++same;
       } else if (raster >= 0 && traced.valid()) {
@@ -230,8 +243,10 @@ int run(int argc, char** argv) {
           ++missed;
         } else if (std::abs(h.t - traced.t) <= 1e-4f * traced.t) {
           ++tie;
-        } else {
+        } else if (h.t > traced.t) {
           ++farther;
+        } else {
+          ++nearer;  // the traversal missed a closer hit: a traversal bug
         }
       } else if (raster >= 0) {
         ++raster_only;
@@ -243,14 +258,15 @@ int run(int argc, char** argv) {
   const double n = double(width) * double(height);
   std::printf("%s: %zu triangles, %dx%d, %s, depth %d bits, medians of %d: vertices written and uploaded %.3f ms, "
               "draw %.3f ms, read-back %.3f ms\n",
-              p.path.c_str(), triangles, width, height, renderer, depth24 ? 24 : 16, std::max(1, p.repeat),
+              p.path.c_str(), triangles, width, height, renderer.c_str(), depth24 ? 24 : 16, std::max(1, p.repeat),
               median(upload_ms), median(draw_ms), median(readback_ms));
   std::printf("against the CPU traversal: %zu of %.0f pixels hit; the same triangle or both a miss %zu; another triangle "
               "%zu (%.4f %%), rasterized only %zu (%.4f %%), traced only %zu (%.4f %%)\n",
               hits, n, same, other_triangle, 100.0 * double(other_triangle) / n, raster_only,
               100.0 * double(raster_only) / n, traced_only, 100.0 * double(traced_only) / n);
   std::printf("of those with another triangle: the ray meets the rasterized one at the traced t (within 1e-4) %zu, "
-              "farther %zu, misses it %zu\n", tie, farther, missed);
+              "farther %zu, nearer %zu, misses it %zu; depth range %.4g to %.4g\n",
+              tie, farther, nearer, missed, double(near_distance), double(far_distance));
   return 0;
 }
 

@@ -230,6 +230,10 @@ struct PassStats {
   LoopCounts folded;            // 4x2 tiles, leaf steps folded into their parents
   LoopCounts shadow_tiled;      // 4x2 tiles, the light loop's walks alone
   LoopCounts shadow_dense;      // the same walks packed 8 to a group, in tile order
+  // The light-loop group iterations `tiled` counts for tiles without a shadow ray for that light
+  // (simulate_walk charges a loop at least one iteration; the shader skips it: a miss returns
+  // before the light loop, and `if (lit)` is skipped when no lane takes it).
+  uint64_t shadow_idle_groups = 0;
 };
 
 // primary_stats, when given: each ray's own closest-hit walk statistics, in ray order.
@@ -301,7 +305,11 @@ PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& r
         }
         bool any = false;
         for (const TraversalTrace* t : tile) any = any || !t->segments.empty();
-        if (any) s.shadow_tiled += simulate_walk(tile);  // a group with no shadow ray skips the loop
+        if (any) {
+          s.shadow_tiled += simulate_walk(tile);
+        } else {
+          ++s.shadow_idle_groups;  // a group with no shadow ray skips the walk
+        }
       }
     }
     for (size_t i0 = 0; i0 < packed.size(); i0 += 8) {
@@ -460,7 +468,9 @@ int run(int argc, char** argv) {
                   double(s.shadow_dense.node) / double(std::max<uint64_t>(s.shadow_tiled.node, 1)),
                   (unsigned long long)s.shadow_dense.leaf,
                   double(s.shadow_dense.leaf) / double(std::max<uint64_t>(s.shadow_tiled.leaf, 1)),
-                  100.0 * double(s.shadow_tiled.node) / double(std::max<uint64_t>(s.tiled.node, 1)));
+                  // The pass's node iterations without the walks the shader skips (see PassStats).
+                  100.0 * double(s.shadow_tiled.node) /
+                      double(std::max<uint64_t>(s.tiled.node - std::min(s.tiled.node, s.shadow_idle_groups), 1)));
     }
     std::printf("    leaf steps in their parents: node iter. %12llu (x%.3f), lanes' node iter. x%.3f\n",
                 (unsigned long long)s.folded.node, double(s.folded.node) / double(s.tiled.node),
