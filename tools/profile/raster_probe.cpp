@@ -78,17 +78,24 @@ double median(std::vector<double> v) {
   return v.empty() ? 0.0 : v[v.size() / 2];
 }
 
+// Throws with the info log when a shader's compile or a program's link (`status`) failed: the
+// shader and program queries have the same shapes.
+void check_status(GLuint object, GLenum status, void (*get)(GLuint, GLenum, GLint*),
+                  void (*get_log)(GLuint, GLsizei, GLsizei*, GLchar*), const char* what) {
+  GLint ok = 0;
+  get(object, status, &ok);
+  if (!ok) {
+    char log[2048] = {};
+    get_log(object, sizeof(log), nullptr, log);
+    throw Error(ErrorKind::Internal, std::string(what) + " failed: " + log);
+  }
+}
+
 GLuint compile(GLenum kind, const char* source) {
   const GLuint shader = glCreateShader(kind);
   glShaderSource(shader, 1, &source, nullptr);
   glCompileShader(shader);
-  GLint ok = 0;
-  glGetShaderiv(shader, GL_COMPILE_STATUS, &ok);
-  if (!ok) {
-    char log[2048] = {};
-    glGetShaderInfoLog(shader, sizeof(log), nullptr, log);
-    throw Error(ErrorKind::Internal, std::string("shader compile failed: ") + log);
-  }
+  check_status(shader, GL_COMPILE_STATUS, glGetShaderiv, glGetShaderInfoLog, "shader compile");
   return shader;
 }
 
@@ -151,13 +158,7 @@ int run(int argc, char** argv) {
   glAttachShader(program, compile(GL_FRAGMENT_SHADER, kFragmentShader));
   glBindAttribLocation(program, 0, "a_vertex");
   glLinkProgram(program);
-  GLint linked = 0;
-  glGetProgramiv(program, GL_LINK_STATUS, &linked);
-  if (!linked) {
-    char log[2048] = {};
-    glGetProgramInfoLog(program, sizeof(log), nullptr, log);
-    throw Error(ErrorKind::Internal, std::string("program link failed: ") + log);
-  }
+  check_status(program, GL_LINK_STATUS, glGetProgramiv, glGetProgramInfoLog, "program link");
   glUseProgram(program);
 
   // The projection of CameraBasis::ray: pixel x's centre at ndc 2 (x + 0.5) / width - 1, row y

@@ -270,6 +270,7 @@ PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& r
   auto lane = [&](uint64_t i) { return i < rays.count() ? &walks[i] : &idle; };
   // llvmpipe's groups: 4x2 tiles of the pass (ray i at (i mod W, i div W)).
   const uint32_t w = rays.width, rows = rays.rows();
+  std::vector<std::vector<const TraversalTrace*>> packed(lights);  // per light, its shadow walks in tile order
   for (uint32_t y0 = 0; y0 < rows; y0 += 2) {
     for (uint32_t x0 = 0; x0 < w; x0 += 4) {
       std::vector<const RayWalks*> group;
@@ -280,6 +281,20 @@ PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& r
       s.postponed += simulate_group(group, lights, Walk::Postponed);
       s.voted += simulate_group(group, lights, Walk::PostponedVote);
       s.folded += simulate_group(group, lights, Walk::FoldedLeaves);
+      // The light loop's walks alone (a lane without a shadow ray, an idle one included, has an
+      // empty walk), and each shadow walk for the packed estimate below.
+      for (size_t l = 0; l < lights; ++l) {
+        std::vector<const TraversalTrace*> tile;
+        for (const RayWalks* r : group) {
+          tile.push_back(&r->walks[l + 1]);
+          if (!r->walks[l + 1].segments.empty()) packed[l].push_back(&r->walks[l + 1]);
+        }
+        if (std::any_of(tile.begin(), tile.end(), [](const TraversalTrace* t) { return !t->segments.empty(); })) {
+          s.shadow_tiled += simulate_walk(tile);
+        } else {
+          ++s.shadow_idle_groups;  // a group with no shadow ray skips the walk
+        }
+      }
     }
   }
   for (uint64_t i0 = 0; i0 < rays.count(); i0 += 8) {
@@ -288,33 +303,12 @@ PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& r
     s.linear += simulate_group(group, lights);
   }
   // Shadow walks compacted (an estimate, not built): a pass of its own over the shadow rays
-  // alone, packed 8 to a group in the 4x2 tiles' order, against the light loop as it runs in the
-  // tiles now (lanes without a shadow ray idle).
-  const TraversalTrace none;
-  for (size_t l = 0; l < lights; ++l) {
-    std::vector<const TraversalTrace*> packed;
-    for (uint32_t y0 = 0; y0 < rows; y0 += 2) {
-      for (uint32_t x0 = 0; x0 < w; x0 += 4) {
-        std::vector<const TraversalTrace*> tile;
-        for (uint32_t y = y0; y < std::min(y0 + 2, rows); ++y) {
-          for (uint32_t x = x0; x < std::min(x0 + 4, w); ++x) {
-            const RayWalks* r = lane(uint64_t(y) * w + x);
-            tile.push_back(r->active ? &r->walks[l + 1] : &none);
-            if (r->active && !r->walks[l + 1].segments.empty()) packed.push_back(&r->walks[l + 1]);
-          }
-        }
-        bool any = false;
-        for (const TraversalTrace* t : tile) any = any || !t->segments.empty();
-        if (any) {
-          s.shadow_tiled += simulate_walk(tile);
-        } else {
-          ++s.shadow_idle_groups;  // a group with no shadow ray skips the walk
-        }
-      }
-    }
-    for (size_t i0 = 0; i0 < packed.size(); i0 += 8) {
-      std::vector<const TraversalTrace*> group(packed.begin() + long(i0),
-                                               packed.begin() + long(std::min(packed.size(), i0 + 8)));
+  // alone, packed 8 to a group in the 4x2 tiles' order (collected by the tile loop above),
+  // against the light loop as it runs in the tiles now.
+  for (const std::vector<const TraversalTrace*>& walks_of_light : packed) {
+    for (size_t i0 = 0; i0 < walks_of_light.size(); i0 += 8) {
+      std::vector<const TraversalTrace*> group(walks_of_light.begin() + long(i0),
+                                               walks_of_light.begin() + long(std::min(walks_of_light.size(), i0 + 8)));
       s.shadow_dense += simulate_walk(group);
     }
   }
