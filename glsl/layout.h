@@ -188,6 +188,8 @@
                                    // 0 = triangles only: no code for the others at all
 #define MOBIRT_SPEC_WIDE_INDICES 11  // trace, shade (Vulkan buffers): 1 = the pass binds a buffer of more
                                      // than MOBIRT_NARROW_INDEX_TEXELS texels: data_index() converts up to 2^24
+#define MOBIRT_SPEC_PRIMARY_HITS 12  // trace: 1 = each ray's closest primitive is known (--primary raster): its
+                                     // index + 1 in the ray direction's w (0: none), tested alone, no walk
 // Element indices reach the shaders as exact floats: below 2^24 (a float's consecutive integers end
 // there), so no buffer holds more texels than that. Below 2^23 one add makes them ints
 // (prelude_vk.glsl's data_index()); a pass that binds a larger buffer is specialised to WIDE_INDICES.

@@ -60,6 +60,10 @@ precision highp sampler2D;
 #ifndef WIDE_INDICES
 #define WIDE_INDICES 0
 #endif
+// --primary raster (layout.h, MOBIRT_SPEC_PRIMARY_HITS).
+#ifndef PRIMARY_HITS
+#define PRIMARY_HITS 0
+#endif
 
 #define PRECISE
 #include "precision.glsl"

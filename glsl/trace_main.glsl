@@ -14,7 +14,22 @@ void main() {
   // Under mediump the ray is rounded to fp16 once, before the walk (precision.glsl).
   origin.xyz = mp(origin.xyz);
   direction.xyz = mp(direction.xyz);
-  vec3 hit = traverse(origin.xyz, direction.xyz, origin.w, direction.w, false);
+  vec3 hit;
+  if (PRIMARY_HITS != 0) {
+    // --primary raster: the raster pass found the ray's closest triangle, its index + 1 in the
+    // direction's w (0: none covers the pixel's centre; the ray's tmax is infinite). Only that
+    // triangle is tested, for the hit point the shadow rays start from; where this test misses it
+    // (the pixel centre on an edge, rounded the other way), the ray walks the tree as usual.
+    float prim = direction.w - 1.0;
+    if (prim < 0.0) {
+      OUTPUT(pack_trace(0.0, 0.0));
+      return;
+    }
+    vec3 tuv = intersect_triangle_tuv(prim, origin.xyz, direction.xyz, origin.w, 3.0e38);
+    hit = tuv.x >= 0.0 ? vec3(prim, tuv.x, 0.0) : traverse(origin.xyz, direction.xyz, origin.w, 3.0e38, false);
+  } else {
+    hit = traverse(origin.xyz, direction.xyz, origin.w, direction.w, false);
+  }
   if (hit.z > 0.5) {
     OUTPUT(pack_capped());
     return;

@@ -50,14 +50,7 @@ TEST_F(Specialisation, ProjectScenesRenderTheSameImage) {
 }
 
 TEST_F(Specialisation, NineLightsUseTheWidePackingInBothVariants) {
-  Scene scene = test::box_grid_scene();
-  scene.lights.clear();
-  for (int i = 0; i < 9; ++i) {
-    Light light;
-    light.position = glm::vec3(-8.0f + 2.0f * float(i), 6.0f, 3.0f);
-    light.intensity = 6.0f;
-    scene.lights.push_back(light);
-  }
+  const Scene scene = test::nine_lights_scene();
   expect_same_image(*backend, scene, *scene.camera, 96, 64, 0, true, "nine-lights");
 }
 

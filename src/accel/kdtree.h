@@ -181,6 +181,12 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, std::span<const Sh
 void rebuild_kdtree(FlatKdTree& tree, std::span<const glm::vec3> positions, std::span<const Shape> shapes,
                     const KdBuildOptions& options = {});
 
+// No tree at all: only the primitives' texels (`triangles`, as a build writes them) and the scene
+// box, for a frame that never walks a tree (--primary raster without shadow or secondary rays:
+// decoding reads the triangles, offsets read the box). nodes and leaf_prims are left empty.
+// Non-finite input is refused as the build refuses it; on an error the tree is left empty.
+void flatten_primitives(FlatKdTree& tree, std::span<const glm::vec3> positions, std::span<const Shape> shapes);
+
 // Sets the empty-child flags of every interior node (glsl/layout.h: MOBIRT_NODE_BELOW_EMPTY,
 // MOBIRT_NODE_ABOVE_EMPTY in the node's fourth component), with which traversal closes an empty
 // leaf without visiting it. build_kdtree sets the same flags as it lays the tree out; a tree

@@ -71,6 +71,8 @@
 #include <tbb/info.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
+#include <tbb/parallel_reduce.h>
+#include <tbb/blocked_range.h>
 #include <tbb/scalable_allocator.h>
 #include <tbb/task_arena.h>
 
@@ -1446,9 +1448,9 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, std::span<const Sh
 
 namespace {
 
-// rebuild_kdtree without its clean-up on an error.
-void build_into(FlatKdTree& tree, std::span<const glm::vec3> positions, std::span<const Shape> shapes,
-                const KdBuildOptions& options) {
+// Whole triangles, and no more primitives than exact float indices address: a build's and a
+// flattening's first check.
+void check_primitive_count(std::span<const glm::vec3> positions, std::span<const Shape> shapes) {
   if (positions.size() % 3 != 0) {
     throw Error(ErrorKind::BadInput, "kd-tree: " + count_text(positions.size()) +
                                          " positions do not make whole triangles (3 per triangle)");
@@ -1461,6 +1463,12 @@ void build_into(FlatKdTree& tree, std::span<const glm::vec3> positions, std::spa
                     " that exact float indices (2^24) address; at most " +
                     count_text(kKdMaxTriangles) + " triangles");
   }
+}
+
+// rebuild_kdtree without its clean-up on an error.
+void build_into(FlatKdTree& tree, std::span<const glm::vec3> positions, std::span<const Shape> shapes,
+                const KdBuildOptions& options) {
+  check_primitive_count(positions, shapes);
   // Non-finite positions are found by the build's parallel bounds pass (Builder::build_root).
   if (options.bins < 2) {
     throw Error(ErrorKind::BadInput,
@@ -1515,6 +1523,58 @@ void build_into(FlatKdTree& tree, std::span<const glm::vec3> positions, std::spa
 }
 
 }  // namespace
+
+void flatten_primitives(FlatKdTree& tree, std::span<const glm::vec3> positions, std::span<const Shape> shapes) {
+  tree.clear();
+  try {
+    check_primitive_count(positions, shapes);
+    const size_t n = positions.size() / 3 + shapes.size();
+    tree.triangles.resize(n * MOBIRT_TEXELS_PER_TRIANGLE);
+    // The texels and the box in one parallel pass over the vertices; a non-finite vertex is
+    // refused as the build refuses it.
+    struct Box {
+      Aabb box;
+      size_t first_bad = SIZE_MAX;
+    };
+    const Box total = tbb::parallel_reduce(
+        tbb::blocked_range<size_t>(0, positions.size(), 3 * 4096), Box{},
+        [&](const tbb::blocked_range<size_t>& r, Box b) {
+          for (size_t i = r.begin(); i < r.end(); ++i) {
+            const glm::vec3& p = positions[i];
+            tree.triangles[i] = glm::vec4(p, 0.0f);
+            if (std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z)) {
+              b.box.extend(p);
+            } else {
+              b.first_bad = std::min(b.first_bad, i);
+            }
+          }
+          return b;
+        },
+        [](Box a, const Box& b) {
+          a.box.extend(b.box);
+          a.first_bad = std::min(a.first_bad, b.first_bad);
+          return a;
+        });
+    if (total.first_bad != SIZE_MAX) {
+      throw Error(ErrorKind::BadInput, "kd-tree: triangle " + std::to_string(total.first_bad / 3) + " vertex " +
+                                           std::to_string(total.first_bad % 3) +
+                                           " has a non-finite position (NaN or infinity)");
+    }
+    tree.bounds = total.box;
+    glm::vec4* shape_out = tree.triangles.data() + positions.size();
+    for (size_t k = 0; k < shapes.size(); ++k) {
+      const Aabb box = shape_bounds(shapes[k]);
+      if (!std::isfinite(box.lo.x + box.lo.y + box.lo.z + box.hi.x + box.hi.y + box.hi.z)) {
+        throw Error(ErrorKind::BadInput, "kd-tree: shape " + std::to_string(k) + " has non-finite bounds");
+      }
+      tree.bounds.extend(box);
+      shape_texels(shapes[k], shape_out + k * MOBIRT_TEXELS_PER_TRIANGLE);
+    }
+  } catch (...) {
+    tree = FlatKdTree{};
+    throw;
+  }
+}
 
 void rebuild_kdtree(FlatKdTree& tree, std::span<const glm::vec3> positions, std::span<const Shape> shapes,
                     const KdBuildOptions& options) {

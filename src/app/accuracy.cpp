@@ -131,10 +131,11 @@ int cmd_accuracy(const std::vector<std::string>& args) {
   // minimum is the steadier figure for comparing settings.
   const double frame_min_ms = times.front();
 
-  // The GPU's primary hits and shadow masks: the traversal pass over the primary rays.
+  // The GPU's primary hits and shadow masks as the frame finds them: the traversal pass over the
+  // primary rays, or the raster pass and the shadow pass from its hits (--primary raster).
   const FlatKdTree tree = build_kdtree(scene.mesh.positions, scene.shapes, settings.kd);
   const RayBatch primary = primary_rays(view, settings.width, settings.height);
-  const TraceResult traced = renderer.trace(scene, tree, primary);
+  const TraceResult traced = renderer.trace_primary(scene, view, tree, primary);
   const std::span<const Light> shadow_lights =
       settings.shadows ? std::span<const Light>(scene.lights) : std::span<const Light>();
   const SurfaceHits hits =

@@ -288,13 +288,15 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
   const auto make_pipeline = [&](bool pipelined) {
     PosedScene* mine[2];
     for (PosedScene*& p : mine) p = slots.emplace_back(std::make_unique<PosedScene>(animation, bs.edits, bs.width, bs.height)).get();
-    return std::make_unique<FramePipeline>(
+    auto pipeline = std::make_unique<FramePipeline>(
         size_t(o.warmup + o.frames),
         [mine, fps](int slot, size_t index) {
           const Camera view = mine[slot]->at(double(index) / fps);
           return std::make_pair(static_cast<const Scene*>(&mine[slot]->scene), view);
         },
         settings.kd, settings.always_rebuild, pipelined);
+    pipeline->set_walks_tree([settings](const Scene& s) { return frame_walks_tree(s, settings); });
+    return pipeline;
   };
   std::vector<std::unique_ptr<FramePipeline>> pipelines;
   for (size_t c = 0; c < columns.size(); ++c) pipelines.push_back(make_pipeline(o.pipelined));
@@ -869,6 +871,7 @@ int cmd_bench(const std::vector<std::string>& args) {
                         {"max_steps", o.settings.max_steps},
                         {"compute_data", compute_data_name(o.compute_data)},
                         {"kd_rebuilt_every_frame", true},
+                        {"primary", primary_hits_name(o.settings.primary)},
                         {"pipelined", o.pipelined},
                         {"serial_twin", o.pipelined && o.serial_twin},
                         {"build_threads", o.settings.kd.threads},
@@ -883,6 +886,11 @@ int cmd_bench(const std::vector<std::string>& args) {
                                 .c_str()
                           : "mobirt's frames serial (--serial): pose, build, passes, one after the other",
               o.settings.kd.threads);
+  if (o.settings.primary == PrimaryHits::Raster) {
+    std::printf("--primary raster: mobirt's primary hits rasterized (a depth-tested draw of the triangles), not\n"
+                "traced as in the paper and as every peer traces them; no kd-tree in a frame without shadow and\n"
+                "secondary rays; mobirt's \"traversal\" is the raster pass plus the shadow pass from its hits\n");
+  }
   std::printf("machine: %u cores; %s, %s, %s, LP_NUM_THREADS=%s, %d rasterizer threads pinned one per CPU%s; %s on %u threads\n",
               std::thread::hardware_concurrency(), info.api.c_str(), info.device.c_str(), info.driver.c_str(),
               lp ? lp : "(all cores)", pinned, o.backend_options.pin_threads ? "" : " (--pin-threads off)",

@@ -181,6 +181,17 @@ const Setting kSettings[] = {
            {"device-addresses", DataReads::DeviceAddresses}};
        o.settings.data = v.choice(reads);
      }},
+    {"--primary", "HITS", kFrames,
+     "how the primary rays' closest hits are found: trace (through the\n"
+     "kd-tree, as every generation: the paper's pipeline) or raster (the\n"
+     "triangles drawn with a depth test, shadow rays traced from them; no\n"
+     "kd-tree at all without shadow and secondary rays; scenes with\n"
+     "analytic shapes are traced) (default trace)",
+     [](CommonOptions& o, const Value& v) {
+       static constexpr std::pair<const char*, PrimaryHits> hits[] = {{"trace", PrimaryHits::Trace},
+                                                                      {"raster", PrimaryHits::Raster}};
+       o.settings.primary = v.choice(hits);
+     }},
     {"--light", "SPEC", kViews,
      "replaces the scene's lights (repeat for several):\n"
      "  \"point pos=X,Y,Z [color=R,G,B] [intensity=I] [range=R]\"\n"

@@ -283,6 +283,13 @@ int cmd_render(const std::vector<std::string>& args) {
   // the scene at rest, so that the view does not jump from frame to frame.
   PosedScene posed(animation, common.edits, settings.width, settings.height);
   const Scene& scene = posed.scene;
+  if (settings.primary == PrimaryHits::Raster && !primaries_rasterized(scene, settings)) {
+    std::fprintf(stderr,
+                 "mobirt: note: %s has %zu analytic shapes (spheres, cylinders, cones), which the raster pass "
+                 "cannot draw: its primary rays are traced (--primitives tessellated rasterizes them as "
+                 "triangles)\n",
+                 scene_path.c_str(), scene.shapes.size());
+  }
 
   std::vector<int> frame_list;
   if (frames) {
@@ -328,6 +335,7 @@ int cmd_render(const std::vector<std::string>& args) {
           return std::make_pair(static_cast<const Scene*>(&slots[slot]->scene), view);
         },
         settings.kd, settings.always_rebuild, !serial);
+    pipeline.set_walks_tree([&settings](const Scene& s) { return frame_walks_tree(s, settings); });
     for (size_t i = 0; i < frame_list.size(); ++i) {
       const int frame = frame_list[i];
       FrameTimings t;

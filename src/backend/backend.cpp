@@ -77,6 +77,10 @@ TextureHandle Backend::create_storage_buffer(uint32_t, TexelFormat) {
   throw Error(ErrorKind::Unsupported, "this backend has no storage buffers (OpenGL ES 2.0): use --data images");
 }
 
+PassTiming Backend::run_raster(std::span<const float>, const RasterView&, uint32_t, uint32_t, std::span<uint32_t>) {
+  throw Error(ErrorKind::Unsupported, "this backend cannot rasterize the primary hits: use --primary trace");
+}
+
 void check_run_pass_arguments(const PassDesc& desc, size_t textures, size_t uniform_floats, uint32_t width,
                               uint32_t count, size_t out_texels) {
   const std::string name = desc.shader.name();

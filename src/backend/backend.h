@@ -102,6 +102,20 @@ struct PassTiming {
   uint64_t bytes_read = 0;    // bytes that left the GPU: 4 per ray
 };
 
+// The camera of Backend::run_raster, as CameraBasis (core/camera.h) makes the primary rays: a
+// vertex v lands on pixel centre (x, y) when the ray through that centre passes through v. Nothing
+// nearer than `near` (> 0) along the view axis is drawn; a backend with fixed-point depth spreads
+// its resolution from near to far (OpenGL ES 2.0), one with float depth reverses it (near / z) and
+// needs no far (Vulkan).
+struct RasterView {
+  float eye[4];      // xyz
+  float right[4];    // xyz: the image's x axis
+  float up[4];       // xyz: the image's y axis (upwards; row 0 is the top)
+  float forward[4];  // xyz: the view direction
+  // x: 1 / (tan_half aspect), y: 1 / tan_half, z: near, w: far distance along forward.
+  float projection[4];
+};
+
 struct DeviceInfo {
   std::string api;            // "Vulkan 1.3.239"
   std::string device;         // "llvmpipe (LLVM 15.0.6, 256 bits)"
@@ -154,6 +168,16 @@ class Backend {
   virtual PassTiming run_pass(PassHandle pass, std::span<const TextureHandle> textures,
                               std::span<const float> uniforms, uint32_t width, uint32_t count,
                               std::span<uint32_t> out) = 0;
+
+  // The primary rays' closest triangles rasterized instead of traced (RenderSettings::primary,
+  // --primary raster): `vertices` (4 floats each, three per triangle, no sharing: the position and
+  // the triangle's index + 1) drawn with a depth test into a width x height RGBA8 target, each
+  // fragment writing its index + 1 as the traversal pass packs a hit (24 bits, mask bits 0), and
+  // read back into out[0, width x height), row 0 at the top as the rays' rows; 0 where no triangle
+  // covers the pixel's centre. The same ES 2.0 model as every pass: one RGBA8 output, no storage
+  // writes, no texture at all. Error(Unsupported) by default.
+  virtual PassTiming run_raster(std::span<const float> vertices, const RasterView& view, uint32_t width,
+                                uint32_t height, std::span<uint32_t> out);
 
   // Every validation/debug message received since the last call (tests assert there are none).
   virtual std::vector<std::string> take_debug_messages() = 0;

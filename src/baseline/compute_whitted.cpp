@@ -39,10 +39,7 @@ TracedGeneration ComputeWhittedEngine::trace(const Scene& scene, const RayBatch&
   records_.resize(rays.count());
   ComputeTimings t;
   compute_.trace(rays, lights, settings_.shadow_rays, {settings_.stack_depth, settings_.max_steps}, records_, &t);
-  g.upload_ms += t.upload_ms;
-  g.trace_ms += t.trace_ms;
-  g.trace_readback_ms += t.readback_ms;
-  g.bytes_read += t.bytes_read;
+  g.add_trace_pass(t.upload_ms, t.trace_ms, t.readback_ms, t.bytes_read);
 
   TracedGeneration traced;
   traced.form = TracedGeneration::Form::Hits;

@@ -25,10 +25,7 @@ TracedGeneration RayQueryWhittedEngine::trace(const Scene& scene, const RayBatch
   traced.texels.resize(rays.count());
   RayQueryTimings t;
   traced.packing = rq_.trace(rays, lights, shadow_rays_, traced.texels, &t);
-  g.upload_ms += t.upload_ms;
-  g.trace_ms += t.trace_ms;
-  g.trace_readback_ms += t.readback_ms;
-  g.bytes_read += t.bytes_read;
+  g.add_trace_pass(t.upload_ms, t.trace_ms, t.readback_ms, t.bytes_read);
   return traced;
 }
 

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "accel/kdtree.h"
+#include "core/camera.h"
 #include "raytree/hits.h"
 #include "raytree/packing.h"
 #include "raytree/rays.h"
@@ -44,6 +45,13 @@ struct GenerationTimings {
   uint64_t bytes_read = 0;      // bytes that left the GPU: 4 per ray and pass
 
   GenerationTimings& operator+=(const GenerationTimings& g);
+  // One GPU pass of the generation's tracing: its uploads, its time, its read-back and bytes.
+  void add_trace_pass(double pass_upload_ms, double pass_ms, double readback_ms, uint64_t bytes) {
+    upload_ms += pass_upload_ms;
+    trace_ms += pass_ms;
+    trace_readback_ms += readback_ms;
+    bytes_read += bytes;
+  }
 };
 
 // Where one frame's time went, stage by stage (milliseconds); the per-generation stages summed.
@@ -101,6 +109,14 @@ class WhittedEngine {
   // One generation of rays: closest hits and, with settings.shadows, shadow masks (without, the
   // loop lights every hit by every light). Fills the stages it runs in g.
   virtual TracedGeneration trace(const Scene& scene, const RayBatch& rays, GenerationTimings& g) = 0;
+
+  // The first generation, the primary rays through `camera` (primary_rays(): one per pixel, in
+  // pixel order), which an engine may find another way than by tracing them (the fragment passes'
+  // --primary raster); by default traced as every generation is.
+  virtual TracedGeneration trace_primary(const Scene& scene, const Camera&, const RayBatch& rays,
+                                         GenerationTimings& g) {
+    return trace(scene, rays, g);
+  }
 
   // One colour per ray for the decoded hits (a miss: the background), quantised as the shading pass
   // writes it. Fills the stages it runs in g.

@@ -29,7 +29,9 @@ double FramePipeline::prepare(size_t index) {
   // Into the slot's tree, which holds the arrays of an older tree (render_prepared swaps them
   // out of the renderer): their memory is reused. A frame without a build carries no tree, its
   // arrays emptied but their memory kept.
-  if (f.tree_built) {
+  if (f.tree_built && walks_tree_ && !walks_tree_(*scene)) {
+    flatten_primitives(f.tree, scene->mesh.positions, scene->shapes);
+  } else if (f.tree_built) {
     rebuild_kdtree(f.tree, scene->mesh.positions, scene->shapes, kd_);
   } else {
     f.tree.clear();

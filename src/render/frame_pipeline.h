@@ -36,7 +36,8 @@ struct PreparedFrame {
   size_t index = 0;             // in the pipeline's frame list
   const Scene* scene = nullptr; // posed; owned by the caller's slot
   Camera camera;
-  FlatKdTree tree;              // over scene->mesh.positions when tree_built, else empty; after
+  FlatKdTree tree;              // over scene->mesh.positions when tree_built (or only the
+                                // primitives' texels: FramePipeline::set_walks_tree), else empty; after
                                 // render_prepared, the renderer's previous tree (its memory for
                                 // the slot's next build)
   bool tree_built = false;      // false: the triangles did not move since the last tree built
@@ -80,6 +81,11 @@ class FramePipeline {
 
   bool pipelined() const { return pipelined_; }
 
+  // Which frames walk a kd-tree (frame_walks_tree with the renderer's settings); the others get
+  // only the primitives' texels (flatten_primitives) where a build would be. By default every
+  // frame walks one. Set before the first step.
+  void set_walks_tree(std::function<bool(const Scene&)> walks) { walks_tree_ = std::move(walks); }
+
  private:
   double prepare(size_t index);  // into slots_[index % 2]; returns its milliseconds
 
@@ -88,6 +94,7 @@ class FramePipeline {
   KdBuildOptions kd_;
   bool always_rebuild_;
   bool pipelined_;
+  std::function<bool(const Scene&)> walks_tree_;  // empty: every frame walks a tree
   PreparedFrame slots_[2];
   std::vector<glm::vec3> built_positions_;  // of the last tree built (when not always_rebuild)
   std::vector<Shape> built_shapes_;         // and its analytic shapes

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -55,6 +56,11 @@ glm::vec3 light_where(const Light& light) {
   return light.type == LightType::Directional ? -light.direction : light.position;
 }
 
+// A traversal or raster pass's cost, as a generation counts it.
+void add_pass(GenerationTimings& g, const PassTiming& t) {
+  g.add_trace_pass(t.upload_ms, t.gpu_ms, t.readback_ms, t.bytes_read);
+}
+
 // A pass's shader for how it reads its data: one SPIR-V module per kind (a binding's type cannot
 // be specialised).
 ShaderId by_data_kind(TextureKind kind, ShaderId images, ShaderId texel_buffers, ShaderId storage_buffers,
@@ -106,6 +112,120 @@ std::vector<float> shade_uniforms(const Scene& scene, int pass_lights) {
   return u;
 }
 
+const char* primary_hits_name(PrimaryHits primary) {
+  return primary == PrimaryHits::Raster ? "raster" : "trace";
+}
+
+bool primaries_rasterized(const Scene& scene, const RenderSettings& settings) {
+  return settings.primary == PrimaryHits::Raster && scene.shapes.empty();
+}
+
+bool frame_walks_tree(const Scene& scene, const RenderSettings& settings) {
+  if (!primaries_rasterized(scene, settings)) return true;
+  if (settings.shadows && !scene.lights.empty()) return true;
+  return settings.depth > 0 && scene_has_secondary_rays(scene);
+}
+
+namespace {
+
+// The nearest point of triangle `c` (in the camera's frame: x right, y up, z forward) inside the
+// view pyramid |x| <= z tx, |y| <= z ty, by clipping it to the pyramid's four sides
+// (Sutherland-Hodgman); infinity where none of it is inside. A convex polygon gains at most one
+// vertex per plane (7), but rounding on points that lie on a plane can make it emit two per edge:
+// the buffers hold that, and a polygon that would outgrow them returns 0 (the eye: conservative).
+float nearest_in_view(const glm::vec3 (&c)[3], float tx, float ty) {
+  constexpr int kMaxVertices = 48;  // 3 x 2^4
+  glm::vec3 polygon[2][kMaxVertices];
+  int count = 3;
+  for (int k = 0; k < 3; ++k) polygon[0][k] = c[k];
+  int from = 0;
+  const glm::vec3 planes[4] = {{-1.0f, 0.0f, tx}, {1.0f, 0.0f, tx}, {0.0f, -1.0f, ty}, {0.0f, 1.0f, ty}};
+  for (const glm::vec3& plane : planes) {
+    const glm::vec3* in = polygon[from];
+    glm::vec3* out = polygon[1 - from];
+    int kept = 0;
+    for (int k = 0; k < count; ++k) {
+      if (kept + 2 > kMaxVertices) return 0.0f;
+      const glm::vec3& a = in[k];
+      const glm::vec3& b = in[(k + 1) % count];
+      const float da = glm::dot(plane, a), db = glm::dot(plane, b);
+      if (da >= 0.0f) out[kept++] = a;
+      if ((da >= 0.0f) != (db >= 0.0f)) out[kept++] = a + (da / (da - db)) * (b - a);
+    }
+    count = kept;
+    from = 1 - from;
+    if (count == 0) return kInfinity;
+  }
+  float nearest = kInfinity;
+  for (int k = 0; k < count; ++k) nearest = std::min(nearest, polygon[from][k].z);
+  return nearest;
+}
+
+}  // namespace
+
+bool raster_view(const Camera& camera, int width, int height, std::span<const glm::vec3> positions,
+                 RasterView& view) {
+  const CameraBasis basis(camera, width, height);
+  // The view pyramid, 1 % wider than the image: what a pixel centre's ray can reach.
+  const float tx = 1.01f * basis.tan_half * basis.aspect, ty = 1.01f * basis.tan_half;
+  // Per triangle, on all cores (a 1M-triangle mesh): the farthest vertex, and the nearest point
+  // that a primary ray can see. That is the nearest vertex of a triangle wholly in front of the eye
+  // (conservative: it may lie outside the image), and of one that reaches behind the eye (a floor
+  // under the camera, a room around it) the nearest point of its part inside the view pyramid,
+  // which may be far nearer than any of its vertices in front.
+  constexpr uint32_t kChunk = 4096;
+  const uint32_t triangles = uint32_t(positions.size() / 3);
+  const uint32_t chunks = chunk_count(triangles, kChunk);
+  std::vector<float> chunk_near(chunks, kInfinity), chunk_far(chunks, 0.0f);
+  parallel_for_chunks(triangles, kChunk, 0, [&](uint32_t ch, uint32_t begin, uint32_t end) {
+    float lo = kInfinity, hi = 0.0f;
+    for (uint32_t t = begin; t < end; ++t) {
+      glm::vec3 c[3];
+      bool behind = false;
+      for (int k = 0; k < 3; ++k) {
+        const glm::vec3 v = positions[3 * size_t(t) + k] - basis.eye;
+        c[k] = glm::vec3(glm::dot(v, basis.right), glm::dot(v, basis.up), glm::dot(v, basis.forward));
+        hi = std::max(hi, c[k].z);
+        behind = behind || !(c[k].z > 0.0f);
+      }
+      lo = std::min(lo, behind ? nearest_in_view(c, tx, ty) : std::min({c[0].z, c[1].z, c[2].z}));
+    }
+    chunk_near[ch] = lo;
+    chunk_far[ch] = hi;
+  });
+  float nearest = kInfinity, farthest = 0.0f;
+  for (uint32_t c = 0; c < chunks; ++c) {
+    nearest = std::min(nearest, chunk_near[c]);
+    farthest = std::max(farthest, chunk_far[c]);
+  }
+  if (!(farthest > 0.0f) || !std::isfinite(farthest) || !(nearest < kInfinity)) return false;
+  // The depth buffer's resolution spent where the triangles are (a near plane at the camera's
+  // znear left 24-bit depth too coarse for the Utah toasters' and the wood doll's neighbouring
+  // surfaces: mobirt_raster_probe, README *Session 26*). Never nearer than rays start: a ray
+  // leaves the eye at znear along itself, which is at least znear cos(corner) along the view axis.
+  // A scene that reaches the eye itself gets a near plane at far / 10^6: every hit kept, the
+  // depth resolution of 24-bit GLES much coarser (Vulkan's reversed 32-bit float depth keeps it).
+  const float far_distance = farthest * 1.01f;
+  const float cos_corner = 1.0f / std::sqrt(1.0f + tx * tx + ty * ty);
+  const float near_distance =
+      std::max({camera.znear * cos_corner, std::min(nearest * 0.99f, far_distance), far_distance * 1e-6f});
+  const auto put3 = [](float* out, const glm::vec3& v) {
+    out[0] = v.x;
+    out[1] = v.y;
+    out[2] = v.z;
+    out[3] = 0.0f;
+  };
+  put3(view.eye, basis.eye);
+  put3(view.right, basis.right);
+  put3(view.up, basis.up);
+  put3(view.forward, basis.forward);
+  view.projection[0] = 1.0f / (basis.tan_half * basis.aspect);
+  view.projection[1] = 1.0f / basis.tan_half;
+  view.projection[2] = near_distance;
+  view.projection[3] = far_distance;
+  return true;
+}
+
 struct Renderer::Data {
   struct Texture {
     TextureHandle handle;
@@ -132,7 +252,14 @@ struct Renderer::Data {
   bool tree_prebuilt = false;   // the next begin_frame uploads `tree`, built elsewhere in prebuilt_ms
   double prebuilt_ms = 0.0;
   uint32_t ray_width = 0;  // the ray textures' row width; a change recreates them
-  std::map<std::tuple<int, int, int, bool>, PassHandle> trace_passes;  // (lights, packing, analytic, wide)
+  bool tree_walkable = false;   // `tree` is a kd-tree, not only the primitives' texels (frame_walks_tree)
+  // --primary raster: the vertices drawn, the raster pass's texels and the rays that hit, each with
+  // its rasterized index + 1 in its direction's w (kept: their memory reused frame after frame).
+  std::vector<float> raster_vertices;
+  std::vector<uint32_t> raster_texels;
+  RayBatch hit_rays;
+  // (lights, packing, analytic, wide, primary hits)
+  std::map<std::tuple<int, int, int, bool, bool>, PassHandle> trace_passes;
   std::map<std::tuple<int, int, int, int, bool>, PassHandle> shade_passes;  // (lights, textures, pages, colour, wide)
 };
 
@@ -153,14 +280,27 @@ class Renderer::Engine final : public WhittedEngine {
     // as in the paper); a static scene, or a frame whose triangles did not move, keeps it.
     const auto stage = Clock::now();
     Data& cache = *r_.data_;
+    // A frame that walks no tree (--primary raster, no shadow or secondary rays) gets only the
+    // primitives' texels; a cached one of those never serves a frame that walks.
+    const bool walks = frame_walks_tree(scene, r_.settings_);
     const bool reuse = !prebuilt && !r_.settings_.always_rebuild && cache.tree_valid &&
-                       cache.tree_positions == scene.mesh.positions && cache.tree_shapes == scene.shapes;
+                       (cache.tree_walkable || !walks) && cache.tree_positions == scene.mesh.positions &&
+                       cache.tree_shapes == scene.shapes;
     if (prebuilt) {
       t.build_ms = cache.prebuilt_ms;  // on the frame pipeline's worker, during the previous frame
+      if (walks && cache.tree.nodes.empty()) {
+        throw Error(ErrorKind::Internal, "a frame that walks a kd-tree was handed the primitives' texels only");
+      }
+      cache.tree_walkable = !cache.tree.nodes.empty();
     } else if (!reuse) {
       // Into the last tree's arrays (their memory kept); until uploaded again it is no cache.
       cache.tree_valid = false;
-      rebuild_kdtree(cache.tree, scene.mesh.positions, scene.shapes, r_.settings_.kd);
+      if (walks) {
+        rebuild_kdtree(cache.tree, scene.mesh.positions, scene.shapes, r_.settings_.kd);
+      } else {
+        flatten_primitives(cache.tree, scene.mesh.positions, scene.shapes);
+      }
+      cache.tree_walkable = walks;
       cache.tree_positions = scene.mesh.positions;
       cache.tree_shapes = scene.shapes;
       t.build_ms = elapsed_ms(stage);
@@ -177,15 +317,18 @@ class Renderer::Engine final : public WhittedEngine {
 
   TracedGeneration trace(const Scene& scene, const RayBatch& rays, GenerationTimings& g) override {
     TraceResult result = r_.trace_uploaded(scene, r_.data_->tree, rays);
-    g.upload_ms += result.timing.upload_ms;
-    g.trace_ms += result.timing.gpu_ms;
-    g.trace_readback_ms += result.timing.readback_ms;
-    g.bytes_read += result.timing.bytes_read;
+    add_pass(g, result.timing);
     TracedGeneration traced;
     traced.form = TracedGeneration::Form::PackedTexels;
     traced.texels = std::move(result.texels);
     traced.packing = result.packing;
     return traced;
+  }
+
+  TracedGeneration trace_primary(const Scene& scene, const Camera& camera, const RayBatch& rays,
+                                 GenerationTimings& g) override {
+    if (!primaries_rasterized(scene, r_.settings_)) return trace(scene, rays, g);
+    return r_.trace_rasterized(scene, camera, r_.data_->tree, rays, g);
   }
 
   std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, const SurfaceHits& hits,
@@ -272,8 +415,8 @@ bool Renderer::wide_indices(std::initializer_list<std::pair<uint32_t, uint32_t>>
   });
 }
 
-PassHandle Renderer::trace_pass(int lights, Packing packing, bool analytic, bool wide) {
-  auto key = std::make_tuple(lights, int(packing), int(analytic), wide);
+PassHandle Renderer::trace_pass(int lights, Packing packing, bool analytic, bool wide, bool primary_hits) {
+  auto key = std::make_tuple(lights, int(packing), int(analytic), wide, primary_hits);
   auto it = data_->trace_passes.find(key);
   if (it != data_->trace_passes.end()) return it->second;
   PassDesc desc;
@@ -288,6 +431,7 @@ PassHandle Renderer::trace_pass(int lights, Packing packing, bool analytic, bool
                          {MOBIRT_SPEC_OFFSET, int(settings_.shadow_rays.offset.mode)},
                          {MOBIRT_SPEC_ANALYTIC, int(analytic)}};
   if (wide) desc.specialization.push_back({MOBIRT_SPEC_WIDE_INDICES, 1});
+  if (primary_hits) desc.specialization.push_back({MOBIRT_SPEC_PRIMARY_HITS, 1});
   desc.uniform_vec4s = MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * uint32_t(lights);
   desc.texture_bindings = {MOBIRT_BIND_NODES, MOBIRT_BIND_LEAF_PRIMS, MOBIRT_BIND_TRIANGLES,
                            MOBIRT_BIND_RAY_ORIGIN, MOBIRT_BIND_RAY_DIRECTION};
@@ -397,7 +541,25 @@ TraceResult Renderer::trace(const Scene& scene, const FlatKdTree& tree, const Ra
   return trace_uploaded(scene, tree, rays);
 }
 
-TraceResult Renderer::trace_uploaded(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays) {
+TraceResult Renderer::trace_primary(const Scene& scene, const Camera& camera, const FlatKdTree& tree,
+                                    const RayBatch& rays) {
+  if (!primaries_rasterized(scene, settings_)) return trace(scene, tree, rays);
+  data_->tree_valid = false;  // the GPU now holds this tree, not the cached one
+  upload_tree(tree);
+  GenerationTimings g;
+  TracedGeneration traced = trace_rasterized(scene, camera, tree, rays, g);
+  TraceResult result;
+  result.texels = std::move(traced.texels);
+  result.packing = traced.packing;
+  result.timing.gpu_ms = g.trace_ms;
+  result.timing.upload_ms = g.upload_ms;
+  result.timing.readback_ms = g.trace_readback_ms;
+  result.timing.bytes_read = g.bytes_read;
+  return result;
+}
+
+TraceResult Renderer::trace_uploaded(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays,
+                                     bool primary_hits) {
   TraceResult result;
   // Without shadows the pass is specialised to no lights: it casts no shadow rays at all.
   const int lights = pass_lights(int(shadow_lights(scene).size()));
@@ -408,13 +570,112 @@ TraceResult Renderer::trace_uploaded(const Scene& scene, const FlatKdTree& tree,
   const bool wide = wide_indices({{d.nodes.rows, kDataWidth}, {d.leaf_prims.rows, kDataWidth},
                                   {d.triangles.rows, kDataWidth}, {d.ray_origin.rows, rays.width},
                                   {d.ray_direction.rows, rays.width}});
-  const PassHandle pass = trace_pass(lights, result.packing, !settings_.specialize || !scene.shapes.empty(), wide);
+  const PassHandle pass =
+      trace_pass(lights, result.packing, !settings_.specialize || !scene.shapes.empty(), wide, primary_hits);
   const std::vector<float> uniforms = trace_uniforms(tree, shadow_lights(scene), settings_.shadow_rays, lights);
   const TextureHandle textures[] = {d.nodes.handle, d.leaf_prims.handle, d.triangles.handle,
                                     d.ray_origin.handle, d.ray_direction.handle};
   result.texels.resize(rays.count());
   result.timing = backend_.run_pass(pass, textures, uniforms, rays.width, rays.count(), result.texels);
   return result;
+}
+
+TracedGeneration Renderer::trace_rasterized(const Scene& scene, const Camera& camera, const FlatKdTree& tree,
+                                            const RayBatch& rays, GenerationTimings& g) {
+  Data& d = *data_;
+  const uint32_t width = rays.width, height = rays.rows();
+  std::atomic<uint32_t> out_of_order{0};
+  parallel_for_chunks(rays.count(), 16384, 0, [&](uint32_t, uint32_t begin, uint32_t end) {
+    uint32_t wrong = 0;
+    for (uint32_t i = begin; i < end; ++i) wrong += rays.pixel[i] != i ? 1u : 0u;
+    if (wrong) out_of_order.fetch_add(wrong, std::memory_order_relaxed);
+  });
+  if (uint64_t(width) * height != rays.count() || out_of_order.load() != 0) {
+    throw Error(ErrorKind::Internal, "--primary raster: the primary rays are not one per pixel in pixel order");
+  }
+  // The vertices: each triangle's three, with its index + 1 (an exact float below 2^24), on all cores.
+  auto stage = Clock::now();
+  const std::vector<glm::vec3>& positions = scene.mesh.positions;
+  const uint32_t triangles = uint32_t(scene.mesh.triangle_count());
+  RasterView view{};
+  const bool visible = raster_view(camera, int(width), int(height), positions, view);
+  d.raster_vertices.resize(visible ? size_t(triangles) * 12 : 0);
+  if (visible) {
+    float* out = d.raster_vertices.data();
+    parallel_for_chunks(triangles, 4096, 0, [&](uint32_t, uint32_t begin, uint32_t end) {
+      for (uint32_t t = begin; t < end; ++t) {
+        const float index = float(t + 1);
+        for (uint32_t k = 0; k < 3; ++k) {
+          const glm::vec3& p = positions[3 * t + k];
+          float* v = out + (3 * size_t(t) + k) * 4;
+          v[0] = p.x;
+          v[1] = p.y;
+          v[2] = p.z;
+          v[3] = index;
+        }
+      }
+    });
+  }
+  g.upload_ms += elapsed_ms(stage);
+  d.raster_texels.resize(rays.count());
+  add_pass(g, backend_.run_raster(d.raster_vertices, view, width, height, d.raster_texels));
+
+  TracedGeneration traced;
+  traced.form = TracedGeneration::Form::PackedTexels;
+  const int lights = pass_lights(int(shadow_lights(scene).size()));
+  traced.packing = choose_packing(scene.primitive_count(), lights, scene.source);
+  if (shadow_lights(scene).empty()) {
+    // No shadow rays: the raster's texels are what the trace pass would write without them (index
+    // + 1 in 24 bits, mask 0). A pass without shadow rays is made for 8 lights at most, so 24/8.
+    if (traced.packing != Packing::Bits24_8) throw Error(ErrorKind::Internal, "--primary raster: 16/16 without shadows");
+    traced.texels = d.raster_texels;
+    return traced;
+  }
+  // Shadow rays from the rasterized hits: the trace pass specialised to PRIMARY_HITS, each ray's
+  // index + 1 in its direction's w (its tmax is infinite: a primary ray's). Over the hits alone,
+  // as the shading pass shades the hits alone: a miss needs no fragment (its texel is 0, no hit and
+  // no shadow bits), and the Utah wood doll's rays mostly miss. The hits in pixel order, 8 to a 4x2
+  // tile (order_in_simd_tiles): neighbouring pixels in one SIMD group.
+  stage = Clock::now();
+  constexpr uint32_t kChunk = 4096;
+  const uint32_t n = rays.count();
+  const uint32_t chunks = chunk_count(n, kChunk);
+  std::vector<uint32_t> first(size_t(chunks) + 1, 0);
+  parallel_for_chunks(n, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
+    uint32_t count = 0;
+    for (uint32_t i = begin; i < end; ++i) count += d.raster_texels[i] != 0 ? 1u : 0u;
+    first[c + 1] = count;
+  });
+  for (uint32_t c = 0; c < chunks; ++c) first[c + 1] += first[c];
+  RayBatch& hit_rays = d.hit_rays;
+  const uint32_t hit_count = first[chunks];
+  hit_rays.width = width;
+  hit_rays.unique_pixels = true;
+  hit_rays.origin.resize(hit_count);
+  hit_rays.direction.resize(hit_count);
+  hit_rays.pixel.resize(hit_count);
+  hit_rays.weight.resize(hit_count);
+  parallel_for_chunks(n, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
+    uint32_t k = first[c];
+    for (uint32_t i = begin; i < end; ++i) {
+      const uint32_t index_plus_one = d.raster_texels[i] & 0xFFFFFFu;
+      if (index_plus_one == 0) continue;
+      hit_rays.origin[k] = rays.origin[i];
+      hit_rays.direction[k] = glm::vec4(glm::vec3(rays.direction[i]), float(index_plus_one));
+      hit_rays.pixel[k] = i;  // the primary ray it stands for
+      hit_rays.weight[k] = glm::vec3(0.0f);
+      ++k;
+    }
+  });
+  order_in_simd_tiles(hit_rays);
+  g.upload_ms += elapsed_ms(stage);
+  traced.texels.assign(n, pack_trace(traced.packing, 0, 0));
+  if (hit_count == 0) return traced;
+  TraceResult result = trace_uploaded(scene, tree, hit_rays, true);
+  add_pass(g, result.timing);
+  if (result.packing != traced.packing) throw Error(ErrorKind::Internal, "--primary raster: the shadow pass packed otherwise");
+  parallel_for(hit_count, 0, [&](uint32_t k) { traced.texels[hit_rays.pixel[k]] = result.texels[k]; }, 4096);
+  return traced;
 }
 
 int Renderer::pass_lights(int scene_lights) const {

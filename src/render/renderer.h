@@ -33,6 +33,18 @@ namespace mobirt {
 // the same kind of measurement variant (what llvmpipe's texture-function calls cost).
 enum class DataReads { TexelBuffers, Images, StorageBuffers, DeviceAddresses };
 
+// How the primary rays' closest hits are found. Trace: through the kd-tree, as every other
+// generation (the paper's pipeline, the default). Raster: the triangles drawn with a depth test
+// (Backend::run_raster), each pixel centre's closest triangle found by the rasterizer where the
+// primary ray through it would find it by a walk, a hybrid renderer's G-buffer step; the shadow
+// rays then start from that triangle's hit (glsl/trace_main.glsl, PRIMARY_HITS), and a frame
+// without shadow or secondary rays builds no kd-tree at all (frame_walks_tree). Pixels whose
+// centre lies on an edge between two triangles may take the other one (README, *Primary hits
+// rasterized*). A scene with analytic shapes (spheres, cones) has its primaries traced.
+enum class PrimaryHits { Trace, Raster };
+// "trace" / "raster".
+const char* primary_hits_name(PrimaryHits primary);
+
 struct RenderSettings {
   int width = 400;
   int height = 240;
@@ -52,6 +64,7 @@ struct RenderSettings {
   // The shading pass's colour: 8 bits per channel, or 16 from two passes (high and low bytes).
   ColourDepth colour = ColourDepth::Bits8;
   DataReads data = DataReads::TexelBuffers;  // faster on lavapipe (README: "Data reads")
+  PrimaryHits primary = PrimaryHits::Trace;
   KdBuildOptions kd;
   ShadowSettings shadow_rays;  // also the ray/triangle test and precision of every traced ray
   SecondarySettings secondary;
@@ -83,6 +96,10 @@ class Renderer {
   // The traversal pass alone over the given rays (for tests and benchmarks). The tree must have
   // been built from scene.mesh.
   TraceResult trace(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays);
+  // The primary generation's texels as a frame finds them (settings().primary: traced, or
+  // rasterized with the shadow pass from its hits), over `rays` = primary_rays(camera, width,
+  // height): what `mobirt accuracy` compares with the reference. The tree as for trace().
+  TraceResult trace_primary(const Scene& scene, const Camera& camera, const FlatKdTree& tree, const RayBatch& rays);
 
   // The shading pass alone over decoded hits (two passes for 16-bit colour); one colour per ray,
   // as read back from the RGBA8 texels. Lights the hits by their masks as they are (the frame sets
@@ -117,8 +134,8 @@ class Renderer {
   // Whether a pass that binds buffers of these rows x widths (the capacities: a buffer's texels)
   // must be specialised to WIDE_INDICES: one of more than 2^23 texels (glsl/layout.h).
   bool wide_indices(std::initializer_list<std::pair<uint32_t, uint32_t>> rows_and_widths) const;
-  // wide: the pass binds such a buffer.
-  PassHandle trace_pass(int lights, Packing packing, bool analytic, bool wide);
+  // wide: the pass binds such a buffer. primary_hits: specialised to PRIMARY_HITS (--primary raster).
+  PassHandle trace_pass(int lights, Packing packing, bool analytic, bool wide, bool primary_hits = false);
   PassHandle shade_pass(int lights, int textures, int pages, int colour, bool wide);
   void prepare_atlas(const Scene& scene);
   void upload_tree(const FlatKdTree& tree);
@@ -129,7 +146,15 @@ class Renderer {
   std::span<const Light> shadow_lights(const Scene& scene) const;
   // The light count a pass is built for: the scene's, or the packing's maximum when general.
   int pass_lights(int scene_lights) const;
-  TraceResult trace_uploaded(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays);
+  // primary_hits: the pass specialised to PRIMARY_HITS (each ray's rasterized index + 1 in its
+  // direction's w).
+  TraceResult trace_uploaded(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays,
+                             bool primary_hits = false);
+  // The primary generation with its hits rasterized (--primary raster) and, with shadows, the trace
+  // pass specialised to PRIMARY_HITS casting the shadow rays from them, over the hits alone.
+  // `tree`: the one uploaded, whose triangles and box the shadow pass reads.
+  TracedGeneration trace_rasterized(const Scene& scene, const Camera& camera, const FlatKdTree& tree,
+                                    const RayBatch& rays, GenerationTimings& g);
 
   Backend& backend_;
   RenderSettings settings_;
@@ -139,6 +164,22 @@ class Renderer {
   std::unique_ptr<Data> data_;
   std::unique_ptr<Engine> engine_;
 };
+
+// Whether a frame of `scene` with `settings` walks a kd-tree: every frame does, but one whose
+// primary hits are rasterized and that casts no shadow ray and no secondary ray. That one gets only
+// the primitives' texels (flatten_primitives): decoding reads the triangles, nothing walks a tree.
+bool frame_walks_tree(const Scene& scene, const RenderSettings& settings);
+// Whether a frame rasterizes its primary hits: --primary raster, and a scene of triangles only
+// (analytic shapes have none to draw: their scenes' primaries are traced).
+bool primaries_rasterized(const Scene& scene, const RenderSettings& settings);
+
+// The view of Backend::run_raster for the primary rays of `camera` at width x height: near just
+// before the nearest point a primary ray can see (the nearest vertex of a triangle wholly in front
+// of the eye, or the nearest point inside the view pyramid of one that reaches behind it), never
+// before znear cos(corner), the nearest a ray starts along the view axis; far just past the
+// farthest vertex. False when no triangle reaches into the view pyramid: none can be seen.
+bool raster_view(const Camera& camera, int width, int height, std::span<const glm::vec3> positions,
+                 RasterView& view);
 
 // The traversal and shading uniforms (vec4 arrays, indices in glsl/layout.h).
 // pass_lights: the light count the pass was built for (>= lights.size(); the rest are unused).

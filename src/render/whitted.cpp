@@ -135,7 +135,8 @@ Image render_whitted(const Scene& scene, const Camera& camera, const RenderSetti
   for (int generation = 0; generation <= depth && rays.count() > 0; ++generation) {
     GenerationTimings g;
     g.rays = rays.count();
-    TracedGeneration traced = engine.trace(scene, rays, g);
+    TracedGeneration traced = generation == 0 ? engine.trace_primary(scene, camera, rays, g)
+                                               : engine.trace(scene, rays, g);
 
     stage = std::chrono::steady_clock::now();
     const SurfaceHits hits = decode_generation(scene, settings, tree, rays, std::move(traced), g);

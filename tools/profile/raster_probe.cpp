@@ -7,8 +7,9 @@
 // trace only shadow and secondary rays. This probe measures that on the same driver (llvmpipe, here
 // through OpenGL ES 2.0 on EGL's surfaceless platform: the rasterizer lavapipe shares), with the
 // scene's own camera and size, and checks it against the CPU traversal of the same primary rays
-// (src/accel/kdtree_traverse.cpp, the traversal pass's oracle), pixel by pixel. Not built into the
-// renderer: see the README's *Session 26*.
+// (src/accel/kdtree_traverse.cpp, the traversal pass's oracle), pixel by pixel. The renderer's
+// --primary raster (Backend::run_raster, session 27) grew out of it; the probe stays as its
+// standalone measure on GLES (README *Session 26*).
 //
 // Per repeat: the posed triangles written into a vertex buffer (position + index, no sharing),
 // the draw (glFinish: the rasterizer's time), the read-back (glReadPixels). Medians are printed,
@@ -35,6 +36,7 @@
 #include "core/error.h"
 #include "profile_scene.h"
 #include "raytree/rays.h"
+#include "render/renderer.h"
 
 namespace mobirt {
 namespace {
@@ -163,18 +165,14 @@ int run(int argc, char** argv) {
 
   // The projection of CameraBasis::ray: pixel x's centre at ndc 2 (x + 0.5) / width - 1, row y
   // (0 at the top) at 1 - 2 (y + 0.5) / height, so that each pixel centre samples the primary ray
-  // through it. Depth from just before the nearest vertex in front of the eye to just past the
-  // farthest: the depth buffer's resolution spent where the triangles are.
+  // through it. Depth from the renderer's near and far (raster_view, as --primary raster draws:
+  // the nearest point a primary ray can see, to just past the farthest vertex).
   const CameraBasis basis(p.camera, width, height);
-  float nearest = std::numeric_limits<float>::max(), farthest = 0.0f;
-  for (const glm::vec3& v : scene.mesh.positions) {
-    const float z = glm::dot(v - basis.eye, basis.forward);
-    farthest = std::max(farthest, z);
-    if (z > 0.0f) nearest = std::min(nearest, z);
+  RasterView view{};
+  if (!raster_view(p.camera, width, height, scene.mesh.positions, view)) {
+    throw Error(ErrorKind::BadInput, "every triangle lies behind the camera");
   }
-  if (!(farthest > 0.0f)) throw Error(ErrorKind::BadInput, "every triangle lies behind the camera");
-  const float far_distance = farthest * 1.01f;
-  const float near_distance = std::max({p.camera.znear, nearest * 0.99f, far_distance * 1e-6f});
+  const float near_distance = view.projection[2], far_distance = view.projection[3];
   const float a = (far_distance + near_distance) / (far_distance - near_distance);
   const float b = -2.0f * far_distance * near_distance / (far_distance - near_distance);
   glUniform4f(glGetUniformLocation(program, "u_projection"), 1.0f / (basis.tan_half * basis.aspect),

@@ -29,6 +29,8 @@
 // The full-screen triangle's GLSL ES 1.00 source (build/gles_shaders/; a pass's own comes with its
 // PassDesc) and the binding and #define tables generated from glsl/layout.h and prelude_vk.glsl.
 #include "es_fullscreen_vert.h"
+#include "es_raster_frag.h"
+#include "es_raster_vert.h"
 #include "gles_layout_tables.h"
 
 namespace mobirt {
@@ -304,6 +306,8 @@ class GlesBackend final : public Backend {
   void destroy(PassHandle pass) override;
   PassTiming run_pass(PassHandle pass, std::span<const TextureHandle> textures, std::span<const float> uniforms,
                       uint32_t width, uint32_t count, std::span<uint32_t> out) override;
+  PassTiming run_raster(std::span<const float> vertices, const RasterView& view, uint32_t width, uint32_t height,
+                        std::span<uint32_t> out) override;
   std::vector<std::string> take_debug_messages() override;
 
  private:
@@ -311,6 +315,10 @@ class GlesBackend final : public Backend {
   void check_gl(const char* what) const;  // throws on a pending GL error
   void ensure_target(uint32_t width, uint32_t height);
   GLuint compile(GLenum stage, const std::string& source, const std::string& name);
+  // `vertex` and `fragment` linked with `attribute` at location 0; `fragment` is freed with the
+  // program (or at once on a failed link, which throws naming `name`).
+  GLuint link_program(GLuint vertex, GLuint fragment, const char* attribute, const std::string& name);
+  void prepare_raster(uint32_t width, uint32_t height);  // the raster program and target (run_raster)
   Texture& texture_ref(TextureHandle handle);
   Pass& pass_ref(PassHandle handle);
 
@@ -326,6 +334,16 @@ class GlesBackend final : public Backend {
   GLuint target_ = 0;
   uint32_t target_width_ = 0, target_height_ = 0;
   std::vector<uint8_t> readback_;
+  // The raster pass (run_raster), made by its first call: program, vertex buffer, and a target of
+  // its own, RGBA8 colour and a depth buffer (24 bits with GL_OES_depth24, else 16).
+  struct Raster {
+    GLuint program = 0;
+    GLint eye = -1, right = -1, up = -1, forward = -1, projection = -1;
+    GLuint vertices = 0;
+    GLuint framebuffer = 0, colour = 0, depth = 0;
+    uint32_t width = 0, height = 0;
+  } raster_;
+  bool depth24_ = false;
   std::unordered_map<uint32_t, Texture> textures_;
   std::unordered_map<uint32_t, Pass> passes_;
   uint32_t next_texture_ = 1;
@@ -372,6 +390,7 @@ GlesBackend::GlesBackend(const BackendOptions& options) {
                                               ") lacks GL_OES_texture_float: mobirt keeps its scene data in float textures");
     }
     const bool khr_debug = has_word(gl_extensions.c_str(), "GL_KHR_debug");
+    depth24_ = has_word(gl_extensions.c_str(), "GL_OES_depth24");
     if (khr_debug) {
       auto callback = reinterpret_cast<PFNGLDEBUGMESSAGECALLBACKKHRPROC>(eglGetProcAddress("glDebugMessageCallbackKHR"));
       auto control = reinterpret_cast<PFNGLDEBUGMESSAGECONTROLKHRPROC>(eglGetProcAddress("glDebugMessageControlKHR"));
@@ -470,6 +489,11 @@ GlesBackend::~GlesBackend() {
   for (auto& [id, p] : passes_) glDeleteProgram(p.program);
   if (target_) glDeleteTextures(1, &target_);
   if (framebuffer_) glDeleteFramebuffers(1, &framebuffer_);
+  if (raster_.program) glDeleteProgram(raster_.program);
+  if (raster_.vertices) glDeleteBuffers(1, &raster_.vertices);
+  if (raster_.framebuffer) glDeleteFramebuffers(1, &raster_.framebuffer);
+  if (raster_.colour) glDeleteTextures(1, &raster_.colour);
+  if (raster_.depth) glDeleteRenderbuffers(1, &raster_.depth);
   if (vertex_buffer_) glDeleteBuffers(1, &vertex_buffer_);
   if (vertex_shader_) glDeleteShader(vertex_shader_);
   glFinish();
@@ -522,6 +546,26 @@ GLuint GlesBackend::compile(GLenum stage, const std::string& source, const std::
     throw Error(ErrorKind::Internal, "GLSL ES compile of " + name + " failed: " + log.c_str());
   }
   return shader;
+}
+
+GLuint GlesBackend::link_program(GLuint vertex, GLuint fragment, const char* attribute, const std::string& name) {
+  const GLuint program = glCreateProgram();
+  glAttachShader(program, vertex);
+  glAttachShader(program, fragment);
+  glBindAttribLocation(program, 0, attribute);
+  glLinkProgram(program);
+  glDeleteShader(fragment);  // freed with the program
+  GLint ok = GL_FALSE;
+  glGetProgramiv(program, GL_LINK_STATUS, &ok);
+  if (!ok) {
+    GLint length = 0;
+    glGetProgramiv(program, GL_INFO_LOG_LENGTH, &length);
+    std::string log(size_t(std::max(length, 1)), '\0');
+    glGetProgramInfoLog(program, GLsizei(log.size()), nullptr, log.data());
+    glDeleteProgram(program);
+    throw Error(ErrorKind::Internal, "GLSL ES link of " + name + " failed: " + log.c_str());
+  }
+  return program;
 }
 
 TextureHandle GlesBackend::create_texture(uint32_t width, uint32_t height, TexelFormat format) {
@@ -649,25 +693,11 @@ PassHandle GlesBackend::create_pass(const PassDesc& desc) {
   const GLuint fragment = compile(GL_FRAGMENT_SHADER, source, name);
   Pass pass;
   pass.desc = desc;
-  pass.program = glCreateProgram();
-  glAttachShader(pass.program, vertex_shader_);
-  glAttachShader(pass.program, fragment);
-  glBindAttribLocation(pass.program, 0, "a_position");
-  glLinkProgram(pass.program);
-  glDeleteShader(fragment);  // freed with the program
-  GLint ok = GL_FALSE;
-  glGetProgramiv(pass.program, GL_LINK_STATUS, &ok);
+  pass.program = link_program(vertex_shader_, fragment, "a_position", name);  // frees `fragment`
   auto fail = [&](ErrorKind kind, const std::string& message) {
     glDeleteProgram(pass.program);
     throw Error(kind, message);
   };
-  if (!ok) {
-    GLint length = 0;
-    glGetProgramiv(pass.program, GL_INFO_LOG_LENGTH, &length);
-    std::string log(size_t(std::max(length, 1)), '\0');
-    glGetProgramInfoLog(pass.program, GLsizei(log.size()), nullptr, log.data());
-    fail(ErrorKind::Internal, "GLSL ES link of " + name + " failed: " + log.c_str());
-  }
 
   // Reflection on the linked program: the active samplers, counted against the ES 2.0 limit.
   const std::map<std::string, int> slots = sampler_slots(code);
@@ -823,6 +853,124 @@ PassTiming GlesBackend::run_pass(PassHandle handle, std::span<const TextureHandl
   glDisableVertexAttribArray(0);
   glUseProgram(0);
   pending_upload_ms_ = 0.0;
+  timing.wall_ms = elapsed_ms(wall_start);
+  return timing;
+}
+
+void GlesBackend::prepare_raster(uint32_t width, uint32_t height) {
+  Raster& r = raster_;
+  if (!r.program) {
+    const GLuint vertex = compile(GL_VERTEX_SHADER, es_raster_vert, "raster.vert");
+    GLuint fragment = 0;
+    try {
+      fragment = compile(GL_FRAGMENT_SHADER, es_raster_frag, "raster.frag");
+    } catch (...) {
+      glDeleteShader(vertex);
+      throw;
+    }
+    GLuint program = 0;
+    try {
+      program = link_program(vertex, fragment, "a_vertex", "raster.vert + raster.frag");
+    } catch (...) {
+      glDeleteShader(vertex);
+      throw;
+    }
+    glDeleteShader(vertex);  // freed with the program
+    r.program = program;
+    r.eye = glGetUniformLocation(program, "u_eye");
+    r.right = glGetUniformLocation(program, "u_right");
+    r.up = glGetUniformLocation(program, "u_up");
+    r.forward = glGetUniformLocation(program, "u_forward");
+    r.projection = glGetUniformLocation(program, "u_projection");
+    glGenBuffers(1, &r.vertices);
+    glGenFramebuffers(1, &r.framebuffer);
+    check_gl("raster program");
+  }
+  if (r.colour && r.width == width && r.height == height) return;
+  if (width > uint32_t(max_texture_size_) || height > uint32_t(max_texture_size_)) {
+    throw Error(ErrorKind::BadInput, "--size " + std::to_string(width) + "x" + std::to_string(height) +
+                                         " is larger than GL_MAX_TEXTURE_SIZE (" + std::to_string(max_texture_size_) +
+                                         "): use --primary trace");
+  }
+  r.width = r.height = 0;  // no target until the new one is complete (a failed one is made again)
+  if (!r.colour) glGenTextures(1, &r.colour);
+  if (!r.depth) glGenRenderbuffers(1, &r.depth);
+  glBindTexture(GL_TEXTURE_2D, r.colour);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+  glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA, GLsizei(width), GLsizei(height), 0, GL_RGBA, GL_UNSIGNED_BYTE, nullptr);
+  glBindRenderbuffer(GL_RENDERBUFFER, r.depth);
+  glRenderbufferStorage(GL_RENDERBUFFER, depth24_ ? GL_DEPTH_COMPONENT24_OES : GL_DEPTH_COMPONENT16, GLsizei(width),
+                        GLsizei(height));
+  glBindFramebuffer(GL_FRAMEBUFFER, r.framebuffer);
+  glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, r.colour, 0);
+  glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, r.depth);
+  const GLenum status = glCheckFramebufferStatus(GL_FRAMEBUFFER);
+  if (status != GL_FRAMEBUFFER_COMPLETE) {
+    throw Error(ErrorKind::Internal, "the raster framebuffer of " + std::to_string(width) + "x" +
+                                         std::to_string(height) + " is incomplete (status " + std::to_string(status) + ")");
+  }
+  check_gl("raster target");
+  r.width = width;
+  r.height = height;
+}
+
+PassTiming GlesBackend::run_raster(std::span<const float> vertices, const RasterView& view, uint32_t width,
+                                   uint32_t height, std::span<uint32_t> out) {
+  const auto wall_start = Clock::now();
+  current();
+  if (out.size() != size_t(width) * height) {
+    throw Error(ErrorKind::Internal, "run_raster: the output holds " + std::to_string(out.size()) + " texels, not " +
+                                         std::to_string(width) + "x" + std::to_string(height));
+  }
+  if (vertices.size() % 12 != 0) {
+    throw Error(ErrorKind::Internal, "run_raster: the vertices are not whole triangles of 4 floats a vertex");
+  }
+  PassTiming timing;
+  timing.upload_ms = pending_upload_ms_;
+  pending_upload_ms_ = 0.0;
+  if (width == 0 || height == 0) {
+    timing.wall_ms = elapsed_ms(wall_start);
+    return timing;
+  }
+  prepare_raster(width, height);
+  const Raster& r = raster_;
+  const auto upload_start = Clock::now();
+  glBindBuffer(GL_ARRAY_BUFFER, r.vertices);
+  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(vertices.size_bytes()), vertices.data(), GL_STREAM_DRAW);
+  glFinish();
+  timing.upload_ms += elapsed_ms(upload_start);
+  glUseProgram(r.program);
+  glUniform4fv(r.eye, 1, view.eye);
+  glUniform4fv(r.right, 1, view.right);
+  glUniform4fv(r.up, 1, view.up);
+  glUniform4fv(r.forward, 1, view.forward);
+  glUniform4fv(r.projection, 1, view.projection);
+  glBindFramebuffer(GL_FRAMEBUFFER, r.framebuffer);
+  glViewport(0, 0, GLsizei(width), GLsizei(height));
+  glEnableVertexAttribArray(0);
+  glVertexAttribPointer(0, 4, GL_FLOAT, GL_FALSE, 0, nullptr);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_LESS);
+  glDepthMask(GL_TRUE);
+  glClearColor(0.0f, 0.0f, 0.0f, 0.0f);  // index + 1 = 0: no triangle
+  glClearDepthf(1.0f);
+  check_gl("raster set-up");
+
+  const auto gpu_start = Clock::now();
+  glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+  glDrawArrays(GL_TRIANGLES, 0, GLsizei(vertices.size() / 4));
+  glFinish();
+  timing.gpu_ms = elapsed_ms(gpu_start);
+  glDisable(GL_DEPTH_TEST);  // the fragment passes draw without one
+
+  const auto read_start = Clock::now();
+  glReadPixels(0, 0, GLsizei(width), GLsizei(height), GL_RGBA, GL_UNSIGNED_BYTE, out.data());
+  glDisableVertexAttribArray(0);
+  glUseProgram(0);
+  check_gl("raster glReadPixels");
+  timing.readback_ms = elapsed_ms(read_start);
+  timing.bytes_read = uint64_t(out.size()) * 4;
   timing.wall_ms = elapsed_ms(wall_start);
   return timing;
 }

@@ -21,6 +21,15 @@
 
 namespace mobirt::vk {
 
+ShaderModule create_shader_module(VkDevice vk_device, std::span<const uint32_t> code) {
+  VkShaderModuleCreateInfo info{VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO};
+  info.codeSize = code.size_bytes();
+  info.pCode = code.data();
+  VkShaderModule module = VK_NULL_HANDLE;
+  VK_CHECK(vkCreateShaderModule(vk_device, &info, nullptr, &module));
+  return ShaderModule(vk_device, module);
+}
+
 VkDescriptorType descriptor_type(TextureKind kind) {
   switch (kind) {
     case TextureKind::TexelBuffer: return VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER;
@@ -122,12 +131,7 @@ Pipelines::Pipelines(const Device& device, const std::string& cache_dir)
   render_pass_ = create_target_render_pass(vk_device, false);
   host_render_pass_ = create_target_render_pass(vk_device, true);
 
-  VkShaderModuleCreateInfo module_info{VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO};
-  module_info.codeSize = sizeof(spirv_fullscreen_vert);
-  module_info.pCode = spirv_fullscreen_vert;
-  VkShaderModule module = VK_NULL_HANDLE;
-  VK_CHECK(vkCreateShaderModule(vk_device, &module_info, nullptr, &module));
-  vertex_shader_ = ShaderModule(vk_device, module);
+  vertex_shader_ = create_shader_module(vk_device, spirv_fullscreen_vert);
 
   VkPipelineCacheCreateInfo cache_info{VK_STRUCTURE_TYPE_PIPELINE_CACHE_CREATE_INFO};
   const std::vector<char> cached = load_cache();
@@ -185,6 +189,15 @@ void Pipelines::save_cache() const {
 VkPipeline create_fullscreen_pipeline(VkDevice vk_device, VkRenderPass render_pass, VkPipelineLayout pipeline_layout,
                                       VkShaderModule vertex, VkShaderModule fragment,
                                       const VkSpecializationInfo* specialization, VkPipelineCache cache) {
+  return create_graphics_pipeline(vk_device, render_pass, pipeline_layout, vertex, fragment, specialization, cache,
+                                  nullptr, nullptr);
+}
+
+VkPipeline create_graphics_pipeline(VkDevice vk_device, VkRenderPass render_pass, VkPipelineLayout pipeline_layout,
+                                    VkShaderModule vertex, VkShaderModule fragment,
+                                    const VkSpecializationInfo* specialization, VkPipelineCache cache,
+                                    const VkPipelineVertexInputStateCreateInfo* vertex_input,
+                                    const VkPipelineDepthStencilStateCreateInfo* depth) {
   VkPipelineShaderStageCreateInfo stages[2]{};
   stages[0].sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
   stages[0].stage = VK_SHADER_STAGE_VERTEX_BIT;
@@ -196,7 +209,7 @@ VkPipeline create_fullscreen_pipeline(VkDevice vk_device, VkRenderPass render_pa
   stages[1].pName = "main";
   stages[1].pSpecializationInfo = specialization;
 
-  VkPipelineVertexInputStateCreateInfo vertex_input{VK_STRUCTURE_TYPE_PIPELINE_VERTEX_INPUT_STATE_CREATE_INFO};
+  const VkPipelineVertexInputStateCreateInfo no_vertex_input{VK_STRUCTURE_TYPE_PIPELINE_VERTEX_INPUT_STATE_CREATE_INFO};
   VkPipelineInputAssemblyStateCreateInfo assembly{VK_STRUCTURE_TYPE_PIPELINE_INPUT_ASSEMBLY_STATE_CREATE_INFO};
   assembly.topology = VK_PRIMITIVE_TOPOLOGY_TRIANGLE_LIST;
   VkPipelineViewportStateCreateInfo viewport{VK_STRUCTURE_TYPE_PIPELINE_VIEWPORT_STATE_CREATE_INFO};
@@ -204,7 +217,7 @@ VkPipeline create_fullscreen_pipeline(VkDevice vk_device, VkRenderPass render_pa
   viewport.scissorCount = 1;
   VkPipelineRasterizationStateCreateInfo raster{VK_STRUCTURE_TYPE_PIPELINE_RASTERIZATION_STATE_CREATE_INFO};
   raster.polygonMode = VK_POLYGON_MODE_FILL;
-  raster.cullMode = VK_CULL_MODE_NONE;
+  raster.cullMode = VK_CULL_MODE_NONE;  // rays hit both sides of a triangle
   raster.frontFace = VK_FRONT_FACE_COUNTER_CLOCKWISE;
   raster.lineWidth = 1.0f;
   VkPipelineMultisampleStateCreateInfo multisample{VK_STRUCTURE_TYPE_PIPELINE_MULTISAMPLE_STATE_CREATE_INFO};
@@ -224,11 +237,12 @@ VkPipeline create_fullscreen_pipeline(VkDevice vk_device, VkRenderPass render_pa
   VkGraphicsPipelineCreateInfo pipeline_info{VK_STRUCTURE_TYPE_GRAPHICS_PIPELINE_CREATE_INFO};
   pipeline_info.stageCount = 2;
   pipeline_info.pStages = stages;
-  pipeline_info.pVertexInputState = &vertex_input;
+  pipeline_info.pVertexInputState = vertex_input ? vertex_input : &no_vertex_input;
   pipeline_info.pInputAssemblyState = &assembly;
   pipeline_info.pViewportState = &viewport;
   pipeline_info.pRasterizationState = &raster;
   pipeline_info.pMultisampleState = &multisample;
+  pipeline_info.pDepthStencilState = depth;
   pipeline_info.pColorBlendState = &blend;
   pipeline_info.pDynamicState = &dynamic;
   pipeline_info.layout = pipeline_layout;
@@ -345,12 +359,7 @@ Pass Pipelines::create_pass(const PassDesc& desc) const {
   }
 
   // The pipeline: a full-screen triangle, the specialised fragment shader, dynamic viewport.
-  VkShaderModuleCreateInfo module_info{VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO};
-  module_info.codeSize = code.size_bytes();
-  module_info.pCode = code.data();
-  VkShaderModule module_handle = VK_NULL_HANDLE;
-  VK_CHECK(vkCreateShaderModule(vk_device, &module_info, nullptr, &module_handle));
-  const ShaderModule fragment_module(vk_device, module_handle);  // only needed until the pipeline exists
+  const ShaderModule fragment_module = create_shader_module(vk_device, code);  // needed until the pipeline exists
 
   const SpecializationConstants specialization(desc.specialization);
   pass.pipeline = Pipeline(vk_device, create_fullscreen_pipeline(vk_device, render_pass_.get(), pipeline_layout,

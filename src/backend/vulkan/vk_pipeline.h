@@ -29,12 +29,24 @@ Sampler create_fetch_sampler(VkDevice device, VkFilter filter = VK_FILTER_NEARES
 // host_read, left in GENERAL for the host to read a linear target in place (a compatible pass).
 RenderPass create_target_render_pass(VkDevice device, bool host_read = false);
 
+// A shader module of SPIR-V `code`.
+ShaderModule create_shader_module(VkDevice device, std::span<const uint32_t> code);
+
 // The graphics pipeline of a full-screen fragment pass: one triangle from `vertex`, `fragment` with
 // its specialisation (may be null), no culling, no blending, dynamic viewport and scissor, one
 // RGBA8 attachment of `render_pass`. Every fragment pass uses it, the peers' included.
 VkPipeline create_fullscreen_pipeline(VkDevice device, VkRenderPass render_pass, VkPipelineLayout layout,
                                       VkShaderModule vertex, VkShaderModule fragment,
                                       const VkSpecializationInfo* specialization, VkPipelineCache cache);
+
+// The same pipeline state with the vertex stage's input and a depth test where given (the raster
+// pass of --primary raster, vk_raster.h): null keeps the full-screen pass's (no vertex input, no
+// depth attachment).
+VkPipeline create_graphics_pipeline(VkDevice device, VkRenderPass render_pass, VkPipelineLayout layout,
+                                    VkShaderModule vertex, VkShaderModule fragment,
+                                    const VkSpecializationInfo* specialization, VkPipelineCache cache,
+                                    const VkPipelineVertexInputStateCreateInfo* vertex_input,
+                                    const VkPipelineDepthStencilStateCreateInfo* depth);
 
 // A pass's specialization constants as Vulkan takes them; info() points into this object.
 class SpecializationConstants {
@@ -85,6 +97,8 @@ class Pipelines {
   // Writes the pipeline cache to its file, whole or not at all; never throws (a cache is an
   // optimisation, so a folder that cannot be written only costs the next run its compile time).
   void save_cache() const;
+  // The pipeline cache (the raster pass's pipeline goes into it too).
+  VkPipelineCache cache() const { return cache_.get(); }
 
  private:
   std::vector<char> load_cache() const;

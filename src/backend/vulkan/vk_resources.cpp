@@ -149,12 +149,13 @@ Image create_bare_image(VkDevice vk_device, uint32_t width, uint32_t height, VkF
   return Image(vk_device, image);
 }
 
-ImageView create_view(VkDevice vk_device, VkImage image, VkFormat format) {
+ImageView create_view(VkDevice vk_device, VkImage image, VkFormat format,
+                      VkImageAspectFlags aspect = VK_IMAGE_ASPECT_COLOR_BIT) {
   VkImageViewCreateInfo view_info{VK_STRUCTURE_TYPE_IMAGE_VIEW_CREATE_INFO};
   view_info.image = image;
   view_info.viewType = VK_IMAGE_VIEW_TYPE_2D;
   view_info.format = format;
-  view_info.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 1, 0, 1};
+  view_info.subresourceRange = {aspect, 0, 1, 0, 1};
   VkImageView view = VK_NULL_HANDLE;
   VK_CHECK(vkCreateImageView(vk_device, &view_info, nullptr, &view));
   return ImageView(vk_device, view);
@@ -176,8 +177,45 @@ VkFormatFeatureFlags usage_features(VkImageUsageFlags usage) {
 
 }  // namespace
 
+namespace {
+VkMappedMemoryRange whole(VkDeviceMemory memory) {
+  VkMappedMemoryRange range{VK_STRUCTURE_TYPE_MAPPED_MEMORY_RANGE};
+  range.memory = memory;
+  range.size = VK_WHOLE_SIZE;
+  return range;
+}
+}  // namespace
+
+void flush_mapped(VkDevice device, VkDeviceMemory memory, bool coherent) {
+  if (coherent) return;
+  const VkMappedMemoryRange range = whole(memory);
+  VK_CHECK(vkFlushMappedMemoryRanges(device, 1, &range));
+}
+
+void invalidate_mapped(VkDevice device, VkDeviceMemory memory, bool coherent) {
+  if (coherent) return;
+  const VkMappedMemoryRange range = whole(memory);
+  VK_CHECK(vkInvalidateMappedMemoryRanges(device, 1, &range));
+}
+
+void record_copy_to_host(VkCommandBuffer commands, VkImage image, VkBuffer buffer, uint32_t width, uint32_t height) {
+  VkBufferImageCopy region{};
+  region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
+  region.imageExtent = {width, height, 1};
+  vkCmdCopyImageToBuffer(commands, image, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, buffer, 1, &region);
+  VkBufferMemoryBarrier to_host{VK_STRUCTURE_TYPE_BUFFER_MEMORY_BARRIER};
+  to_host.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+  to_host.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
+  to_host.srcQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+  to_host.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+  to_host.buffer = buffer;
+  to_host.size = VK_WHOLE_SIZE;
+  vkCmdPipelineBarrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 0, nullptr, 1,
+                       &to_host, 0, nullptr);
+}
+
 DeviceImage create_image(const Device& device, uint32_t width, uint32_t height, VkFormat format,
-                         VkImageUsageFlags usage) {
+                         VkImageUsageFlags usage, VkImageAspectFlags aspect) {
   const VkDevice vk_device = device.handle();
   DeviceImage result;
   result.image = create_bare_image(vk_device, width, height, format, usage, VK_IMAGE_TILING_OPTIMAL,
@@ -186,7 +224,7 @@ DeviceImage create_image(const Device& device, uint32_t width, uint32_t height, 
   vkGetImageMemoryRequirements(vk_device, result.image.get(), &requirements);
   result.memory = allocate(device, requirements, 0, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
   VK_CHECK(vkBindImageMemory(vk_device, result.image.get(), result.memory.get(), 0));
-  result.view = create_view(vk_device, result.image.get(), format);
+  result.view = create_view(vk_device, result.image.get(), format, aspect);
   return result;
 }
 

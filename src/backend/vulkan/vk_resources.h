@@ -98,8 +98,9 @@ HostBuffer create_host_buffer(const Device& device, VkDeviceSize size, VkBufferU
 
 // An optimally tiled width x height image of `format` for `usage`, in device-local memory where
 // there is some, with its view.
+// aspect: the view's (a depth attachment's is VK_IMAGE_ASPECT_DEPTH_BIT).
 DeviceImage create_image(const Device& device, uint32_t width, uint32_t height, VkFormat format,
-                         VkImageUsageFlags usage);
+                         VkImageUsageFlags usage, VkImageAspectFlags aspect = VK_IMAGE_ASPECT_COLOR_BIT);
 
 // A linearly tiled, host-mapped width x height image of `format` for `usage`, created in
 // VK_IMAGE_LAYOUT_PREINITIALIZED (host writes are defined in it and in GENERAL), where the device
@@ -110,6 +111,16 @@ DeviceImage create_image(const Device& device, uint32_t width, uint32_t height, 
 // every read slow), else none.
 DeviceImage create_host_image(const Device& device, uint32_t width, uint32_t height, VkFormat format,
                               VkImageUsageFlags usage, bool host_cached = false);
+
+// The host's writes to mapped memory made visible to the device, and the device's writes to the
+// host: both nothing for host-coherent memory.
+void flush_mapped(VkDevice device, VkDeviceMemory memory, bool coherent);
+void invalidate_mapped(VkDevice device, VkDeviceMemory memory, bool coherent);
+
+// Records the copy of the top-left width x height texels of `image` (a colour image in
+// TRANSFER_SRC_OPTIMAL) into `buffer`, rows packed, and the barrier that makes them visible to the
+// host once the submission's fence signalled: a pass's read-back.
+void record_copy_to_host(VkCommandBuffer commands, VkImage image, VkBuffer buffer, uint32_t width, uint32_t height);
 
 // A host-visible uniform texel buffer of `texels` texels of `format`, mapped, with its view.
 TexelBuffer create_texel_buffer(const Device& device, uint32_t texels, VkFormat format, size_t texel_bytes);

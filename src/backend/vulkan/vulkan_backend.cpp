@@ -19,6 +19,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <memory>
 #include <span>
 #include <string>
 #include <unordered_map>
@@ -28,6 +29,7 @@
 #include "backend/shader_constraints.h"
 #include "backend/vulkan/vk_device.h"
 #include "backend/vulkan/vk_pipeline.h"
+#include "backend/vulkan/vk_raster.h"
 #include "backend/vulkan/vk_resources.h"
 #include "backend/vulkan/vk_util.h"
 #include "core/error.h"
@@ -68,6 +70,8 @@ class Impl {
   PassTiming run_pass(PassHandle pass, std::span<const TextureHandle> textures,
                       std::span<const float> uniforms, uint32_t width, uint32_t count,
                       std::span<uint32_t> out);
+  PassTiming run_raster(std::span<const float> vertices, const RasterView& view, uint32_t width, uint32_t height,
+                        std::span<uint32_t> out);
   std::vector<std::string> take_debug_messages() { return device_.take_debug_messages(); }
   void save_pipeline_cache() const { pipelines_.save_cache(); }
 
@@ -85,6 +89,11 @@ class Impl {
   void flush(const vk::Memory& memory, bool coherent);  // host writes to non-coherent memory
   void stage(const void* data, size_t bytes);  // into the staging buffer, flushed
   void ensure_readback(VkDeviceSize size);
+  // Milliseconds between two timestamps of the query pool (the device's valid bits, its period).
+  double timestamp_ms(uint64_t from, uint64_t to) const {
+    const uint64_t mask = device_.timestamp_bits() >= 64 ? ~uint64_t(0) : (uint64_t(1) << device_.timestamp_bits()) - 1;
+    return double((to - from) & mask) * double(device_.properties().limits.timestampPeriod) * 1e-6;
+  }
   void ensure_target(uint32_t width, uint32_t height);
   void begin_commands();
   void submit_and_wait(const char* what);
@@ -105,6 +114,7 @@ class Impl {
   vk::HostBuffer staging_;
   vk::HostBuffer readback_;
   vk::RenderTarget target_;
+  std::unique_ptr<vk::RasterPass> raster_;  // made by the first run_raster
   std::unordered_map<uint32_t, vk::Texture> textures_;
   std::unordered_map<uint32_t, vk::Pass> passes_;
   uint32_t next_texture_ = 1;
@@ -180,11 +190,7 @@ void Impl::ensure_staging(VkDeviceSize size) {
 }
 
 void Impl::flush(const vk::Memory& memory, bool coherent) {
-  if (coherent) return;
-  VkMappedMemoryRange range{VK_STRUCTURE_TYPE_MAPPED_MEMORY_RANGE};
-  range.memory = memory.get();
-  range.size = VK_WHOLE_SIZE;
-  VK_CHECK(vkFlushMappedMemoryRanges(device_.handle(), 1, &range));
+  vk::flush_mapped(device_.handle(), memory.get(), coherent);
 }
 
 void Impl::stage(const void* data, size_t bytes) {
@@ -614,20 +620,7 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
   if (timed) vkCmdWriteTimestamp(commands_, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_.get(), 1);
 
   if (!target_.linear) {
-    VkBufferImageCopy region{};
-    region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
-    region.imageExtent = {width, height, 1};
-    vkCmdCopyImageToBuffer(commands_, target_.image.image.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL,
-                           readback_.buffer.get(), 1, &region);
-    VkBufferMemoryBarrier to_host{VK_STRUCTURE_TYPE_BUFFER_MEMORY_BARRIER};
-    to_host.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
-    to_host.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
-    to_host.srcQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
-    to_host.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
-    to_host.buffer = readback_.buffer.get();
-    to_host.size = VK_WHOLE_SIZE;
-    vkCmdPipelineBarrier(commands_, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 0, nullptr, 1,
-                         &to_host, 0, nullptr);
+    vk::record_copy_to_host(commands_, target_.image.image.get(), readback_.buffer.get(), width, height);
   }
   if (timed) vkCmdWriteTimestamp(commands_, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_.get(), 2);
 
@@ -636,12 +629,10 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
   const double submit_ms = elapsed_ms(gpu_start);
 
   const auto copy_start = Clock::now();
-  const VkDeviceMemory read_memory = target_.linear ? target_.image.memory.get() : readback_.memory.get();
-  if (!(target_.linear ? target_.image.coherent : readback_.coherent)) {
-    VkMappedMemoryRange range{VK_STRUCTURE_TYPE_MAPPED_MEMORY_RANGE};
-    range.memory = read_memory;
-    range.size = VK_WHOLE_SIZE;
-    VK_CHECK(vkInvalidateMappedMemoryRanges(device_.handle(), 1, &range));
+  if (target_.linear) {
+    vk::invalidate_mapped(device_.handle(), target_.image.memory.get(), target_.image.coherent);
+  } else {
+    vk::invalidate_mapped(device_.handle(), readback_.memory.get(), readback_.coherent);
   }
   if (target_.linear && target_.image.row_pitch == VkDeviceSize(width) * 4) {
     std::memcpy(out.data(), target_.image.mapped, size_t(count) * 4);
@@ -662,15 +653,69 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
     uint64_t stamps[kTimestampCount] = {};
     VK_CHECK_RESULT(device_result(vkGetQueryPoolResults(device_.handle(), queries_.get(), 0, kTimestampCount, sizeof(stamps), stamps,
                                                   sizeof(uint64_t), VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT), "vkGetQueryPoolResults"), "vkGetQueryPoolResults");
-    const uint64_t mask = device_.timestamp_bits() >= 64 ? ~uint64_t(0) : (uint64_t(1) << device_.timestamp_bits()) - 1;
-    const double period_ms = double(device_.properties().limits.timestampPeriod) * 1e-6;
-    timing.gpu_ms = double((stamps[1] - stamps[0]) & mask) * period_ms;
-    timing.readback_ms = double((stamps[2] - stamps[1]) & mask) * period_ms + copy_ms;
+    timing.gpu_ms = timestamp_ms(stamps[0], stamps[1]);
+    timing.readback_ms = timestamp_ms(stamps[1], stamps[2]) + copy_ms;
   } else {
     timing.gpu_ms = submit_ms;  // no timestamps: the whole submission on the CPU clock
     timing.readback_ms = copy_ms;
   }
   timing.bytes_read = uint64_t(count) * 4;
+  pending_upload_ms_ = 0.0;
+  timing.wall_ms = elapsed_ms(wall_start);
+  device_.throw_validation_errors();
+  return timing;
+}
+
+PassTiming Impl::run_raster(std::span<const float> vertices, const RasterView& view, uint32_t width, uint32_t height,
+                            std::span<uint32_t> out) {
+  const auto wall_start = Clock::now();
+  usable();
+  if (out.size() != size_t(width) * height) {
+    throw Error(ErrorKind::Internal, "run_raster: the output holds " + std::to_string(out.size()) + " texels, not " +
+                                         std::to_string(width) + "x" + std::to_string(height));
+  }
+  PassTiming timing;
+  timing.upload_ms = pending_upload_ms_;
+  if (width == 0 || height == 0) {
+    pending_upload_ms_ = 0.0;
+    timing.wall_ms = elapsed_ms(wall_start);
+    return timing;
+  }
+  if (!raster_) raster_ = std::make_unique<vk::RasterPass>(device_, pipelines_.cache());
+  const auto upload_start = Clock::now();
+  raster_->prepare(width, height, vertices);
+  timing.upload_ms += elapsed_ms(upload_start);  // the vertices written into their buffer
+  ensure_readback(VkDeviceSize(width) * height * 4);
+
+  begin_commands();
+  const bool timed = bool(queries_);
+  if (timed) {
+    vkCmdResetQueryPool(commands_, queries_.get(), 0, kTimestampCount);
+    vkCmdWriteTimestamp(commands_, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, queries_.get(), 0);
+  }
+  raster_->record(commands_, view, width, height, readback_.buffer.get());
+  if (timed) vkCmdWriteTimestamp(commands_, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_.get(), 1);
+  const auto gpu_start = Clock::now();
+  submit_and_wait("raster");
+  const double submit_ms = elapsed_ms(gpu_start);
+
+  const auto copy_start = Clock::now();
+  vk::invalidate_mapped(device_.handle(), readback_.memory.get(), readback_.coherent);
+  std::memcpy(out.data(), readback_.mapped, out.size_bytes());
+  timing.readback_ms = elapsed_ms(copy_start);
+  // The draw and the copy to the read-back buffer are one span of timestamps: the copy of 4 bytes
+  // a pixel is a small part of it.
+  if (timed) {
+    uint64_t stamps[2] = {};
+    VK_CHECK_RESULT(device_result(vkGetQueryPoolResults(device_.handle(), queries_.get(), 0, 2, sizeof(stamps), stamps,
+                                                        sizeof(uint64_t), VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT),
+                                  "vkGetQueryPoolResults"),
+                    "vkGetQueryPoolResults");
+    timing.gpu_ms = timestamp_ms(stamps[0], stamps[1]);
+  } else {
+    timing.gpu_ms = submit_ms;
+  }
+  timing.bytes_read = uint64_t(out.size()) * 4;
   pending_upload_ms_ = 0.0;
   timing.wall_ms = elapsed_ms(wall_start);
   device_.throw_validation_errors();
@@ -709,6 +754,10 @@ class VulkanBackend final : public Backend {
   PassTiming run_pass(PassHandle pass, std::span<const TextureHandle> textures, std::span<const float> uniforms,
                       uint32_t width, uint32_t count, std::span<uint32_t> out) override {
     return impl_->run_pass(pass, textures, uniforms, width, count, out);
+  }
+  PassTiming run_raster(std::span<const float> vertices, const RasterView& view, uint32_t width, uint32_t height,
+                        std::span<uint32_t> out) override {
+    return impl_->run_raster(vertices, view, width, height, out);
   }
   std::vector<std::string> take_debug_messages() override { return impl_->take_debug_messages(); }
   bool reads_target_in_place() const { return impl_->reads_target_in_place(); }
