@@ -97,6 +97,10 @@ TEST_P(RasterPrimary, EachPixelHoldsTheTriangleItsPrimaryRayHitsFirst) {
     ASSERT_TRUE(scene.camera);
     expect_raster_matches_traversal(*backend, scene, *scene.camera, 160, 96);
   }
+  // Axis-aligned boxes on a grid of whole units: edges that pixel centres can land on exactly.
+  const Scene boxes = test::box_grid_scene();
+  SCOPED_TRACE("box grid");
+  expect_raster_matches_traversal(*backend, boxes, *boxes.camera, 160, 120);
 }
 
 // A floor that reaches far behind the camera, a metre under it: its nearest visible point is far
@@ -158,6 +162,7 @@ TEST_P(RasterPrimary, FramesMatchTracedPrimariesOnProjectScenes) {
       settings.height = 72;
       settings.depth = depth;
       settings.shadows = shadows;
+      settings.primary = PrimaryHits::Trace;
       Renderer traced(*backend, settings);
       settings.primary = PrimaryHits::Raster;
       Renderer rasterized(*backend, settings);
@@ -187,6 +192,7 @@ TEST_P(RasterPrimary, NineLightsInGeneralPasses) {
     settings.depth = 0;
     settings.shadows = shadows;
     settings.specialize = false;
+    settings.primary = PrimaryHits::Trace;
     Renderer traced(*backend, settings);
     settings.primary = PrimaryHits::Raster;
     Renderer rasterized(*backend, settings);
@@ -231,6 +237,7 @@ TEST(RasterPrimaryFrame, WalksATreeOnlyWhereARayWalksOne) {
   const Scene boxes = test::box_grid_scene();  // two lights, no mirror or glass
   RenderSettings s;
   s.depth = 0;
+  s.primary = PrimaryHits::Trace;
   EXPECT_TRUE(frame_walks_tree(boxes, s)) << "traced primaries";
   s.primary = PrimaryHits::Raster;
   EXPECT_TRUE(frame_walks_tree(boxes, s)) << "shadow rays";
@@ -244,6 +251,40 @@ TEST(RasterPrimaryFrame, WalksATreeOnlyWhereARayWalksOne) {
   EXPECT_FALSE(frame_walks_tree(toaster, s));
   const Scene shapes = test::shapes_scene();
   EXPECT_TRUE(frame_walks_tree(shapes, s)) << "analytic shapes: primaries traced";
+}
+
+// --primary auto rasterizes up to kRasterTrianglesPerPixel triangles per pixel, and past it where
+// that spares a tree rebuilt every frame; analytic scenes are traced whatever it says.
+TEST(RasterPrimaryFrame, AutoRasterizesWhereItPays) {
+  const int w = 400, h = 240;
+  const size_t limit = size_t(kRasterTrianglesPerPixel * w * h);
+  EXPECT_TRUE(raster_pays(limit, w, h, false, true));
+  EXPECT_FALSE(raster_pays(limit + 1, w, h, false, true)) << "a kept tree, rays that walk it";
+  EXPECT_FALSE(raster_pays(limit + 1, w, h, true, true)) << "shadow rays walk the rebuilt tree anyway";
+  EXPECT_FALSE(raster_pays(limit + 1, w, h, false, false)) << "a still scene keeps its tree";
+  EXPECT_TRUE(raster_pays(100 * limit, w, h, true, false)) << "no tree to build every frame";
+
+  const Scene toaster = project_scene("toaster");  // 11,102 triangles
+  RenderSettings s;
+  EXPECT_EQ(s.primary, PrimaryHits::Auto) << "the default";
+  EXPECT_TRUE(primaries_rasterized(toaster, s)) << "400x240: 0.12 triangles per pixel";
+  s.width = 100;
+  s.height = 60;
+  EXPECT_FALSE(primaries_rasterized(toaster, s)) << "100x60: 1.9 triangles per pixel";
+  EXPECT_TRUE(frame_walks_tree(toaster, s));
+  s.shadows = false;
+  s.depth = 0;
+  s.always_rebuild = true;
+  EXPECT_TRUE(primaries_rasterized(toaster, s)) << "ray casting, the tree rebuilt every frame";
+  EXPECT_FALSE(frame_walks_tree(toaster, s));
+  s.always_rebuild = false;
+  EXPECT_FALSE(primaries_rasterized(toaster, s)) << "ray casting, the tree kept";
+  s.primary = PrimaryHits::Raster;
+  EXPECT_TRUE(primaries_rasterized(toaster, s)) << "asked for";
+  s.primary = PrimaryHits::Auto;
+  s.width = 400;
+  s.height = 240;
+  EXPECT_FALSE(primaries_rasterized(test::shapes_scene(), s)) << "analytic shapes";
 }
 
 // The primitives' texels alone are the build's, and so is the box; a non-finite vertex is refused
@@ -303,6 +344,7 @@ TEST_F(RasterPrimaryVulkan, AnalyticScenesAreTracedAndStaticScenesKeepTheirTexel
   RenderSettings settings;
   settings.width = 96;
   settings.height = 64;
+  settings.primary = PrimaryHits::Trace;
   Renderer traced(*backend, settings);
   settings.primary = PrimaryHits::Raster;
   Renderer rasterized(*backend, settings);

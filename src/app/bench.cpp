@@ -384,6 +384,7 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
   cell["depth"] = level.depth;
   cell["shadows"] = level.shadows;
   cell["triangles"] = scene.mesh.triangle_count();
+  cell["primary"] = primaries_rasterized(scene, settings) ? "raster" : "trace";  // what --primary chose
   cell["shapes"] = scene.shapes.size();
   cell["lights"] = scene.lights.size();
   cell["animated"] = animation.animated();
@@ -687,7 +688,7 @@ void print_tables(const nlohmann::json& result) {
 // many of the run's cells are done, and each column's median fps in it.
 void print_progress(const nlohmann::json& cell, size_t done, size_t total, double seconds) {
   std::string line = "bench: [" + std::to_string(done) + "/" + std::to_string(total) + "] " +
-                     cell_label(cell) + ":";
+                     cell_label(cell) + " (primary " + cell.value("primary", std::string("trace")) + "):";
   for (const auto& [key, title] : {std::pair<const char*, const char*>{"mobirt", "Vulkan"},
                                    {"mobirt_gles", "GLES 2.0"}, {"ray_query", "ray query"}, {"compute", "compute"},
                                    {"embree", "Embree 3"}, {"cpu_kd", "CPU kd-tree"}}) {
@@ -886,10 +887,13 @@ int cmd_bench(const std::vector<std::string>& args) {
                                 .c_str()
                           : "mobirt's frames serial (--serial): pose, build, passes, one after the other",
               o.settings.kd.threads);
-  if (o.settings.primary == PrimaryHits::Raster) {
-    std::printf("--primary raster: mobirt's primary hits rasterized (a depth-tested draw of the triangles), not\n"
-                "traced as in the paper and as every peer traces them; no kd-tree in a frame without shadow and\n"
-                "secondary rays; mobirt's \"traversal\" is the raster pass plus the shadow pass from its hits\n");
+  if (o.settings.primary != PrimaryHits::Trace) {
+    std::printf("--primary %s: mobirt's primary hits rasterized (a depth-tested draw of the triangles)%s, not\n"
+                "traced as in the paper and as every peer traces them (--primary trace: as the paper); no kd-tree\n"
+                "in a frame without shadow and secondary rays; where rasterized, mobirt's \"traversal\" is the\n"
+                "raster pass plus the shadow pass from its hits\n",
+                primary_hits_name(o.settings.primary),
+                o.settings.primary == PrimaryHits::Auto ? " where that pays (each cell's \"primary\" in the JSON)" : "");
   }
   std::printf("machine: %u cores; %s, %s, %s, LP_NUM_THREADS=%s, %d rasterizer threads pinned one per CPU%s; %s on %u threads\n",
               std::thread::hardware_concurrency(), info.api.c_str(), info.device.c_str(), info.driver.c_str(),

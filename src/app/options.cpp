@@ -183,13 +183,15 @@ const Setting kSettings[] = {
      }},
     {"--primary", "HITS", kFrames,
      "how the primary rays' closest hits are found: trace (through the\n"
-     "kd-tree, as every generation: the paper's pipeline) or raster (the\n"
+     "kd-tree, as every generation: the paper's pipeline), raster (the\n"
      "triangles drawn with a depth test, shadow rays traced from them; no\n"
      "kd-tree at all without shadow and secondary rays; scenes with\n"
-     "analytic shapes are traced) (default trace)",
+     "analytic shapes are traced) or auto (raster up to 0.5 triangles per\n"
+     "pixel, and past it when that spares a kd-tree rebuilt every frame;\n"
+     "trace elsewhere) (default auto)",
      [](CommonOptions& o, const Value& v) {
-       static constexpr std::pair<const char*, PrimaryHits> hits[] = {{"trace", PrimaryHits::Trace},
-                                                                      {"raster", PrimaryHits::Raster}};
+       static constexpr std::pair<const char*, PrimaryHits> hits[] = {
+           {"trace", PrimaryHits::Trace}, {"raster", PrimaryHits::Raster}, {"auto", PrimaryHits::Auto}};
        o.settings.primary = v.choice(hits);
      }},
     {"--light", "SPEC", kViews,

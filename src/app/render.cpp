@@ -359,9 +359,11 @@ int cmd_render(const std::vector<std::string>& args) {
   }
   if (posed.headlit()) note_headlight(scene);  // the pipeline's other slot poses the same scene
   if (timings && !measured.empty()) {
-    std::printf("%s: %zu triangles, %zu shapes, %zu lights, %dx%d, depth %d on %s\n", scene_path.c_str(),
-                scene.mesh.triangle_count(), scene.shapes.size(), scene.lights.size(), settings.width,
-                settings.height, settings.depth, backend->device_info().device.c_str());
+    std::printf("%s: %zu triangles, %zu shapes, %zu lights, %dx%d, depth %d, primary hits %s on %s\n",
+                scene_path.c_str(), scene.mesh.triangle_count(), scene.shapes.size(), scene.lights.size(),
+                settings.width, settings.height, settings.depth,
+                primaries_rasterized(scene, settings) ? "rasterized" : "traced",
+                backend->device_info().device.c_str());
     if (frames) {
       std::printf("median of %zu frames (the first frame, which compiles the shaders, left out)\n", measured.size());
     } else {

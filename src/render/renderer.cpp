@@ -113,17 +113,43 @@ std::vector<float> shade_uniforms(const Scene& scene, int pass_lights) {
 }
 
 const char* primary_hits_name(PrimaryHits primary) {
-  return primary == PrimaryHits::Raster ? "raster" : "trace";
+  switch (primary) {
+    case PrimaryHits::Trace: return "trace";
+    case PrimaryHits::Raster: return "raster";
+    case PrimaryHits::Auto: return "auto";
+  }
+  return "?";
 }
 
+bool raster_pays(size_t triangles, int width, int height, bool always_rebuild, bool walks_tree) {
+  if (always_rebuild && !walks_tree) return true;
+  return double(triangles) <= kRasterTrianglesPerPixel * double(width) * double(height);
+}
+
+namespace {
+
+// Whether a frame with rasterized primaries still walks a kd-tree: its shadow and secondary rays.
+bool rays_walk_tree(const Scene& scene, const RenderSettings& settings) {
+  if (settings.shadows && !scene.lights.empty()) return true;
+  return settings.depth > 0 && scene_has_secondary_rays(scene);
+}
+
+}  // namespace
+
 bool primaries_rasterized(const Scene& scene, const RenderSettings& settings) {
-  return settings.primary == PrimaryHits::Raster && scene.shapes.empty();
+  if (!scene.shapes.empty()) return false;
+  switch (settings.primary) {
+    case PrimaryHits::Trace: return false;
+    case PrimaryHits::Raster: return true;
+    case PrimaryHits::Auto:
+      return raster_pays(scene.mesh.triangle_count(), settings.width, settings.height, settings.always_rebuild,
+                         rays_walk_tree(scene, settings));
+  }
+  return false;
 }
 
 bool frame_walks_tree(const Scene& scene, const RenderSettings& settings) {
-  if (!primaries_rasterized(scene, settings)) return true;
-  if (settings.shadows && !scene.lights.empty()) return true;
-  return settings.depth > 0 && scene_has_secondary_rays(scene);
+  return !primaries_rasterized(scene, settings) || rays_walk_tree(scene, settings);
 }
 
 namespace {

@@ -34,15 +34,15 @@ namespace mobirt {
 enum class DataReads { TexelBuffers, Images, StorageBuffers, DeviceAddresses };
 
 // How the primary rays' closest hits are found. Trace: through the kd-tree, as every other
-// generation (the paper's pipeline, the default). Raster: the triangles drawn with a depth test
+// generation (the paper's pipeline). Raster: the triangles drawn with a depth test
 // (Backend::run_raster), each pixel centre's closest triangle found by the rasterizer where the
 // primary ray through it would find it by a walk, a hybrid renderer's G-buffer step; the shadow
 // rays then start from that triangle's hit (glsl/trace_main.glsl, PRIMARY_HITS), and a frame
 // without shadow or secondary rays builds no kd-tree at all (frame_walks_tree). Pixels whose
 // centre lies on an edge between two triangles may take the other one (README, *Primary hits
-// rasterized*). A scene with analytic shapes (spheres, cones) has its primaries traced.
-enum class PrimaryHits { Trace, Raster };
-// "trace" / "raster".
+// rasterized*). A scene with analytic shapes (spheres, cones) has its primaries traced. Auto (the
+// default): rasterized where that is measured to be faster (raster_pays), traced elsewhere.
+enum class PrimaryHits { Trace, Raster, Auto };
 const char* primary_hits_name(PrimaryHits primary);
 
 struct RenderSettings {
@@ -64,7 +64,7 @@ struct RenderSettings {
   // The shading pass's colour: 8 bits per channel, or 16 from two passes (high and low bytes).
   ColourDepth colour = ColourDepth::Bits8;
   DataReads data = DataReads::TexelBuffers;  // faster on lavapipe (README: "Data reads")
-  PrimaryHits primary = PrimaryHits::Trace;
+  PrimaryHits primary = PrimaryHits::Auto;
   KdBuildOptions kd;
   ShadowSettings shadow_rays;  // also the ray/triangle test and precision of every traced ray
   SecondarySettings secondary;
@@ -169,9 +169,17 @@ class Renderer {
 // primary hits are rasterized and that casts no shadow ray and no secondary ray. That one gets only
 // the primitives' texels (flatten_primitives): decoding reads the triangles, nothing walks a tree.
 bool frame_walks_tree(const Scene& scene, const RenderSettings& settings);
-// Whether a frame rasterizes its primary hits: --primary raster, and a scene of triangles only
-// (analytic shapes have none to draw: their scenes' primaries are traced).
+// Whether a frame rasterizes its primary hits: --primary raster, or auto where raster_pays, and a
+// scene of triangles only (analytic shapes have none to draw: their scenes' primaries are traced).
 bool primaries_rasterized(const Scene& scene, const RenderSettings& settings);
+// --primary auto's choice for a scene of `triangles` at width x height. The raster pass costs per
+// triangle (llvmpipe sets up each one, however small), the primary walk per pixel: rasterized up
+// to kRasterTrianglesPerPixel triangles per pixel, where the two passes cost about the same
+// (README, *Primary hits rasterized*: where it loses); past it too when rasterizing spares the
+// frame its kd-tree (walks_tree false: no shadow or secondary ray) and the tree would be built for
+// every frame (always_rebuild: the paper's model and the bench's).
+inline constexpr double kRasterTrianglesPerPixel = 0.5;
+bool raster_pays(size_t triangles, int width, int height, bool always_rebuild, bool walks_tree);
 
 // The view of Backend::run_raster for the primary rays of `camera` at width x height: near just
 // before the nearest point a primary ray can see (the nearest vertex of a triangle wholly in front
