@@ -170,6 +170,27 @@ TEST(Bench, OneSmallCellWithEveryColumn) {
   EXPECT_TRUE(bounce["paper_fps"].is_null());  // a scene given on the command line: no paper figure
 }
 
+// A cell whose primaries are rasterized and whose shadow rays walk the tree built every frame (what
+// --primary auto makes of every default bench cell): the tree is built, the build ratio given.
+TEST(Bench, RasterizedPrimariesWithShadows) {
+  const fs::path json = test::temp_dir() / "bench.json";
+  const test::CommandResult r =
+      test::run_mobirt("bench " MOBIRT_SOURCE_DIR "/scenes/fish.gltf --size 120x72 --frames 2 --warmup 1 "
+                       "--levels shadow --backend vulkan --no-cpu --no-serial-twin --json '" + json.string() + "'");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("bench: [1/1] fish, + shadow (primary raster): Vulkan "), std::string::npos) << r.output;
+  std::ifstream in(json);
+  const nlohmann::json j = nlohmann::json::parse(in);
+  ASSERT_EQ(j["cells"].size(), 1u);
+  const nlohmann::json& c = j["cells"][0];
+  EXPECT_EQ(c["primary"], "raster");
+  EXPECT_TRUE(c["kd_tree_built"].get<bool>());
+  EXPECT_GT(c["mobirt"]["stages_ms"]["build"].get<double>(), 0.0);
+  EXPECT_GT(c["ratios"]["mobirt"]["build_over_embree"].get<double>(), 0.0);
+  EXPECT_GT(c["ratios"]["mobirt"]["fps_over_embree"].get<double>(), 0.0);
+  EXPECT_EQ(j["settings"]["primary"], "auto");
+}
+
 // --no-baseline leaves out every peer, the ray query and the compute pass included, and says
 // nothing about it.
 TEST(Bench, NoBaselineSkipsEveryPeer) {
@@ -198,11 +219,14 @@ TEST(Bench, NoBaselineSkipsEveryPeer) {
 // mobirt's frames are pipelined unless --serial, and the table and the JSON say which; pipelined,
 // the next frame was prepared on the worker during each frame but the last, and each frame was
 // rendered a second time serially unless --no-serial-twin.
+// Ray casting at 32x20 rasterizes the primaries (--primary auto: no tree to rebuild every frame)
+// and builds no tree; with --primary trace the worker builds one each frame.
 TEST(Bench, SaysWhetherItsFramesArePipelined) {
-  for (const std::string mode : {"", " --serial", " --no-serial-twin"}) {
+  for (const std::string mode : {"", " --serial", " --no-serial-twin", " --primary trace", " --serial --primary trace"}) {
     SCOPED_TRACE(mode.empty() ? "pipelined" : mode);
-    const bool serial = mode == " --serial";
-    const bool twin_expected = mode.empty();
+    const bool serial = mode.find(" --serial") != std::string::npos;
+    const bool twin_expected = mode.empty() || mode == " --primary trace";
+    const bool traced = mode.find("--primary trace") != std::string::npos;
     const fs::path json = test::temp_dir() / "bench.json";
     const test::CommandResult r = test::run_mobirt(
         "bench " MOBIRT_SOURCE_DIR "/scenes/fish.gltf --size 32x20 --frames 3 --warmup 0 --levels cast "
@@ -219,6 +243,8 @@ TEST(Bench, SaysWhetherItsFramesArePipelined) {
     EXPECT_EQ(j["settings"]["build_threads"].get<int>(), 1);
     const nlohmann::json& mobirt = j["cells"][0]["mobirt"];
     EXPECT_EQ(mobirt["pipelined"].get<bool>(), !serial);
+    EXPECT_EQ(j["cells"][0]["primary"], traced ? "trace" : "raster");
+    EXPECT_EQ(j["cells"][0]["kd_tree_built"].get<bool>(), traced);
     const nlohmann::json& s = mobirt["stages_ms"];
     // The serial twin, and the output's table of it; serial, the column is that loop already.
     EXPECT_EQ(r.output.find("mobirt's frames again, serial") != std::string::npos, twin_expected) << r.output;

@@ -62,6 +62,7 @@ inline DefaultSceneImages render_default_scene(Backend& backend, FrameTimings* t
   RenderSettings settings;
   settings.width = 200;
   settings.height = 120;
+  settings.primary = PrimaryHits::Trace;  // the same tree and hits as the CPU's
   Renderer renderer(backend, settings);
   DefaultSceneImages images;
   images.gpu = renderer.render(scene, *scene.camera, timings);

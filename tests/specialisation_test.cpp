@@ -19,11 +19,16 @@ class Specialisation : public test::VulkanTest {};
 void expect_same_image(Backend& backend, const Scene& scene, const Camera& camera, int width,
                        int height, int depth, bool shadows, const std::string& what) {
   SCOPED_TRACE(what);
+  // The traversal pass of the traced primaries, and the passes of the default (--primary auto:
+  // rasterized primaries and the shadow pass from their hits at these sizes).
+  for (PrimaryHits primary : {PrimaryHits::Trace, PrimaryHits::Auto}) {
+  SCOPED_TRACE(primary_hits_name(primary));
   RenderSettings settings;
   settings.width = width;
   settings.height = height;
   settings.depth = depth;
   settings.shadows = shadows;
+  settings.primary = primary;
   Renderer specialised(backend, settings);
   settings.specialize = false;
   Renderer general(backend, settings);
@@ -34,6 +39,7 @@ void expect_same_image(Backend& backend, const Scene& scene, const Camera& camer
   EXPECT_LE(d.share_over, 0.001) << "share of pixels that differ";
   if (d.max_error > 1.0 / 255.0 + 1e-6) {
     write_image(test::output_path(what + "-diff.png").string(), difference_image(a, b));
+  }
   }
 }
 

@@ -31,10 +31,14 @@ mkdir -p "$OUT"
 CSV="$OUT/accuracy.csv"
 rm -f "$CSV"
 
-# label|options. SIZE, HALF and DOUBLE stand for the scene's resolution, half and twice it.
+# label|options. SIZE, HALF and DOUBLE stand for the scene's resolution, half and twice it. Every
+# run traces its primary rays (--primary trace, PRIMARY below), so that the knobs act on every ray
+# as in the paper's passes; the --primary raster row is the default's rasterized primaries (the
+# default --primary auto rasterizes every project scene at these sizes).
+PRIMARY="--primary trace"
 if ((QUICK)); then
   SETTINGS=("defaults|" "--intersect watertight|--intersect watertight" "--precision mediump|--precision mediump"
-            "--colour 16|--colour 16" "--depth 0|--depth 0")
+            "--colour 16|--colour 16" "--depth 0|--depth 0" "--primary raster|--primary raster")
 else
   SETTINGS=("defaults|"
             "--bins 8|--bins 8" "--bins 128|--bins 128"
@@ -52,6 +56,7 @@ else
             "--colour 16 --intersect watertight|--colour 16 --intersect watertight"
             "--depth 0|--depth 0" "--depth 1|--depth 1" "--depth 3|--depth 3"
             "--size HALF|--size HALF" "--size DOUBLE|--size DOUBLE"
+            "--primary raster|--primary raster"
             "defaults (again: timing noise)|")
 fi
 
@@ -70,6 +75,7 @@ for scene in $SCENES; do
     # shellcheck disable=SC2086 # options are words
     if [[ "$options" == *--size* ]]; then args=($options); else args=(--size "$size" $options); fi
     echo "sweep: round $round, $name: $label" >&2
+    [[ "$options" == *--primary* ]] || args+=($PRIMARY)
     "$MOBIRT" accuracy "$scene" "${args[@]}" --repeat "$REPEAT" --csv "$CSV" --label "$label" >/dev/null
   done
 done

@@ -190,6 +190,7 @@ int cmd_accuracy(const std::vector<std::string>& args) {
   j["device"] = backend->device_info().device;
   j["settings"] = {{"depth", settings.depth},
                    {"shadows", settings.shadows},
+                   {"primary", primaries_rasterized(scene, settings) ? "raster" : "trace"},
                    {"min_weight", settings.secondary.min_weight},
                    {"stack", settings.stack_depth},
                    {"max_steps", settings.max_steps},

@@ -385,6 +385,10 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
   cell["shadows"] = level.shadows;
   cell["triangles"] = scene.mesh.triangle_count();
   cell["primary"] = primaries_rasterized(scene, settings) ? "raster" : "trace";  // what --primary chose
+  // False where no ray walks a tree: the frames' "build" is then only the primitives' texels
+  // (flatten_primitives), not a kd-tree, and no build ratio is given.
+  const bool tree_built = frame_walks_tree(scene, settings);
+  cell["kd_tree_built"] = tree_built;
   cell["shapes"] = scene.shapes.size();
   cell["lights"] = scene.lights.size();
   cell["animated"] = animation.animated();
@@ -408,7 +412,8 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
     if (embree) {
       cell["ratios"][key] = {{"fps_over_embree", fps_over(emb)},
                              {"traversal_over_embree", traversal_over(emb)},
-                             {"build_over_embree", stage_over(gpu[c], emb, "build")},
+                             {"build_over_embree", tree_built ? nlohmann::json(stage_over(gpu[c], emb, "build"))
+                                                              : nlohmann::json(nullptr)},
                              {"cpu_over_embree", stage_over(gpu[c], emb, "cpu")}};
     }
     if (ray_query) {
@@ -432,7 +437,8 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
           gpu_fps / std::max(cell[key]["serial"]["fps"]["median"].get<double>(), 1e-9);
       if (embree) {
         cell["ratios"][key]["serial_traversal_over_embree"] = serial_traversal_over(emb);
-        cell["ratios"][key]["serial_build_over_embree"] = stage_over(twin[c], emb, "build");
+        cell["ratios"][key]["serial_build_over_embree"] =
+            tree_built ? nlohmann::json(stage_over(twin[c], emb, "build")) : nlohmann::json(nullptr);
       }
       if (ray_query) cell["ratios"][key]["serial_traversal_over_ray_query"] = serial_traversal_over(rqs);
       if (compute) cell["ratios"][key]["serial_traversal_over_compute"] = serial_traversal_over(cps);
@@ -669,9 +675,12 @@ void print_tables(const nlohmann::json& result) {
     std::printf("%-28s", cell_label(c).c_str());
     for (const std::string& g : gpus) {
       const nlohmann::json& r = c["ratios"][g];
-      std::printf(" | %-8s %6.2fx %6.2fx %6.1fx %6.2fx", "", r["fps_over_embree"].get<double>(),
-                  r["traversal_over_embree"].get<double>(), r["build_over_embree"].get<double>(),
-                  r["cpu_over_embree"].get<double>());
+      char build[16] = "      -";  // no kd-tree built (rasterized primaries, no ray walks one)
+      if (!r["build_over_embree"].is_null()) {
+        std::snprintf(build, sizeof build, "%6.1fx", r["build_over_embree"].get<double>());
+      }
+      std::printf(" | %-8s %6.2fx %6.2fx %s %6.2fx", "", r["fps_over_embree"].get<double>(),
+                  r["traversal_over_embree"].get<double>(), build, r["cpu_over_embree"].get<double>());
       if (ray_query) {
         std::printf(" %6.2fx %6.2fx", r["fps_over_ray_query"].get<double>(),
                     r["traversal_over_ray_query"].get<double>());

@@ -187,8 +187,9 @@ const Setting kSettings[] = {
      "triangles drawn with a depth test, shadow rays traced from them; no\n"
      "kd-tree at all without shadow and secondary rays; scenes with\n"
      "analytic shapes are traced) or auto (raster up to 0.5 triangles per\n"
-     "pixel, and past it when that spares a kd-tree rebuilt every frame;\n"
-     "trace elsewhere) (default auto)",
+     "pixel, and past it when that spares the frame a kd-tree it would\n"
+     "build: --always-rebuild or an animation's --frames, no shadow or\n"
+     "secondary ray; trace elsewhere) (default auto)",
      [](CommonOptions& o, const Value& v) {
        static constexpr std::pair<const char*, PrimaryHits> hits[] = {
            {"trace", PrimaryHits::Trace}, {"raster", PrimaryHits::Raster}, {"auto", PrimaryHits::Auto}};

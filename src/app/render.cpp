@@ -301,6 +301,8 @@ int cmd_render(const std::vector<std::string>& args) {
   auto output_for = [&](int frame) { return frames ? frame_path(output, frame) : output; };
   check_image_output(output_for(frames ? frames->first : 0));
 
+  // Frames of an animation pose the triangles anew: each builds a tree (--primary auto counts it).
+  settings.tree_per_frame = frames && animation.animated();
   auto backend = create_backend(common.backend_name, common.backend);
   Renderer renderer(*backend, settings);
   std::vector<FrameTimings> measured;
@@ -384,6 +386,7 @@ int cmd_render(const std::vector<std::string>& args) {
                        {"width", settings.width},
                        {"height", settings.height},
                        {"depth", settings.depth},
+                       {"primary", primaries_rasterized(scene, settings) ? "raster" : "trace"},
                        {"stack", settings.stack_depth},
                        {"max_steps", settings.max_steps},
                        {"device", backend->device_info().device},

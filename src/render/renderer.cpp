@@ -121,8 +121,8 @@ const char* primary_hits_name(PrimaryHits primary) {
   return "?";
 }
 
-bool raster_pays(size_t triangles, int width, int height, bool always_rebuild, bool walks_tree) {
-  if (always_rebuild && !walks_tree) return true;
+bool raster_pays(size_t triangles, int width, int height, bool tree_per_frame, bool walks_tree) {
+  if (tree_per_frame && !walks_tree) return true;
   return double(triangles) <= kRasterTrianglesPerPixel * double(width) * double(height);
 }
 
@@ -142,8 +142,8 @@ bool primaries_rasterized(const Scene& scene, const RenderSettings& settings) {
     case PrimaryHits::Trace: return false;
     case PrimaryHits::Raster: return true;
     case PrimaryHits::Auto:
-      return raster_pays(scene.mesh.triangle_count(), settings.width, settings.height, settings.always_rebuild,
-                         rays_walk_tree(scene, settings));
+      return raster_pays(scene.mesh.triangle_count(), settings.width, settings.height,
+                         settings.always_rebuild || settings.tree_per_frame, rays_walk_tree(scene, settings));
   }
   return false;
 }

@@ -61,6 +61,10 @@ struct RenderSettings {
   // Rebuild the kd-tree every frame even when the triangles did not move (the paper's model, and
   // the benchmarks'); by default a static scene keeps its tree.
   bool always_rebuild = false;
+  // Set by the caller where each frame it renders poses the triangles anew (an animation played
+  // frame by frame), so that each frame builds a tree: --primary auto's choice counts it as
+  // always_rebuild does (raster_pays). A still scene keeps its tree from frame to frame.
+  bool tree_per_frame = false;
   // The shading pass's colour: 8 bits per channel, or 16 from two passes (high and low bytes).
   ColourDepth colour = ColourDepth::Bits8;
   DataReads data = DataReads::TexelBuffers;  // faster on lavapipe (README: "Data reads")
@@ -177,9 +181,10 @@ bool primaries_rasterized(const Scene& scene, const RenderSettings& settings);
 // to kRasterTrianglesPerPixel triangles per pixel, where the two passes cost about the same
 // (README, *Primary hits rasterized*: where it loses); past it too when rasterizing spares the
 // frame its kd-tree (walks_tree false: no shadow or secondary ray) and the tree would be built for
-// every frame (always_rebuild: the paper's model and the bench's).
+// every frame (tree_per_frame: --always-rebuild, the paper's model and the bench's, or an
+// animation played frame by frame).
 inline constexpr double kRasterTrianglesPerPixel = 0.5;
-bool raster_pays(size_t triangles, int width, int height, bool always_rebuild, bool walks_tree);
+bool raster_pays(size_t triangles, int width, int height, bool tree_per_frame, bool walks_tree);
 
 // The view of Backend::run_raster for the primary rays of `camera` at width x height: near just
 // before the nearest point a primary ray can see (the nearest vertex of a triangle wholly in front

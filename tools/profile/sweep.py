@@ -4,8 +4,8 @@
   tools/profile/sweep.py OUT.csv [--mobirt build/mobirt] [--repeat 3] [--params stack,bins,...]
                          [--scenes utah,toaster,...] [--budget SECONDS]
 
-Each run is `mobirt render SCENE --timings-json F --repeat R --always-rebuild [the scene's
-options] [the swept option]`: one warm-up frame (shader compilation), then the stage-by-stage
+Each run is `mobirt render SCENE --timings-json F --repeat R --always-rebuild --primary trace
+[the scene's options] [the swept option]` (the primaries traced, as in the paper's passes): one warm-up frame (shader compilation), then the stage-by-stage
 median of R frames, the kd-tree rebuilt in every frame so that its build time is measured. One row
 per run goes to OUT.csv: scene, parameter, value, and every stage in ms (build, primary rays,
 upload, traversal pass, its read-back, hit decoding, shading pass, its read-back, accumulate,
@@ -85,7 +85,7 @@ def render(mobirt, scene_file, options, env, repeat):
     with tempfile.TemporaryDirectory() as tmp:
         js = os.path.join(tmp, "t.json")
         cmd = [mobirt, "render", scene_file, "-o", os.path.join(tmp, "out.png"), "--timings-json", js,
-               "--repeat", str(repeat), "--always-rebuild"] + options
+               "--repeat", str(repeat), "--always-rebuild", "--primary", "trace"] + options
         out = subprocess.run(cmd, env=env, capture_output=True, text=True)
         if out.returncode != 0:
             raise RuntimeError(f"{' '.join(cmd)}: {out.stderr.strip()}")

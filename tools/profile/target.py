@@ -6,7 +6,7 @@ at least 0.5x Embree rtcIntersect1 in Mrays/s, 2 threads).
                           [-- SCENE and view options]
 
 Alternates, ROUNDS times, `mobirt render ... --timings-json` (the traversal pass's Mrays/s, median
-of 5 frames, primary + shadow rays) and `mobirt_embree_rays` on the same scene, view and rays
+of 5 frames, primary + shadow rays, the primaries traced: --primary trace) and `mobirt_embree_rays` on the same scene, view and rays
 (median of 5 runs of rtcIntersect1 on every ray), so that both see the same machine load, and
 prints the medians and their ratio. Default scene: the Utah toasters with the README's view.
 """
@@ -43,6 +43,7 @@ def main():
         for r in range(args.rounds):
             js = os.path.join(tmp, "t.json")
             subprocess.run([args.mobirt, "render"] + scene + ["-o", os.path.join(tmp, "t.png"), "--depth", "0",
+                                                              "--primary", "trace",
                                                               "--timings-json", js, "--repeat", "5"],
                            check=True, capture_output=True)
             with open(js) as f:
