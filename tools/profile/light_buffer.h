@@ -1,0 +1,49 @@
+// Light buffer (Haines and Greenberg 1986), a measurement (tools/profile/light_buffer_probe.cpp): for a point light, a cube of direction cells around it,
+// each listing every triangle that a ray from the light through the cell can meet. A shadow ray
+// from a point p to the light lies on one direction from the light, so only the triangles of p's
+// cell can occlude it: one cell look-up and a short list instead of a walk through the kd-tree.
+// Exact where the cells are conservative: each triangle is clipped to each face's view pyramid
+// (widened by kLightBufferFaceMargin so that directions on a cube edge belong to both faces) and
+// its projection's bounding rectangle widened by kLightBufferCellMargin of a cell.
+#pragma once
+
+#include <glm/glm.hpp>
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+namespace mobirt {
+
+inline constexpr float kLightBufferFaceMargin = 1e-3f;   // of the face's half-width, at z = 1
+inline constexpr float kLightBufferCellMargin = 1e-2f;   // of a cell
+inline constexpr uint32_t kLightBufferOutside = 0xFFFFFFFFu;  // a direction no triangle covers
+
+struct LightBuffer {
+  glm::vec3 light{0.0f};
+  int resolution = 0;                 // cells per face edge
+  // Per face, the directions its cells cover (the union of its triangles' projections, a little
+  // wider): (s0, t0, columns per unit of s, rows per unit of t); the face's (u / w, v / w) at s0,
+  // t0 is the corner of cell 0.
+  std::array<glm::vec4, 6> window{};
+  // Cell c's triangles are prims[first[c] .. first[c + 1]), sorted by near (their nearest distance
+  // to the light, ascending). Cell index: (face * resolution + row) * resolution + column; face
+  // 0..5 = +x, -x, +y, -y, +z, -z (light_buffer_cell).
+  std::vector<uint32_t> first;
+  std::vector<uint32_t> prims;
+  std::vector<float> near;            // per entry of prims
+  size_t cells() const { return first.empty() ? 0 : first.size() - 1; }
+};
+
+// The light buffer of the triangles `positions` (three vertices each) around `light`.
+LightBuffer build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 light, int resolution);
+
+// The cell of direction d (from the light; not zero), or kLightBufferOutside where no triangle is.
+uint32_t light_buffer_cell(const LightBuffer& lb, glm::vec3 d);
+
+// The nearest distance from `p` to the triangle a, b, c (Ericson, Real-Time Collision Detection,
+// 5.1.5), in double.
+double point_triangle_distance(glm::dvec3 p, glm::dvec3 a, glm::dvec3 b, glm::dvec3 c);
+
+}  // namespace mobirt

@@ -1,0 +1,117 @@
+// mobirt_light_buffer_probe: what a light buffer (src/accel/light_buffer.h) would make of the
+// primary hits' shadow rays against the kd-tree walk, on the CPU: per point light and resolution,
+// its build time and size, the candidates each shadow ray tests (the whole cell, and up to the
+// first whose nearest distance to the light is past the ray's end), against the kd-tree's node
+// steps and triangle tests for the same rays (kdtree_traverse.cpp, the traversal pass's CPU twin);
+// every ray's answer checked against the walk's. Measurement only: not in the renderer.
+//
+// Usage: mobirt_light_buffer_probe SCENE [profile_scene.h options] [--res N,N,...]
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <sstream>
+
+#include "light_buffer.h"
+#include "profile_scene.h"
+#include "raytree/rays.h"
+
+namespace mobirt {
+namespace {
+
+int run(int argc, char** argv) {
+  std::vector<int> resolutions = {16, 32, 64, 128};
+  std::vector<char*> args;
+  for (int i = 0; i < argc; ++i) {
+    if (std::string(argv[i]) == "--res" && i + 1 < argc) {
+      resolutions.clear();
+      std::stringstream ss(argv[++i]);
+      for (std::string r; std::getline(ss, r, ',');) resolutions.push_back(std::stoi(r));
+    } else {
+      args.push_back(argv[i]);
+    }
+  }
+  const profile::ProfileScene p = profile::load_profile_scene(int(args.size()), args.data(),
+                                                              "usage: mobirt_light_buffer_probe SCENE [options] [--res N,...]");
+  const Scene& scene = p.scene;
+  const RayBatch rays = primary_rays(p.camera, p.width, p.height);
+  const float scale = glm::length(p.tree.bounds.hi - p.tree.bounds.lo);
+  std::printf("%s: %zu triangles, %dx%d, %zu lights\n", p.path.c_str(), scene.mesh.triangle_count(), p.width,
+              p.height, scene.lights.size());
+  for (size_t li = 0; li < scene.lights.size(); ++li) {
+    const Light& light = scene.lights[li];
+    if (light.type == LightType::Directional) {
+      std::printf("light %zu: directional, skipped\n", li);
+      continue;
+    }
+    // The shadow rays: from each primary hit, offset along the normal towards the viewer, to the light.
+    std::vector<Ray> shadow;
+    for (uint32_t i = 0; i < rays.count(); ++i) {
+      const Ray r = rays.ray(i);
+      const Hit h = traverse(p.tree, r);
+      if (!h.valid()) continue;
+      const glm::vec3* v = &scene.mesh.positions[3 * size_t(h.prim)];
+      glm::vec3 n = glm::normalize(glm::cross(v[1] - v[0], v[2] - v[0]));
+      if (glm::dot(n, r.direction) > 0.0f) n = -n;
+      const glm::vec3 o = r.origin + h.t * r.direction + n * (1e-4f * scale);
+      if (glm::dot(n, light.position - o) <= 0.0f) continue;  // faces away: no ray cast
+      shadow.push_back(Ray{o, light.position - o, 0.0f, 1.0f});
+    }
+    TraversalStats walk;
+    std::vector<uint8_t> walk_answer(shadow.size());
+    const auto w0 = std::chrono::steady_clock::now();
+    for (size_t i = 0; i < shadow.size(); ++i) {
+      TraversalStats one;  // each call starts its counters at 0
+      walk_answer[i] = occluded(p.tree, shadow[i], p.stack, one, -1) ? 1 : 0;
+      walk += one;
+    }
+    const double walk_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - w0).count();
+    const double nrays = double(std::max<size_t>(1, shadow.size()));
+    std::printf("light %zu at (%g, %g, %g): %zu shadow rays, %.1f %% occluded; kd-tree walk per ray: %.2f steps, "
+                "%.2f nodes, %.2f triangle tests (CPU %.2f ms)\n",
+                li, light.position.x, light.position.y, light.position.z, shadow.size(),
+                100.0 * double(std::count(walk_answer.begin(), walk_answer.end(), 1)) / nrays,
+                double(walk.steps) / nrays, double(walk.nodes_visited) / nrays, double(walk.triangles_tested) / nrays,
+                walk_ms);
+    std::printf("  res  cells  refs/tri  build ms  tests/ray (whole cell)  tests/ray (to the ray's end)  max cell  "
+                "answers differing  CPU ms\n");
+    for (int res : resolutions) {
+      const auto b0 = std::chrono::steady_clock::now();
+      const LightBuffer lb = build_light_buffer(scene.mesh.positions, light.position, res);
+      const double build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - b0).count();
+      uint64_t whole = 0, cut = 0;
+      size_t differ = 0;
+      uint32_t max_cell = 0;
+      for (size_t c = 0; c < lb.cells(); ++c) max_cell = std::max(max_cell, lb.first[c + 1] - lb.first[c]);
+      const auto t0 = std::chrono::steady_clock::now();
+      for (size_t i = 0; i < shadow.size(); ++i) {
+        const Ray& r = shadow[i];
+        const uint32_t c = light_buffer_cell(lb, -r.direction);
+        const float end = glm::length(r.direction) * (1.0f + 1e-4f);
+        bool hit = false;
+        const uint32_t b = c == kLightBufferOutside ? 0 : lb.first[c], e = c == kLightBufferOutside ? 0 : lb.first[c + 1];
+        whole += e - b;
+        for (uint32_t k = b; k < e; ++k) {
+          if (lb.near[k] > end) break;
+          ++cut;
+          Hit h;
+          if (intersect_triangle(p.tree, int32_t(lb.prims[k]), r, h)) {
+            hit = true;
+            break;
+          }
+        }
+        differ += hit != (walk_answer[i] != 0) ? 1 : 0;
+      }
+      const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+      std::printf("  %3d %6zu %9.2f %9.2f %23.2f %29.2f %9u %18zu %7.2f\n", res, lb.cells(),
+                  double(lb.prims.size()) / double(std::max<size_t>(1, scene.mesh.triangle_count())), build_ms,
+                  double(whole) / nrays, double(cut) / nrays, max_cell, differ, ms);
+    }
+  }
+  return 0;
+}
+
+}  // namespace
+}  // namespace mobirt
+
+int main(int argc, char** argv) { return mobirt::profile::run_tool("mobirt_light_buffer_probe", argc, argv, mobirt::run); }
