@@ -138,13 +138,43 @@ LightBuffer build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 l
     float df = float(d);  // rounded down: a lower bound stays one
     if (double(df) > d) df = std::nextafter(df, 0.0f);
     tri_near[t] = df;
-    for (int face = 0; face < 6; ++face) {
-      Bounds b;
-      if (!cover(face, c, b)) continue;
+  }
+  // Triangles in the order of their nearest distance: each cell's list is filled in that order.
+  std::vector<uint32_t> order(triangles);
+  std::iota(order.begin(), order.end(), 0u);
+  std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return tri_near[a] < tri_near[b] || (tri_near[a] == tri_near[b] && a < b); });
+  const double inner = 1.0 - kLightBufferFaceMargin;
+  for (uint32_t t : order) {
+    const glm::dvec3 c[3] = {glm::dvec3(positions[3 * t]) - l, glm::dvec3(positions[3 * t + 1]) - l,
+                             glm::dvec3(positions[3 * t + 2]) - l};
+    auto add = [&](int face, const Bounds& b) {
       rects.emplace_back(face, b);
-      rect_tri.push_back(uint32_t(t));
+      rect_tri.push_back(t);
       Bounds& w = window[face];
       w = {std::min(w.s0, b.s0), std::min(w.t0, b.t0), std::max(w.s1, b.s1), std::max(w.t1, b.t1)};
+    };
+    // Fast path: every vertex well inside one face's pyramid (the pyramid is convex, so the
+    // triangle is too, away from the other faces' widened pyramids): its vertices' projections.
+    const int face = major_face(glm::vec3(c[0]));
+    Bounds b;
+    bool inside = true;
+    for (int k = 0; k < 3 && inside; ++k) {
+      const glm::dvec3 f = face_coords(face, c[k]);
+      if (!(f.z > 0.0) || std::abs(f.x) > inner * f.z || std::abs(f.y) > inner * f.z) {
+        inside = false;
+        break;
+      }
+      b.s0 = std::min(b.s0, f.x / f.z);
+      b.s1 = std::max(b.s1, f.x / f.z);
+      b.t0 = std::min(b.t0, f.y / f.z);
+      b.t1 = std::max(b.t1, f.y / f.z);
+    }
+    if (inside) {
+      add(face, b);
+      continue;
+    }
+    for (int f = 0; f < 6; ++f) {
+      if (cover(f, c, b)) add(f, b);
     }
   }
   for (int face = 0; face < 6; ++face) {
@@ -178,12 +208,9 @@ LightBuffer build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 l
   lb.first.assign(cells + 1, 0);
   for (size_t c = 0; c < cells; ++c) lb.first[c + 1] = lb.first[c] + count[c];
   lb.prims.resize(lb.first[cells]);
-  // Filled in the order of the triangles' nearest distance: each cell's list comes out sorted.
-  std::vector<uint32_t> order(rects.size());
-  std::iota(order.begin(), order.end(), 0u);
-  std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return tri_near[rect_tri[a]] < tri_near[rect_tri[b]]; });
+  // The rectangles came in the order of their triangles' nearest distance: each list comes out sorted.
   std::vector<uint32_t> fill(lb.first.begin(), lb.first.end() - 1);
-  for (uint32_t i : order) {
+  for (size_t i = 0; i < cell_rects.size(); ++i) {
     const Rect& r = cell_rects[i];
     for (int y = r.y0; y <= r.y1; ++y) {
       for (int x = r.x0; x <= r.x1; ++x) lb.prims[fill[(size_t(r.face) * resolution + y) * resolution + x]++] = rect_tri[i];
