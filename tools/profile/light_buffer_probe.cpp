@@ -12,7 +12,7 @@
 #include <cstdlib>
 #include <sstream>
 
-#include "light_buffer.h"
+#include "accel/light_buffer.h"
 #include "profile_scene.h"
 #include "raytree/rays.h"
 
@@ -87,19 +87,10 @@ int run(int argc, char** argv) {
       for (size_t i = 0; i < shadow.size(); ++i) {
         const Ray& r = shadow[i];
         const uint32_t c = light_buffer_cell(lb, -r.direction);
-        const float end = glm::length(r.direction) * (1.0f + 1e-4f);
-        bool hit = false;
-        const uint32_t b = c == kLightBufferOutside ? 0 : lb.first[c], e = c == kLightBufferOutside ? 0 : lb.first[c + 1];
-        whole += e - b;
-        for (uint32_t k = b; k < e; ++k) {
-          if (lb.near[k] > end) break;
-          ++cut;
-          Hit h;
-          if (intersect_triangle(p.tree, int32_t(lb.prims[k]), r, h)) {
-            hit = true;
-            break;
-          }
-        }
+        whole += c == kLightBufferOutside ? 0 : lb.first[c + 1] - lb.first[c];
+        uint32_t tests = 0;
+        const bool hit = light_buffer_occluded(lb, p.tree, r.origin, &tests);
+        cut += tests;
         differ += hit != (walk_answer[i] != 0) ? 1 : 0;
       }
       const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();

@@ -1,10 +1,12 @@
-// Light buffer (Haines and Greenberg 1986), a measurement (tools/profile/light_buffer_probe.cpp): for a point light, a cube of direction cells around it,
+// Light buffer (Haines and Greenberg 1986): for a point light, a cube of direction cells around it,
 // each listing every triangle that a ray from the light through the cell can meet. A shadow ray
 // from a point p to the light lies on one direction from the light, so only the triangles of p's
 // cell can occlude it: one cell look-up and a short list instead of a walk through the kd-tree.
 // Exact where the cells are conservative: each triangle is clipped to each face's view pyramid
 // (widened by kLightBufferFaceMargin so that directions on a cube edge belong to both faces) and
-// its projection's bounding rectangle widened by kLightBufferCellMargin of a cell.
+// its projection's bounding rectangle widened by kLightBufferCellMargin of a cell. Measured against
+// the kd-tree walk by tools/profile/light_buffer_probe.cpp (README, *Session 28: a light buffer*);
+// not yet in the renderer's passes.
 #pragma once
 
 #include <glm/glm.hpp>
@@ -41,6 +43,13 @@ LightBuffer build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 l
 
 // The cell of direction d (from the light; not zero), or kLightBufferOutside where no triangle is.
 uint32_t light_buffer_cell(const LightBuffer& lb, glm::vec3 d);
+
+// Whether the segment from `origin` to the light meets one of the triangles (`tree` holds their
+// texels: intersect_triangle, the traversal pass's test), testing only origin's cell up to the
+// first triangle whose nearest distance to the light is past the segment's end. tests: how many
+// triangles it tested (may be null).
+struct FlatKdTree;
+bool light_buffer_occluded(const LightBuffer& lb, const FlatKdTree& tree, glm::vec3 origin, uint32_t* tests = nullptr);
 
 // The nearest distance from `p` to the triangle a, b, c (Ericson, Real-Time Collision Detection,
 // 5.1.5), in double.

@@ -1,8 +1,10 @@
-#include "light_buffer.h"
+#include "accel/light_buffer.h"
 
 #include <algorithm>
 #include <cmath>
 #include <numeric>
+
+#include "accel/kdtree.h"
 
 namespace mobirt {
 namespace {
@@ -92,6 +94,23 @@ uint32_t light_buffer_cell(const LightBuffer& lb, glm::vec3 d) {
   return uint32_t((face * r + int(y)) * r + int(x));
 }
 
+bool light_buffer_occluded(const LightBuffer& lb, const FlatKdTree& tree, glm::vec3 origin, uint32_t* tests) {
+  const Ray ray{origin, lb.light - origin, 0.0f, 1.0f};
+  const uint32_t c = light_buffer_cell(lb, -ray.direction);
+  if (tests) *tests = 0;
+  if (c == kLightBufferOutside) return false;
+  // Past the segment's end (a little beyond, for the rounding of the length): no triangle there
+  // can meet it.
+  const float end = glm::length(ray.direction) * (1.0f + 1e-4f);
+  for (uint32_t k = lb.first[c]; k < lb.first[c + 1]; ++k) {
+    if (lb.near[k] > end) break;
+    if (tests) ++*tests;
+    Hit h;
+    if (intersect_triangle(tree, int32_t(lb.prims[k]), ray, h)) return true;
+  }
+  return false;
+}
+
 double point_triangle_distance(glm::dvec3 p, glm::dvec3 a, glm::dvec3 b, glm::dvec3 c) {
   const glm::dvec3 ab = b - a, ac = c - a, ap = p - a;
   const double d1 = glm::dot(ab, ap), d2 = glm::dot(ac, ap);
@@ -153,6 +172,13 @@ LightBuffer build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 l
       Bounds& w = window[face];
       w = {std::min(w.s0, b.s0), std::min(w.t0, b.t0), std::max(w.s1, b.s1), std::max(w.t1, b.t1)};
     };
+    // A triangle through the light (or all but): a segment ending at the light may touch it from
+    // any direction, so it goes into every cell of every face.
+    const double extent = std::max({glm::length(c[1] - c[0]), glm::length(c[2] - c[0]), glm::length(c[2] - c[1])});
+    if (!(double(tri_near[t]) > 1e-6 * extent)) {
+      for (int f = 0; f < 6; ++f) add(f, Bounds{-2.0, -2.0, 2.0, 2.0});
+      continue;
+    }
     // Fast path: every vertex well inside one face's pyramid (the pyramid is convex, so the
     // triangle is too, away from the other faces' widened pyramids): its vertices' projections.
     const int face = major_face(glm::vec3(c[0]));
