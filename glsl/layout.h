@@ -143,6 +143,15 @@
                                    //       the light (directional), w = light type
                                    //   [1] xyz = spot direction (where it points), w = cos(outer)
 #define MOBIRT_TP_VEC4S_PER_LIGHT 2
+// Per light, with LIGHT_BUFFERS (--shadow-cells N): x = the node index of its light buffer's first
+// cell (src/accel/light_buffer.h), y = cells per face edge, z = 1 where the light has one (point
+// and spot lights; 0: its shadow rays walk the tree), w = unused. The node texture then holds,
+// past the tree's nodes, per light buffer: 6 texels, each face's window (s0, t0, columns per unit
+// of s, rows per unit of t), then 6 N^2 leaf texels, one per cell (first entry, count,
+// MOBIRT_NODE_LEAF, 0), whose entries in the leaf-entry texture are the triangles' as a leaf's,
+// with the triangle's nearest distance to the light in the second texel's w.
+#define MOBIRT_TP_LIGHT_BUFFERS (MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * MOBIRT_MAX_LIGHTS)
+#define MOBIRT_LIGHT_BUFFER_WINDOWS 6
 // Shading pass
 #define MOBIRT_SP_BACKGROUND 0     // rgb = background colour, a = unused
 #define MOBIRT_SP_LIGHTS 1         // MOBIRT_SP_VEC4S_PER_LIGHT vec4 per light:
@@ -190,6 +199,8 @@
                                      // than MOBIRT_NARROW_INDEX_TEXELS texels: data_index() converts up to 2^24
 #define MOBIRT_SPEC_PRIMARY_HITS 12  // trace: 1 = each ray's closest primitive is known (--primary raster): its
                                      // index + 1 in the ray direction's w (0: none), tested alone, no walk
+#define MOBIRT_SPEC_LIGHT_BUFFERS 13  // trace: 1 = point and spot lights' shadow rays test their light
+                                      // buffer's cell (MOBIRT_TP_LIGHT_BUFFERS) instead of walking the tree
 // Element indices reach the shaders as exact floats: below 2^24 (a float's consecutive integers end
 // there), so no buffer holds more texels than that. Below 2^23 one add makes them ints
 // (prelude_vk.glsl's data_index()); a pass that binds a larger buffer is specialised to WIDE_INDICES.

@@ -64,6 +64,10 @@ precision highp sampler2D;
 #ifndef PRIMARY_HITS
 #define PRIMARY_HITS 0
 #endif
+// --shadow-cells (layout.h, MOBIRT_SPEC_LIGHT_BUFFERS).
+#ifndef LIGHT_BUFFERS
+#define LIGHT_BUFFERS 0
+#endif
 
 #define PRECISE
 #include "precision.glsl"

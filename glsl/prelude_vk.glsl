@@ -21,6 +21,7 @@ layout(constant_id = MOBIRT_SPEC_ATLAS_PAGES) const int ATLAS_PAGES = 0;
 layout(constant_id = MOBIRT_SPEC_ANALYTIC) const int ANALYTIC = 0;
 layout(constant_id = MOBIRT_SPEC_WIDE_INDICES) const int WIDE_INDICES = 0;
 layout(constant_id = MOBIRT_SPEC_PRIMARY_HITS) const int PRIMARY_HITS = 0;
+layout(constant_id = MOBIRT_SPEC_LIGHT_BUFFERS) const int LIGHT_BUFFERS = 0;
 
 // A loop that only its body ends (a break, a return or the step cap MAX_STEPS checked inside):
 // GLSL 450 needs no index, and llvmpipe adds a counter of its own to every loop anyway.

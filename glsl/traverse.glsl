@@ -438,6 +438,50 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
   return vec3(best_prim, best_t, 1.0);
 }
 
+// Whether the segment from `origin` to `light` meets a triangle of light l's light buffer cell
+// (src/accel/light_buffer.cpp's light_buffer_occluded, the same cell, list and test): 1.0 yes,
+// 0.0 no, -1.0 the step cap ended the list first. `to_light` = light - origin as the walk gets it.
+float light_buffer_occluded(int l, vec3 origin, vec3 to_light) {
+  vec4 head = PARAM(MOBIRT_TP_LIGHT_BUFFERS + l);
+  vec3 dir = -to_light;
+  vec3 a = abs(dir);
+  float face;
+  vec3 f;
+  if (a.x >= a.y && a.x >= a.z) {
+    face = dir.x >= 0.0 ? 0.0 : 1.0;
+    f = dir.x >= 0.0 ? vec3(-dir.z, -dir.y, dir.x) : vec3(dir.z, -dir.y, -dir.x);
+  } else if (a.y >= a.z) {
+    face = dir.y >= 0.0 ? 2.0 : 3.0;
+    f = dir.y >= 0.0 ? vec3(dir.x, dir.z, dir.y) : vec3(dir.x, -dir.z, -dir.y);
+  } else {
+    face = dir.z >= 0.0 ? 4.0 : 5.0;
+    f = dir.z >= 0.0 ? vec3(dir.x, -dir.y, dir.z) : vec3(-dir.x, -dir.y, -dir.z);
+  }
+  vec4 w = DATA_TEXEL(u_nodes, head.x - float(MOBIRT_LIGHT_BUFFER_WINDOWS) + face);
+  float res = head.y;
+  float x = (f.x / f.z - w.x) * w.z;
+  float y = (f.y / f.z - w.y) * w.w;
+  if (!(x >= 0.0 && y >= 0.0 && x < res && y < res)) return 0.0;
+  vec4 cell = DATA_TEXEL(u_nodes, head.x + (face * res + floor(y)) * res + floor(x));
+  float base = cell.r * float(MOBIRT_TEXELS_PER_TRIANGLE);
+  float end = base + cell.g * float(MOBIRT_TEXELS_PER_TRIANGLE);
+  // Past the segment's end (a little beyond, for the rounding of its length) no triangle meets it.
+  float reach = length(to_light) * (1.0 + 1e-4);
+  int steps = 0;
+  UNBOUNDED_LOOP(k, MAX_STEPS + 1) {
+    if (base >= end) break;
+    if (steps >= MAX_STEPS) return -1.0;
+    steps = steps + 1;
+    vec4 t0 = DATA_TEXEL(u_leaf_prims, base);
+    vec4 t1 = DATA_TEXEL(u_leaf_prims, base + 1.0);
+    if (t1.w > reach) break;
+    vec4 t2 = DATA_TEXEL(u_leaf_prims, base + 2.0);
+    base = base + float(MOBIRT_TEXELS_PER_TRIANGLE);
+    if (intersect_primitive(t0, t1, t2, origin, to_light, 0.0, 1.0) >= 0.0) return 1.0;
+  }
+  return 0.0;
+}
+
 // The shadow mask of a hit: bit i set when light i is visible. Lights behind the surface as seen
 // from the ray and points outside a spot's outer cone get no shadow ray: they cannot light it.
 // Returns -1.0 when a shadow ray hit the loop cap. rays_cast: the shadow rays it cast (the compute
@@ -482,9 +526,15 @@ float shadow_mask_counted(float prim, vec3 o, vec3 d, float t, out float rays_ca
     }
     if (lit) {
       rays_cast = rays_cast + 1.0;
-      vec3 r = traverse(origin, mp(to_light), 0.0, tmax, true);
-      if (r.z > 0.5) return -1.0;
-      if (r.x < 0.0) mask = mask + bit;
+      if (LIGHT_BUFFERS != 0 && PARAM(MOBIRT_TP_LIGHT_BUFFERS + l).z > 0.5) {
+        float occluded = light_buffer_occluded(l, origin, mp(to_light));
+        if (occluded < 0.0) return -1.0;
+        if (occluded < 0.5) mask = mask + bit;
+      } else {
+        vec3 r = traverse(origin, mp(to_light), 0.0, tmax, true);
+        if (r.z > 0.5) return -1.0;
+        if (r.x < 0.0) mask = mask + bit;
+      }
     }
     bit = bit * 2.0;
     lights_done = lights_done + 1;

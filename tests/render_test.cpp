@@ -170,6 +170,7 @@ TEST_F(VulkanRender, LoopCapStopsExactlyTheRaysWhoseCpuWalkIsLonger) {
     settings.height = 64;
     settings.stack_depth = stack_depth;
     settings.max_steps = cap;
+    settings.shadow_cells = 0;  // the shadow rays walk the tree, as the CPU's step counts assume
     Renderer renderer(*backend, settings);
     const FlatKdTree tree = build_kdtree(scene.mesh.positions, settings.kd);
     const RayBatch rays = primary_rays(*scene.camera, settings.width, settings.height);

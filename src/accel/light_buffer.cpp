@@ -94,6 +94,16 @@ uint32_t light_buffer_cell(const LightBuffer& lb, glm::vec3 d) {
   return uint32_t((face * r + int(y)) * r + int(x));
 }
 
+double LightBuffer::mean_list() const {
+  double sum = 0.0, squares = 0.0;
+  for (size_t c = 0; c < cells(); ++c) {
+    const double n = double(first[c + 1] - first[c]);
+    sum += n;
+    squares += n * n;
+  }
+  return sum > 0.0 ? squares / sum : 0.0;
+}
+
 bool light_buffer_occluded(const LightBuffer& lb, const FlatKdTree& tree, glm::vec3 origin, uint32_t* tests) {
   const Ray ray{origin, lb.light - origin, 0.0f, 1.0f};
   const uint32_t c = light_buffer_cell(lb, -ray.direction);

@@ -195,6 +195,12 @@ const Setting kSettings[] = {
            {"trace", PrimaryHits::Trace}, {"raster", PrimaryHits::Raster}, {"auto", PrimaryHits::Auto}};
        o.settings.primary = v.choice(hits);
      }},
+    {"--shadow-cells", "N|auto", kFrames,
+     "point and spot lights' shadow rays test the triangles of one cell of\n"
+     "a light buffer (N x N cells per cube face around the light) instead\n"
+     "of walking the kd-tree; 0 walks it; auto: 64 up to 32,768 triangles,\n"
+     "else 0 (default auto)",
+     [](CommonOptions& o, const Value& v) { o.settings.shadow_cells = v.text == "auto" ? -1 : v.integer(0, 1024); }},
     {"--light", "SPEC", kViews,
      "replaces the scene's lights (repeat for several):\n"
      "  \"point pos=X,Y,Z [color=R,G,B] [intensity=I] [range=R]\"\n"

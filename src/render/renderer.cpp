@@ -13,6 +13,7 @@
 #include <type_traits>
 #include <utility>
 
+#include "accel/light_buffer.h"
 #include "core/error.h"
 #include "core/parallel.h"
 #include "layout.h"
@@ -284,8 +285,15 @@ struct Renderer::Data {
   std::vector<float> raster_vertices;
   std::vector<uint32_t> raster_texels;
   RayBatch hit_rays;
-  // (lights, packing, analytic, wide, primary hits)
-  std::map<std::tuple<int, int, int, bool, bool>, PassHandle> trace_passes;
+  // --shadow-cells: per shadow light the head of its light buffer (MOBIRT_TP_LIGHT_BUFFERS; z = 0
+  // where it has none), the lights' positions they were built for, and the arrays uploaded (the
+  // tree's nodes and leaf entries with the light buffers after them; memory kept).
+  std::vector<glm::vec4> light_buffer_heads;
+  std::vector<glm::vec3> light_buffer_positions;
+  bool light_buffers = false;  // some light has one
+  TexelArray nodes_with_cells, entries_with_cells;
+  // (lights, packing, analytic, wide, primary hits, light buffers)
+  std::map<std::tuple<int, int, int, bool, bool, bool>, PassHandle> trace_passes;
   std::map<std::tuple<int, int, int, int, bool>, PassHandle> shade_passes;  // (lights, textures, pages, colour, wide)
 };
 
@@ -331,8 +339,17 @@ class Renderer::Engine final : public WhittedEngine {
       cache.tree_shapes = scene.shapes;
       t.build_ms = elapsed_ms(stage);
     }
-    if (!reuse) {
-      r_.upload_tree(cache.tree);
+    // A kept tree whose lights moved needs new light buffers (--shadow-cells).
+    bool lights_moved = false;
+    if (r_.settings_.shadow_cells != 0) {
+      const std::span<const Light> lights = r_.shadow_lights(scene);
+      lights_moved = lights.size() != cache.light_buffer_positions.size();
+      for (size_t l = 0; !lights_moved && l < lights.size(); ++l) {
+        lights_moved = lights[l].position != cache.light_buffer_positions[l];
+      }
+    }
+    if (!reuse || lights_moved) {
+      r_.upload_tree(cache.tree, r_.shadow_lights(scene));
       cache.tree_valid = true;
     }
     t.tree_rebuilt = !reuse;
@@ -441,8 +458,9 @@ bool Renderer::wide_indices(std::initializer_list<std::pair<uint32_t, uint32_t>>
   });
 }
 
-PassHandle Renderer::trace_pass(int lights, Packing packing, bool analytic, bool wide, bool primary_hits) {
-  auto key = std::make_tuple(lights, int(packing), int(analytic), wide, primary_hits);
+PassHandle Renderer::trace_pass(int lights, Packing packing, bool analytic, bool wide, bool primary_hits,
+                                bool light_buffers) {
+  auto key = std::make_tuple(lights, int(packing), int(analytic), wide, primary_hits, light_buffers);
   auto it = data_->trace_passes.find(key);
   if (it != data_->trace_passes.end()) return it->second;
   PassDesc desc;
@@ -458,7 +476,9 @@ PassHandle Renderer::trace_pass(int lights, Packing packing, bool analytic, bool
                          {MOBIRT_SPEC_ANALYTIC, int(analytic)}};
   if (wide) desc.specialization.push_back({MOBIRT_SPEC_WIDE_INDICES, 1});
   if (primary_hits) desc.specialization.push_back({MOBIRT_SPEC_PRIMARY_HITS, 1});
-  desc.uniform_vec4s = MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * uint32_t(lights);
+  if (light_buffers) desc.specialization.push_back({MOBIRT_SPEC_LIGHT_BUFFERS, 1});
+  desc.uniform_vec4s = light_buffers ? MOBIRT_TP_LIGHT_BUFFERS + uint32_t(lights)
+                                     : MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * uint32_t(lights);
   desc.texture_bindings = {MOBIRT_BIND_NODES, MOBIRT_BIND_LEAF_PRIMS, MOBIRT_BIND_TRIANGLES,
                            MOBIRT_BIND_RAY_ORIGIN, MOBIRT_BIND_RAY_DIRECTION};
   desc.texture_kinds.assign(desc.texture_bindings.size(), data_kind_);
@@ -519,8 +539,62 @@ void Renderer::prepare_atlas(const Scene& scene) {
   d.atlas_scene = key;
 }
 
-void Renderer::upload_tree(const FlatKdTree& tree) {
+void Renderer::build_light_buffers(const FlatKdTree& tree, std::span<const Light> lights) {
   Data& d = *data_;
+  d.light_buffers = false;
+  d.light_buffer_heads.assign(lights.size(), glm::vec4(0.0f));
+  d.light_buffer_positions.clear();
+  for (const Light& light : lights) d.light_buffer_positions.push_back(light.position);
+  // A tree of triangles only (analytic shapes have no light-buffer test), and a walkable one.
+  const size_t triangles = tree.triangles.size() / MOBIRT_TEXELS_PER_TRIANGLE;
+  // Under emulated mediump the test's fp16 rounding moves triangles out of the cells they were
+  // listed in, where the walk's leaves still test them as the CPU's does: auto walks there.
+  const bool highp = settings_.shadow_rays.ray_test.precision == Precision::High;
+  const int res = settings_.shadow_cells >= 0                                  ? settings_.shadow_cells
+                  : highp && triangles <= kAutoShadowCellsTriangles ? kAutoShadowCells
+                                                                    : 0;
+  bool analytic = false;
+  for (size_t t = 0; t < triangles && !analytic; ++t) {
+    analytic = tree.triangles[t * MOBIRT_TEXELS_PER_TRIANGLE][MOBIRT_PRIM_KIND] != MOBIRT_PRIM_TRIANGLE;
+  }
+  if (res <= 0 || tree.nodes.empty() || analytic) return;
+  std::vector<glm::vec3> positions(triangles * 3);
+  for (size_t t = 0; t < triangles; ++t) {
+    for (size_t k = 0; k < 3; ++k) positions[3 * t + k] = glm::vec3(tree.triangles[t * MOBIRT_TEXELS_PER_TRIANGLE + k]);
+  }
+  d.nodes_with_cells = tree.nodes;
+  d.entries_with_cells = tree.leaf_prims;
+  for (size_t l = 0; l < lights.size(); ++l) {
+    if (lights[l].type == LightType::Directional) continue;
+    const LightBuffer lb = build_light_buffer(positions, lights[l].position, res);
+    if (lb.mean_list() > kLightBufferMaxMeanList) continue;  // long lists: the walk is faster
+    const size_t entry_base = d.entries_with_cells.size() / MOBIRT_TEXELS_PER_TRIANGLE;
+    const size_t head = d.nodes_with_cells.size() + MOBIRT_LIGHT_BUFFER_WINDOWS;
+    if (head + lb.cells() >= size_t(MOBIRT_MAX_INDEX_TEXELS) ||
+        (entry_base + lb.prims.size()) * MOBIRT_TEXELS_PER_TRIANGLE >= size_t(MOBIRT_MAX_INDEX_TEXELS)) {
+      continue;  // past what a texture index reaches: this light's rays walk the tree
+    }
+    d.nodes_with_cells.insert(d.nodes_with_cells.end(), lb.window.begin(), lb.window.end());
+    for (size_t c = 0; c < lb.cells(); ++c) {
+      d.nodes_with_cells.push_back(glm::vec4(float(entry_base + lb.first[c]), float(lb.first[c + 1] - lb.first[c]),
+                                             MOBIRT_NODE_LEAF, 0.0f));
+    }
+    for (size_t k = 0; k < lb.prims.size(); ++k) {
+      const glm::vec4* tri = &tree.triangles[size_t(lb.prims[k]) * MOBIRT_TEXELS_PER_TRIANGLE];
+      d.entries_with_cells.push_back(tri[0]);
+      d.entries_with_cells.push_back(glm::vec4(glm::vec3(tri[1]), lb.near[k]));
+      d.entries_with_cells.push_back(glm::vec4(glm::vec3(tri[2]), float(lb.prims[k])));
+    }
+    d.light_buffer_heads[l] = glm::vec4(float(head), float(res), 1.0f, 0.0f);
+    d.light_buffers = true;
+  }
+}
+
+void Renderer::upload_tree(const FlatKdTree& tree, std::span<const Light> lights) {
+  Data& d = *data_;
+  build_light_buffers(tree, lights);
+  const TexelArray& nodes = d.light_buffers ? d.nodes_with_cells : tree.nodes;
+  const TexelArray& entries = d.light_buffers ? d.entries_with_cells : tree.leaf_prims;
   // Texture rows are uploaded whole: pad each array to full rows.
   auto upload_padded = [&](Data::Texture& t, const void* src, size_t elements, size_t element_bytes,
                            TexelFormat format) {
@@ -534,9 +608,8 @@ void Renderer::upload_tree(const FlatKdTree& tree) {
       backend_.upload(t.handle, src, bytes);
     }
   };
-  upload_padded(d.nodes, tree.nodes.data(), tree.nodes.size(), sizeof(glm::vec4), TexelFormat::RGBA32F);
-  upload_padded(d.leaf_prims, tree.leaf_prims.data(), tree.leaf_prims.size(), sizeof(glm::vec4),
-                TexelFormat::RGBA32F);
+  upload_padded(d.nodes, nodes.data(), nodes.size(), sizeof(glm::vec4), TexelFormat::RGBA32F);
+  upload_padded(d.leaf_prims, entries.data(), entries.size(), sizeof(glm::vec4), TexelFormat::RGBA32F);
   upload_padded(d.triangles, tree.triangles.data(), tree.triangles.size(), sizeof(glm::vec4),
                 TexelFormat::RGBA32F);
 }
@@ -563,7 +636,7 @@ void Renderer::upload_rays(const RayBatch& rays) {
 
 TraceResult Renderer::trace(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays) {
   data_->tree_valid = false;  // the GPU now holds this tree, not the cached one
-  upload_tree(tree);
+  upload_tree(tree, shadow_lights(scene));
   return trace_uploaded(scene, tree, rays);
 }
 
@@ -571,7 +644,7 @@ TraceResult Renderer::trace_primary(const Scene& scene, const Camera& camera, co
                                     const RayBatch& rays) {
   if (!primaries_rasterized(scene, settings_)) return trace(scene, tree, rays);
   data_->tree_valid = false;  // the GPU now holds this tree, not the cached one
-  upload_tree(tree);
+  upload_tree(tree, shadow_lights(scene));
   GenerationTimings g;
   TracedGeneration traced = trace_rasterized(scene, camera, tree, rays, g);
   TraceResult result;
@@ -596,9 +669,16 @@ TraceResult Renderer::trace_uploaded(const Scene& scene, const FlatKdTree& tree,
   const bool wide = wide_indices({{d.nodes.rows, kDataWidth}, {d.leaf_prims.rows, kDataWidth},
                                   {d.triangles.rows, kDataWidth}, {d.ray_origin.rows, rays.width},
                                   {d.ray_direction.rows, rays.width}});
-  const PassHandle pass =
-      trace_pass(lights, result.packing, !settings_.specialize || !scene.shapes.empty(), wide, primary_hits);
-  const std::vector<float> uniforms = trace_uniforms(tree, shadow_lights(scene), settings_.shadow_rays, lights);
+  const bool light_buffers = d.light_buffers && lights > 0;
+  const PassHandle pass = trace_pass(lights, result.packing, !settings_.specialize || !scene.shapes.empty(), wide,
+                                     primary_hits, light_buffers);
+  std::vector<float> uniforms = trace_uniforms(tree, shadow_lights(scene), settings_.shadow_rays, lights);
+  if (light_buffers) {
+    for (int l = 0; l < lights; ++l) {
+      put(uniforms, MOBIRT_TP_LIGHT_BUFFERS + size_t(l),
+          size_t(l) < d.light_buffer_heads.size() ? d.light_buffer_heads[size_t(l)] : glm::vec4(0.0f));
+    }
+  }
   const TextureHandle textures[] = {d.nodes.handle, d.leaf_prims.handle, d.triangles.handle,
                                     d.ray_origin.handle, d.ray_direction.handle};
   result.texels.resize(rays.count());

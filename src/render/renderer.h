@@ -69,6 +69,12 @@ struct RenderSettings {
   ColourDepth colour = ColourDepth::Bits8;
   DataReads data = DataReads::TexelBuffers;  // faster on lavapipe (README: "Data reads")
   PrimaryHits primary = PrimaryHits::Auto;
+  // --shadow-cells N: point and spot lights' shadow rays test the triangles of one cell of a light
+  // buffer of N x N cells per cube face (src/accel/light_buffer.h) instead of walking the kd-tree;
+  // 0: they walk it; -1 (auto, the default): kAutoShadowCells up to kAutoShadowCellsTriangles
+  // triangles under highp, else 0. Scenes of triangles only; directional lights always walk, and so do lights
+  // whose lists run long (kLightBufferMaxMeanList).
+  int shadow_cells = -1;
   KdBuildOptions kd;
   ShadowSettings shadow_rays;  // also the ray/triangle test and precision of every traced ray
   SecondarySettings secondary;
@@ -139,10 +145,14 @@ class Renderer {
   // must be specialised to WIDE_INDICES: one of more than 2^23 texels (glsl/layout.h).
   bool wide_indices(std::initializer_list<std::pair<uint32_t, uint32_t>> rows_and_widths) const;
   // wide: the pass binds such a buffer. primary_hits: specialised to PRIMARY_HITS (--primary raster).
-  PassHandle trace_pass(int lights, Packing packing, bool analytic, bool wide, bool primary_hits = false);
+  PassHandle trace_pass(int lights, Packing packing, bool analytic, bool wide, bool primary_hits = false,
+                        bool light_buffers = false);
   PassHandle shade_pass(int lights, int textures, int pages, int colour, bool wide);
   void prepare_atlas(const Scene& scene);
-  void upload_tree(const FlatKdTree& tree);
+  // lights: the shadow rays' (shadow_lights): with --shadow-cells their light buffers go with the
+  // tree, past its nodes and leaf entries (glsl/layout.h, MOBIRT_TP_LIGHT_BUFFERS).
+  void upload_tree(const FlatKdTree& tree, std::span<const Light> lights);
+  void build_light_buffers(const FlatKdTree& tree, std::span<const Light> lights);
   // The textures laid out in rows of the rays' width (rays and shading inputs), made again when
   // the width changes.
   void fit_ray_layout(uint32_t width);
@@ -184,6 +194,11 @@ bool primaries_rasterized(const Scene& scene, const RenderSettings& settings);
 // every frame (tree_per_frame: --always-rebuild, the paper's model and the bench's, or an
 // animation played frame by frame).
 inline constexpr double kRasterTrianglesPerPixel = 0.5;
+// --shadow-cells auto (README, *Shadow rays through light buffers*): 64 x 64 cells a face made the
+// bench's shadow frames of 1.4K-11K triangles 1.1-1.5x faster; on 361K (the tessellated
+// sphereflake) the lists ran 50-100x longer and each build took 0.1 s a light.
+inline constexpr int kAutoShadowCells = 64;
+inline constexpr size_t kAutoShadowCellsTriangles = 32768;
 bool raster_pays(size_t triangles, int width, int height, bool tree_per_frame, bool walks_tree);
 
 // The view of Backend::run_raster for the primary rays of `camera` at width x height: near just

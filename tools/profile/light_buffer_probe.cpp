@@ -74,7 +74,7 @@ int run(int argc, char** argv) {
                 double(walk.steps) / nrays, double(walk.nodes_visited) / nrays, double(walk.triangles_tested) / nrays,
                 walk_ms);
     std::printf("  res  cells  refs/tri  build ms  tests/ray (whole cell)  tests/ray (to the ray's end)  max cell  "
-                "answers differing  CPU ms\n");
+                "answers differing  CPU ms  mean list\n");
     for (int res : resolutions) {
       const auto b0 = std::chrono::steady_clock::now();
       const LightBuffer lb = build_light_buffer(scene.mesh.positions, light.position, res);
@@ -94,9 +94,9 @@ int run(int argc, char** argv) {
         differ += hit != (walk_answer[i] != 0) ? 1 : 0;
       }
       const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-      std::printf("  %3d %6zu %9.2f %9.2f %23.2f %29.2f %9u %18zu %7.2f\n", res, lb.cells(),
+      std::printf("  %3d %6zu %9.2f %9.2f %23.2f %29.2f %9u %18zu %7.2f %10.1f\n", res, lb.cells(),
                   double(lb.prims.size()) / double(std::max<size_t>(1, scene.mesh.triangle_count())), build_ms,
-                  double(whole) / nrays, double(cut) / nrays, max_cell, differ, ms);
+                  double(whole) / nrays, double(cut) / nrays, max_cell, differ, ms, lb.mean_list());
     }
   }
   return 0;
