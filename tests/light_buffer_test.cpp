@@ -134,6 +134,8 @@ void expect_same_texels(Backend& backend, const Scene& scene, int cells, bool sp
   const RayBatch rays = primary_rays(*scene.camera, settings.width, settings.height);
   const TraceResult a = walk.trace(scene, tree, rays);
   const TraceResult b = buffered.trace(scene, tree, rays);
+  EXPECT_EQ(walk.light_buffers_used(), 0);
+  const int used = buffered.light_buffers_used();
   ASSERT_EQ(a.packing, b.packing);
   size_t differing = 0, lit = 0, capped = 0;
   for (size_t i = 0; i < rays.count(); ++i) {
@@ -147,9 +149,10 @@ void expect_same_texels(Backend& backend, const Scene& scene, int cells, bool sp
     differing += a.texels[i] != b.texels[i] ? 1 : 0;
     lit += walked.mask != 0 ? 1 : 0;
   }
-  std::printf("[ light buffer ] %s, %d cells: %zu of %u texels differ, %zu capped, %zu lit\n", what.c_str(), cells,
-              differing, rays.count(), capped, lit);
-  if (cells >= 16) {
+  std::printf("[ light buffer ] %s, %d cells, %d lights with one: %zu of %u texels differ, %zu capped, %zu lit\n",
+              what.c_str(), cells, used, differing, rays.count(), capped, lit);
+  if (cells >= 32) {
+    EXPECT_GE(used, 1) << "the buffers were used, not the walk compared with itself";
     EXPECT_GT(lit, rays.count() / 10) << "lights that reach the surfaces";
     EXPECT_EQ(capped, 0u);
   }
@@ -159,8 +162,10 @@ void expect_same_texels(Backend& backend, const Scene& scene, int cells, bool sp
 TEST_P(LightBufferPass, ShadowMasksAreTheWalks) {
   for (const char* name : {"default", "toaster", "marbles", "fish"}) {
     const Scene scene = load_scene(std::string(MOBIRT_SOURCE_DIR "/scenes/") + name + ".gltf");
-    // One cell a face: lists of every triangle the face sees, past the loop cap on the large scenes.
-    for (int cells : {1, 16, 64}) expect_same_texels(*backend, scene, cells, true, name);
+    // One cell a face: lists of every triangle a face sees, mostly too long (kLightBufferMaxMeanList):
+    // those lights walk; where one is kept, rays past the loop cap go to the CPU as capped.
+    // From 64 cells on every scene's light keeps its buffer (the toaster's lists at 32: 108 > 100).
+    for (int cells : {1, 64, 96}) expect_same_texels(*backend, scene, cells, true, name);
   }
   expect_same_texels(*backend, test::random_soup_scene(3000, 7), 32, true, "soup with a spot and a point light");
   expect_same_texels(*backend, test::nine_lights_scene(), 32, false, "nine lights");

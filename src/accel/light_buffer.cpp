@@ -85,12 +85,13 @@ struct Rect {
 }  // namespace
 
 uint32_t light_buffer_cell(const LightBuffer& lb, glm::vec3 d) {
+  // In float, as the shader computes it (glsl/traverse.glsl, light_buffer_occluded).
   const int face = major_face(d);
-  const glm::dvec3 f = face_coords(face, glm::dvec3(d));
+  const glm::vec3 f = glm::vec3(face_coords(face, glm::dvec3(d)));
   const glm::vec4& w = lb.window[size_t(face)];
-  const double x = (f.x / f.z - w.x) * w.z, y = (f.y / f.z - w.y) * w.w;
+  const float x = (f.x / f.z - w.x) * w.z, y = (f.y / f.z - w.y) * w.w;
   const int r = lb.resolution;
-  if (!(x >= 0.0 && y >= 0.0 && x < r && y < r)) return kLightBufferOutside;
+  if (!(x >= 0.0f && y >= 0.0f && x < float(r) && y < float(r))) return kLightBufferOutside;
   return uint32_t((face * r + int(y)) * r + int(x));
 }
 
@@ -219,8 +220,10 @@ LightBuffer build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 l
       lb.window[size_t(face)] = glm::vec4(0.0f);  // no triangle: every direction outside
       continue;
     }
-    // Widened by a cell's margin, in float as the look-up computes it.
-    const double ms = (w.s1 - w.s0) * 1e-3 + 1e-9, mt = (w.t1 - w.t0) * 1e-3 + 1e-9;
+    // Widened by a thousandth of its width, and by what the look-up's float arithmetic (the
+    // shader's: s = u / w in float) may stray from the exact direction: a few ulps of |s|.
+    const double ms = (w.s1 - w.s0) * 1e-3 + 1e-6 * (1.0 + std::max(std::abs(w.s0), std::abs(w.s1)));
+    const double mt = (w.t1 - w.t0) * 1e-3 + 1e-6 * (1.0 + std::max(std::abs(w.t0), std::abs(w.t1)));
     const double s0 = w.s0 - ms, t0 = w.t0 - mt;
     lb.window[size_t(face)] = glm::vec4(float(s0), float(t0), float(resolution / (w.s1 + ms - s0)),
                                         float(resolution / (w.t1 + mt - t0)));
@@ -231,12 +234,16 @@ LightBuffer build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 l
   for (size_t i = 0; i < rects.size(); ++i) {
     const auto& [face, b] = rects[i];
     const glm::vec4& w = lb.window[size_t(face)];
-    auto cell = [&](double s, double origin, double scale, double margin) {
-      return std::clamp(int(std::floor((s - origin) * scale + margin)), 0, resolution - 1);
+    // The margin: kLightBufferCellMargin of a cell, and the float look-up's error in cells (a few
+    // ulps of s and of the window's origin, times the cells per unit, and of the product).
+    auto cell = [&](double s, double origin, double scale, double sign) {
+      const double slack = 5e-7 * ((std::abs(s) + std::abs(origin)) * scale + resolution);
+      return std::clamp(int(std::floor((s - origin) * scale + sign * (kLightBufferCellMargin + slack))), 0,
+                        resolution - 1);
     };
     Rect& r = cell_rects[i];
-    r = {face, cell(b.s0, w.x, w.z, -kLightBufferCellMargin), cell(b.t0, w.y, w.w, -kLightBufferCellMargin),
-         cell(b.s1, w.x, w.z, kLightBufferCellMargin), cell(b.t1, w.y, w.w, kLightBufferCellMargin)};
+    r = {face, cell(b.s0, w.x, w.z, -1.0), cell(b.t0, w.y, w.w, -1.0), cell(b.s1, w.x, w.z, 1.0),
+         cell(b.t1, w.y, w.w, 1.0)};
     for (int y = r.y0; y <= r.y1; ++y) {
       for (int x = r.x0; x <= r.x1; ++x) ++count[(size_t(face) * resolution + y) * resolution + x];
     }

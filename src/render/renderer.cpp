@@ -289,7 +289,8 @@ struct Renderer::Data {
   // where it has none), the lights' positions they were built for, and the arrays uploaded (the
   // tree's nodes and leaf entries with the light buffers after them; memory kept).
   std::vector<glm::vec4> light_buffer_heads;
-  std::vector<glm::vec3> light_buffer_positions;
+  std::vector<glm::vec3> light_buffer_positions;  // empty where none was built
+  std::vector<LightType> light_buffer_types;
   bool light_buffers = false;  // some light has one
   TexelArray nodes_with_cells, entries_with_cells;
   // (lights, packing, analytic, wide, primary hits, light buffers)
@@ -341,11 +342,11 @@ class Renderer::Engine final : public WhittedEngine {
     }
     // A kept tree whose lights moved needs new light buffers (--shadow-cells).
     bool lights_moved = false;
-    if (r_.settings_.shadow_cells != 0) {
+    if (cache.light_buffers) {
       const std::span<const Light> lights = r_.shadow_lights(scene);
       lights_moved = lights.size() != cache.light_buffer_positions.size();
       for (size_t l = 0; !lights_moved && l < lights.size(); ++l) {
-        lights_moved = lights[l].position != cache.light_buffer_positions[l];
+        lights_moved = lights[l].position != cache.light_buffer_positions[l] || lights[l].type != cache.light_buffer_types[l];
       }
     }
     if (!reuse || lights_moved) {
@@ -544,7 +545,7 @@ void Renderer::build_light_buffers(const FlatKdTree& tree, std::span<const Light
   d.light_buffers = false;
   d.light_buffer_heads.assign(lights.size(), glm::vec4(0.0f));
   d.light_buffer_positions.clear();
-  for (const Light& light : lights) d.light_buffer_positions.push_back(light.position);
+  d.light_buffer_types.clear();
   // A tree of triangles only (analytic shapes have no light-buffer test), and a walkable one.
   const size_t triangles = tree.triangles.size() / MOBIRT_TEXELS_PER_TRIANGLE;
   // Under emulated mediump the test's fp16 rounding moves triangles out of the cells they were
@@ -557,17 +558,20 @@ void Renderer::build_light_buffers(const FlatKdTree& tree, std::span<const Light
   for (size_t t = 0; t < triangles && !analytic; ++t) {
     analytic = tree.triangles[t * MOBIRT_TEXELS_PER_TRIANGLE][MOBIRT_PRIM_KIND] != MOBIRT_PRIM_TRIANGLE;
   }
-  if (res <= 0 || tree.nodes.empty() || analytic) return;
+  const bool points = std::any_of(lights.begin(), lights.end(), [](const Light& l) { return l.type != LightType::Directional; });
+  if (res <= 0 || tree.nodes.empty() || analytic || !points) return;
   std::vector<glm::vec3> positions(triangles * 3);
   for (size_t t = 0; t < triangles; ++t) {
     for (size_t k = 0; k < 3; ++k) positions[3 * t + k] = glm::vec3(tree.triangles[t * MOBIRT_TEXELS_PER_TRIANGLE + k]);
   }
-  d.nodes_with_cells = tree.nodes;
-  d.entries_with_cells = tree.leaf_prims;
   for (size_t l = 0; l < lights.size(); ++l) {
     if (lights[l].type == LightType::Directional) continue;
     const LightBuffer lb = build_light_buffer(positions, lights[l].position, res);
     if (lb.mean_list() > kLightBufferMaxMeanList) continue;  // long lists: the walk is faster
+    if (!d.light_buffers) {  // the first buffer: the tree's arrays, the buffers after them
+      d.nodes_with_cells = tree.nodes;
+      d.entries_with_cells = tree.leaf_prims;
+    }
     const size_t entry_base = d.entries_with_cells.size() / MOBIRT_TEXELS_PER_TRIANGLE;
     const size_t head = d.nodes_with_cells.size() + MOBIRT_LIGHT_BUFFER_WINDOWS;
     if (head + lb.cells() >= size_t(MOBIRT_MAX_INDEX_TEXELS) ||
@@ -588,6 +592,20 @@ void Renderer::build_light_buffers(const FlatKdTree& tree, std::span<const Light
     d.light_buffer_heads[l] = glm::vec4(float(head), float(res), 1.0f, 0.0f);
     d.light_buffers = true;
   }
+  // What the buffers were built for: a kept tree's lights that move or change kind rebuild them.
+  if (d.light_buffers) {
+    for (const Light& light : lights) {
+      d.light_buffer_positions.push_back(light.position);
+      d.light_buffer_types.push_back(light.type);
+    }
+  }
+}
+
+int Renderer::light_buffers_used() const {
+  const Data& d = *data_;
+  if (!d.light_buffers) return 0;
+  return int(std::count_if(d.light_buffer_heads.begin(), d.light_buffer_heads.end(),
+                           [](const glm::vec4& h) { return h.z > 0.5f; }));
 }
 
 void Renderer::upload_tree(const FlatKdTree& tree, std::span<const Light> lights) {

@@ -153,6 +153,13 @@ class Renderer {
   // tree, past its nodes and leaf entries (glsl/layout.h, MOBIRT_TP_LIGHT_BUFFERS).
   void upload_tree(const FlatKdTree& tree, std::span<const Light> lights);
   void build_light_buffers(const FlatKdTree& tree, std::span<const Light> lights);
+
+ public:
+  // The lights whose shadow rays test a light buffer in the passes now (--shadow-cells), of the
+  // tree uploaded last.
+  int light_buffers_used() const;
+
+ private:
   // The textures laid out in rows of the rays' width (rays and shading inputs), made again when
   // the width changes.
   void fit_ray_layout(uint32_t width);

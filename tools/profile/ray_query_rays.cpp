@@ -125,6 +125,7 @@ int run(int argc, char** argv) {
 
   const std::unique_ptr<Backend> backend = create_vulkan_backend(BackendOptions{});
   RenderSettings with_shadows, without_shadows;
+  with_shadows.shadow_cells = without_shadows.shadow_cells = 0;  // the kd-tree walk, as the column says
   with_shadows.width = without_shadows.width = p.width;
   with_shadows.height = without_shadows.height = p.height;
   with_shadows.stack_depth = without_shadows.stack_depth = p.stack;
