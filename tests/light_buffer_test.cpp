@@ -96,23 +96,9 @@ TEST(LightBuffer, DirectionsOnTheCubesEdgesAndCorners) {
 
 // ---- In the traversal pass (--shadow-cells), per backend ---------------------------------------
 
-enum class Api { Vulkan, Gles };
+using test::Api;
 
-const char* api_name(Api api) { return api == Api::Vulkan ? "vulkan" : "gles"; }
-
-class LightBufferPass : public ::testing::TestWithParam<Api> {
- protected:
-  void SetUp() override {
-    const BackendOptions options = test::validated_options();
-    backend = GetParam() == Api::Vulkan ? create_vulkan_backend(options) : create_gles_backend(options);
-  }
-  void TearDown() override {
-    if (!backend) return;
-    const std::vector<std::string> messages = backend->take_debug_messages();
-    EXPECT_TRUE(messages.empty()) << api_name(GetParam()) << " debug messages:\n" << test::join(messages);
-  }
-  std::unique_ptr<Backend> backend;
-};
+class LightBufferPass : public test::PerBackendTest {};
 
 // The traversal pass's texels with --shadow-cells N against the walk's on the same rays: the same
 // hits, and the same shadow masks on all but a few rays in 10^4 (a triangle that the walk, at a
@@ -201,8 +187,7 @@ TEST_P(LightBufferPass, DirectionalLightsWalkAndMovedLightsRebuild) {
   EXPECT_EQ(compare_images(moved, fresh).max_error, 0.0f);
 }
 
-INSTANTIATE_TEST_SUITE_P(Backends, LightBufferPass, ::testing::Values(Api::Vulkan, Api::Gles),
-                         [](const ::testing::TestParamInfo<Api>& p) { return api_name(p.param); });
+INSTANTIATE_TEST_SUITE_P(Backends, LightBufferPass, ::testing::Values(Api::Vulkan, Api::Gles), test::api_param_name);
 
 // A light in a triangle's plane, and one inside a triangle: the triangles through the light cover
 // whole faces.

@@ -73,19 +73,10 @@ TEST(Numerics, NormalUlpOffsetKnownAnswers) {
   EXPECT_EQ(offset_normal_ulp({4.0f, 4.0f, 4.0f}, {0.999f / 256.0f, 0.0f, 0.0f}).x, 4.0f);
 }
 
-enum class Api { Vulkan, Gles };
+using test::Api;
 
-class NumericsOnGpu : public ::testing::TestWithParam<Api> {
+class NumericsOnGpu : public test::PerBackendTest {
  protected:
-  void SetUp() override {
-    const BackendOptions options = test::validated_options();
-    backend = GetParam() == Api::Vulkan ? create_vulkan_backend(options) : create_gles_backend(options);
-  }
-  void TearDown() override {
-    if (!backend) return;
-    const std::vector<std::string> messages = backend->take_debug_messages();
-    EXPECT_TRUE(messages.empty()) << test::join(messages);
-  }
 
   // Runs the numerics shader with `function` over one ray per input texel; returns the texels.
   std::vector<uint32_t> run(float function, const std::vector<glm::vec4>& input, const std::vector<glm::vec4>& operand,
@@ -129,8 +120,6 @@ class NumericsOnGpu : public ::testing::TestWithParam<Api> {
     }
     return bad;
   }
-
-  std::unique_ptr<Backend> backend;
 };
 
 // Values of every magnitude fp16 has (subnormals to the overflow threshold), exact ties, the
@@ -252,10 +241,7 @@ TEST_P(NumericsOnGpu, BufferIndicesConvertExactlyBelow2To24) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Backends, NumericsOnGpu, ::testing::Values(Api::Vulkan, Api::Gles),
-                         [](const ::testing::TestParamInfo<Api>& p) {
-                           return std::string(p.param == Api::Vulkan ? "vulkan" : "gles");
-                         });
+INSTANTIATE_TEST_SUITE_P(Backends, NumericsOnGpu, ::testing::Values(Api::Vulkan, Api::Gles), test::api_param_name);
 
 }  // namespace
 }  // namespace mobirt

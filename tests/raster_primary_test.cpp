@@ -23,23 +23,10 @@
 namespace mobirt {
 namespace {
 
-enum class Api { Vulkan, Gles };
+using test::Api;
+using test::api_name;
 
-const char* api_name(Api api) { return api == Api::Vulkan ? "vulkan" : "gles"; }
-
-class RasterPrimary : public ::testing::TestWithParam<Api> {
- protected:
-  void SetUp() override {
-    const BackendOptions options = test::validated_options();
-    backend = GetParam() == Api::Vulkan ? create_vulkan_backend(options) : create_gles_backend(options);
-  }
-  void TearDown() override {
-    if (!backend) return;
-    const std::vector<std::string> messages = backend->take_debug_messages();
-    EXPECT_TRUE(messages.empty()) << api_name(GetParam()) << " debug messages:\n" << test::join(messages);
-  }
-  std::unique_ptr<Backend> backend;
-};
+class RasterPrimary : public test::PerBackendTest {};
 
 Scene project_scene(const std::string& name) {
   return load_scene(std::string(MOBIRT_SOURCE_DIR "/scenes/") + name + ".gltf");
@@ -228,8 +215,7 @@ TEST_P(RasterPrimary, NothingInFrontOfTheCamera) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Backends, RasterPrimary, ::testing::Values(Api::Vulkan, Api::Gles),
-                         [](const ::testing::TestParamInfo<Api>& p) { return api_name(p.param); });
+INSTANTIATE_TEST_SUITE_P(Backends, RasterPrimary, ::testing::Values(Api::Vulkan, Api::Gles), test::api_param_name);
 
 // ---- What the frame skips and refuses ---------------------------------------------------------
 
