@@ -19,6 +19,7 @@ int main(int argc, char** argv) {
   mobirt::bench::register_embree_benchmarks();
   mobirt::bench::register_raytree_benchmarks();
   mobirt::bench::register_atlas_benchmarks();
+  mobirt::bench::register_light_buffer_benchmarks();
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
   benchmark::RunSpecifiedBenchmarks();

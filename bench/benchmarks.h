@@ -12,5 +12,6 @@ void register_kdtree_benchmarks();
 void register_embree_benchmarks();
 void register_raytree_benchmarks();
 void register_atlas_benchmarks();
+void register_light_buffer_benchmarks();
 
 }  // namespace mobirt::bench

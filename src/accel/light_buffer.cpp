@@ -1,10 +1,14 @@
 #include "accel/light_buffer.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
-#include <numeric>
+#include <cstdint>
+#include <utility>
+#include <vector>
 
 #include "accel/kdtree.h"
+#include "core/parallel.h"
 
 namespace mobirt {
 namespace {
@@ -148,70 +152,123 @@ double point_triangle_distance(glm::dvec3 p, glm::dvec3 a, glm::dvec3 b, glm::dv
   return glm::length(p - (a + ab * v + ac * w));
 }
 
-LightBuffer build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 light, int resolution) {
-  LightBuffer lb;
+namespace {
+
+// What pass 1 found for one triangle: its rectangle on one face (0-5: every vertex well inside that
+// face's pyramid), kClipped (it straddles faces: clipped to each), or kEverywhere (through the light).
+constexpr uint8_t kClipped = 6;
+constexpr uint8_t kEverywhere = 7;
+
+// A build's working arrays, kept from build to build on each thread (an animation builds every
+// frame's buffers on the frame pipeline's worker): no page faults on fresh memory per build.
+struct BuildScratch {
+  std::vector<float> near;        // per triangle
+  std::vector<uint8_t> kind;      // per triangle: its face, kClipped or kEverywhere
+  std::vector<Bounds> bounds;     // per triangle: its rectangle where kind is a face
+  std::vector<uint64_t> keys[2];  // (near's bits, triangle) for the radix sort
+  std::vector<std::pair<int, Bounds>> rects;  // in the order of their triangles' near
+  std::vector<uint32_t> rect_tri;
+  std::vector<Rect> cell_rects;
+  std::vector<uint32_t> fill;
+};
+
+// keys sorted by their upper 32 bits (a non-negative float's bits: the same order as the floats),
+// stably: LSD radix sort, 8 bits a pass, passes whose digit every key shares skipped. Keys start
+// in triangle order (the lower 32 bits), so equal distances stay in triangle order.
+void radix_sort_upper(std::vector<uint64_t>& keys, std::vector<uint64_t>& tmp) {
+  tmp.resize(keys.size());
+  for (int shift = 32; shift < 64; shift += 8) {
+    uint32_t count[257] = {};
+    for (uint64_t k : keys) ++count[((k >> shift) & 0xFF) + 1];
+    if (std::any_of(count + 1, count + 257, [&](uint32_t c) { return c == keys.size(); })) continue;
+    for (int i = 0; i < 256; ++i) count[i + 1] += count[i];
+    for (uint64_t k : keys) tmp[count[(k >> shift) & 0xFF]++] = k;
+    keys.swap(tmp);
+  }
+}
+
+}  // namespace
+
+void build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 light, int resolution, LightBuffer& lb,
+                        unsigned threads) {
+  // The calling thread's (a reference: the parallel loops' chunks on other threads use it too).
+  thread_local BuildScratch scratch;
+  BuildScratch& s = scratch;
   lb.light = light;
   lb.resolution = resolution;
-  const size_t triangles = positions.size() / 3;
+  const uint32_t triangles = uint32_t(positions.size() / 3);
   const size_t cells = size_t(6) * resolution * resolution;
   const glm::dvec3 l(light);
-  // Pass 1: each triangle's nearest distance to the light, its rectangle per face, and each face's
-  // window (the union of its rectangles: the cells cover only the directions where triangles are).
-  std::vector<float> tri_near(triangles);
-  std::vector<std::pair<int, Bounds>> rects;
-  std::vector<uint32_t> rect_tri;
-  Bounds window[6];
-  for (size_t t = 0; t < triangles; ++t) {
-    const glm::dvec3 c[3] = {glm::dvec3(positions[3 * t]) - l, glm::dvec3(positions[3 * t + 1]) - l,
-                             glm::dvec3(positions[3 * t + 2]) - l};
-    const double d = point_triangle_distance(glm::dvec3(0.0), c[0], c[1], c[2]);
-    float df = float(d);  // rounded down: a lower bound stays one
-    if (double(df) > d) df = std::nextafter(df, 0.0f);
-    tri_near[t] = df;
-  }
-  // Triangles in the order of their nearest distance: each cell's list is filled in that order.
-  std::vector<uint32_t> order(triangles);
-  std::iota(order.begin(), order.end(), 0u);
-  std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return tri_near[a] < tri_near[b] || (tri_near[a] == tri_near[b] && a < b); });
   const double inner = 1.0 - kLightBufferFaceMargin;
-  for (uint32_t t : order) {
-    const glm::dvec3 c[3] = {glm::dvec3(positions[3 * t]) - l, glm::dvec3(positions[3 * t + 1]) - l,
-                             glm::dvec3(positions[3 * t + 2]) - l};
+  // Pass 1, on all cores: each triangle's nearest distance to the light, and its rectangle where
+  // it lies well inside one face (the pyramid is convex, so the triangle is too, away from the
+  // other faces' widened pyramids): its vertices' projections.
+  s.near.resize(triangles);
+  s.kind.resize(triangles);
+  s.bounds.resize(triangles);
+  s.keys[0].resize(triangles);
+  parallel_for_chunks(triangles, 1024, threads, [&](uint32_t, uint32_t begin, uint32_t end) {
+    for (uint32_t t = begin; t < end; ++t) {
+      const glm::dvec3 c[3] = {glm::dvec3(positions[3 * t]) - l, glm::dvec3(positions[3 * t + 1]) - l,
+                               glm::dvec3(positions[3 * t + 2]) - l};
+      const double d = point_triangle_distance(glm::dvec3(0.0), c[0], c[1], c[2]);
+      float df = float(d);  // rounded down: a lower bound stays one
+      if (double(df) > d) df = std::nextafter(df, 0.0f);
+      s.near[t] = df;
+      s.keys[0][t] = (uint64_t(std::bit_cast<uint32_t>(df)) << 32) | t;
+      // A triangle through the light (or all but): a segment ending at the light may touch it
+      // from any direction, so it goes into every cell of every face.
+      const double extent = std::max({glm::length(c[1] - c[0]), glm::length(c[2] - c[0]), glm::length(c[2] - c[1])});
+      if (!(double(df) > 1e-6 * extent)) {
+        s.kind[t] = kEverywhere;
+        continue;
+      }
+      const int face = major_face(glm::vec3(c[0]));
+      Bounds b;
+      bool inside = true;
+      for (int k = 0; k < 3 && inside; ++k) {
+        const glm::dvec3 f = face_coords(face, c[k]);
+        if (!(f.z > 0.0) || std::abs(f.x) > inner * f.z || std::abs(f.y) > inner * f.z) {
+          inside = false;
+          break;
+        }
+        b.s0 = std::min(b.s0, f.x / f.z);
+        b.s1 = std::max(b.s1, f.x / f.z);
+        b.t0 = std::min(b.t0, f.y / f.z);
+        b.t1 = std::max(b.t1, f.y / f.z);
+      }
+      s.kind[t] = inside ? uint8_t(face) : kClipped;
+      s.bounds[t] = b;
+    }
+  });
+  // Triangles in the order of their nearest distance: each cell's list is filled in that order.
+  radix_sort_upper(s.keys[0], s.keys[1]);
+  // Their rectangles in that order, and each face's window (the union of its rectangles: the cells
+  // cover only the directions where triangles are). Triangles that straddle faces are clipped to
+  // each face's pyramid here (few: those near a cube edge as seen from the light).
+  s.rects.clear();
+  s.rect_tri.clear();
+  Bounds window[6];
+  for (const uint64_t key : s.keys[0]) {
+    const uint32_t t = uint32_t(key);
     auto add = [&](int face, const Bounds& b) {
-      rects.emplace_back(face, b);
-      rect_tri.push_back(t);
+      s.rects.emplace_back(face, b);
+      s.rect_tri.push_back(t);
       Bounds& w = window[face];
       w = {std::min(w.s0, b.s0), std::min(w.t0, b.t0), std::max(w.s1, b.s1), std::max(w.t1, b.t1)};
     };
-    // A triangle through the light (or all but): a segment ending at the light may touch it from
-    // any direction, so it goes into every cell of every face.
-    const double extent = std::max({glm::length(c[1] - c[0]), glm::length(c[2] - c[0]), glm::length(c[2] - c[1])});
-    if (!(double(tri_near[t]) > 1e-6 * extent)) {
+    const uint8_t kind = s.kind[t];
+    if (kind < kClipped) {
+      add(kind, s.bounds[t]);
+    } else if (kind == kEverywhere) {
       for (int f = 0; f < 6; ++f) add(f, Bounds{-2.0, -2.0, 2.0, 2.0});
-      continue;
-    }
-    // Fast path: every vertex well inside one face's pyramid (the pyramid is convex, so the
-    // triangle is too, away from the other faces' widened pyramids): its vertices' projections.
-    const int face = major_face(glm::vec3(c[0]));
-    Bounds b;
-    bool inside = true;
-    for (int k = 0; k < 3 && inside; ++k) {
-      const glm::dvec3 f = face_coords(face, c[k]);
-      if (!(f.z > 0.0) || std::abs(f.x) > inner * f.z || std::abs(f.y) > inner * f.z) {
-        inside = false;
-        break;
+    } else {
+      const glm::dvec3 c[3] = {glm::dvec3(positions[3 * t]) - l, glm::dvec3(positions[3 * t + 1]) - l,
+                               glm::dvec3(positions[3 * t + 2]) - l};
+      Bounds b;
+      for (int f = 0; f < 6; ++f) {
+        if (cover(f, c, b)) add(f, b);
       }
-      b.s0 = std::min(b.s0, f.x / f.z);
-      b.s1 = std::max(b.s1, f.x / f.z);
-      b.t0 = std::min(b.t0, f.y / f.z);
-      b.t1 = std::max(b.t1, f.y / f.z);
-    }
-    if (inside) {
-      add(face, b);
-      continue;
-    }
-    for (int f = 0; f < 6; ++f) {
-      if (cover(f, c, b)) add(f, b);
     }
   }
   for (int face = 0; face < 6; ++face) {
@@ -228,40 +285,48 @@ LightBuffer build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 l
     lb.window[size_t(face)] = glm::vec4(float(s0), float(t0), float(resolution / (w.s1 + ms - s0)),
                                         float(resolution / (w.t1 + mt - t0)));
   }
-  // Pass 2: the rectangles as cell ranges, widened by kLightBufferCellMargin of a cell.
-  std::vector<Rect> cell_rects(rects.size());
-  std::vector<uint32_t> count(cells, 0);
-  for (size_t i = 0; i < rects.size(); ++i) {
-    const auto& [face, b] = rects[i];
-    const glm::vec4& w = lb.window[size_t(face)];
-    // The margin: kLightBufferCellMargin of a cell, and the float look-up's error in cells (a few
-    // ulps of s and of the window's origin, times the cells per unit, and of the product).
-    auto cell = [&](double s, double origin, double scale, double sign) {
-      const double slack = 5e-7 * ((std::abs(s) + std::abs(origin)) * scale + resolution);
-      return std::clamp(int(std::floor((s - origin) * scale + sign * (kLightBufferCellMargin + slack))), 0,
-                        resolution - 1);
-    };
-    Rect& r = cell_rects[i];
-    r = {face, cell(b.s0, w.x, w.z, -1.0), cell(b.t0, w.y, w.w, -1.0), cell(b.s1, w.x, w.z, 1.0),
-         cell(b.t1, w.y, w.w, 1.0)};
+  // Pass 2, on all cores: the rectangles as cell ranges, widened by kLightBufferCellMargin of a cell.
+  const uint32_t rect_count = uint32_t(s.rects.size());
+  s.cell_rects.resize(rect_count);
+  parallel_for_chunks(rect_count, 2048, threads, [&](uint32_t, uint32_t begin, uint32_t end) {
+    for (uint32_t i = begin; i < end; ++i) {
+      const auto& [face, b] = s.rects[i];
+      const glm::vec4& w = lb.window[size_t(face)];
+      // The margin: kLightBufferCellMargin of a cell, and the float look-up's error in cells (a few
+      // ulps of s and of the window's origin, times the cells per unit, and of the product).
+      auto cell = [&](double v, double origin, double scale, double sign) {
+        const double slack = 5e-7 * ((std::abs(v) + std::abs(origin)) * scale + resolution);
+        return std::clamp(int(std::floor((v - origin) * scale + sign * (kLightBufferCellMargin + slack))), 0,
+                          resolution - 1);
+      };
+      s.cell_rects[i] = {face, cell(b.s0, w.x, w.z, -1.0), cell(b.t0, w.y, w.w, -1.0), cell(b.s1, w.x, w.z, 1.0),
+                         cell(b.t1, w.y, w.w, 1.0)};
+    }
+  });
+  // Each cell's count, its list's start, and the lists filled in near order: each comes out sorted.
+  lb.first.assign(cells + 1, 0);
+  uint32_t* count = lb.first.data() + 1;
+  for (const Rect& r : s.cell_rects) {
     for (int y = r.y0; y <= r.y1; ++y) {
-      for (int x = r.x0; x <= r.x1; ++x) ++count[(size_t(face) * resolution + y) * resolution + x];
+      uint32_t* row = count + (size_t(r.face) * resolution + y) * resolution;
+      for (int x = r.x0; x <= r.x1; ++x) ++row[x];
     }
   }
-  lb.first.assign(cells + 1, 0);
-  for (size_t c = 0; c < cells; ++c) lb.first[c + 1] = lb.first[c] + count[c];
+  for (size_t c = 0; c < cells; ++c) lb.first[c + 1] += lb.first[c];
   lb.prims.resize(lb.first[cells]);
-  // The rectangles came in the order of their triangles' nearest distance: each list comes out sorted.
-  std::vector<uint32_t> fill(lb.first.begin(), lb.first.end() - 1);
-  for (size_t i = 0; i < cell_rects.size(); ++i) {
-    const Rect& r = cell_rects[i];
+  s.fill.assign(lb.first.begin(), lb.first.end() - 1);
+  for (uint32_t i = 0; i < rect_count; ++i) {
+    const Rect& r = s.cell_rects[i];
+    const uint32_t t = s.rect_tri[i];
     for (int y = r.y0; y <= r.y1; ++y) {
-      for (int x = r.x0; x <= r.x1; ++x) lb.prims[fill[(size_t(r.face) * resolution + y) * resolution + x]++] = rect_tri[i];
+      uint32_t* row = s.fill.data() + (size_t(r.face) * resolution + y) * resolution;
+      for (int x = r.x0; x <= r.x1; ++x) lb.prims[row[x]++] = t;
     }
   }
   lb.near.resize(lb.prims.size());
-  for (size_t k = 0; k < lb.prims.size(); ++k) lb.near[k] = tri_near[lb.prims[k]];
-  return lb;
+  parallel_for_chunks(uint32_t(lb.prims.size()), 16384, threads, [&](uint32_t, uint32_t begin, uint32_t end) {
+    for (uint32_t k = begin; k < end; ++k) lb.near[k] = s.near[lb.prims[k]];
+  });
 }
 
 }  // namespace mobirt

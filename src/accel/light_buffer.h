@@ -45,8 +45,16 @@ struct LightBuffer {
 // tessellated sphereflake's lights, 19-123x the toaster's lists, took 3x the walk's pass.
 inline constexpr double kLightBufferMaxMeanList = 100.0;
 
-// The light buffer of the triangles `positions` (three vertices each) around `light`.
-LightBuffer build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 light, int resolution);
+// The light buffer of the triangles `positions` (three vertices each) around `light`, into `out`
+// (its arrays' memory reused), on `threads` threads (0 = all cores). The same buffer for any
+// thread count.
+void build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 light, int resolution, LightBuffer& out,
+                        unsigned threads = 0);
+inline LightBuffer build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 light, int resolution) {
+  LightBuffer lb;
+  build_light_buffer(positions, light, resolution, lb);
+  return lb;
+}
 
 // The cell of direction d (from the light; not zero), or kLightBufferOutside where no triangle is.
 uint32_t light_buffer_cell(const LightBuffer& lb, glm::vec3 d);

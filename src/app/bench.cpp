@@ -295,7 +295,7 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
           return std::make_pair(static_cast<const Scene*>(&mine[slot]->scene), view);
         },
         settings.kd, settings.always_rebuild, pipelined);
-    pipeline->set_walks_tree([settings](const Scene& s) { return frame_walks_tree(s, settings); });
+    pipeline->set_render_settings(settings);
     return pipeline;
   };
   std::vector<std::unique_ptr<FramePipeline>> pipelines;

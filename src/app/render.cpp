@@ -337,7 +337,7 @@ int cmd_render(const std::vector<std::string>& args) {
           return std::make_pair(static_cast<const Scene*>(&slots[slot]->scene), view);
         },
         settings.kd, settings.always_rebuild, !serial);
-    pipeline.set_walks_tree([&settings](const Scene& s) { return frame_walks_tree(s, settings); });
+    pipeline.set_render_settings(settings);
     for (size_t i = 0; i < frame_list.size(); ++i) {
       const int frame = frame_list[i];
       FrameTimings t;

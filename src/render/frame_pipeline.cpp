@@ -29,13 +29,15 @@ double FramePipeline::prepare(size_t index) {
   // Into the slot's tree, which holds the arrays of an older tree (render_prepared swaps them
   // out of the renderer): their memory is reused. A frame without a build carries no tree, its
   // arrays emptied but their memory kept.
-  if (f.tree_built && walks_tree_ && !walks_tree_(*scene)) {
+  if (f.tree_built && settings_ && !frame_walks_tree(*scene, *settings_)) {
     flatten_primitives(f.tree, scene->mesh.positions, scene->shapes);
   } else if (f.tree_built) {
     rebuild_kdtree(f.tree, scene->mesh.positions, scene->shapes, kd_);
   } else {
     f.tree.clear();
   }
+  f.light_buffers.clear();
+  if (f.tree_built && settings_) frame_light_buffers(*scene, *settings_, f.light_buffers);
   f.build_ms = f.tree_built ? elapsed_ms(build_start) : 0.0;
   if (f.tree_built && !always_rebuild_) {
     built_positions_ = scene->mesh.positions;
@@ -81,7 +83,7 @@ PipelineStep FramePipeline::step(size_t index, const std::function<void(Prepared
 
 Image render_prepared(Renderer& renderer, PreparedFrame& f, FrameTimings* timings) {
   if (!f.tree_built) return renderer.render(*f.scene, f.camera, timings);
-  return renderer.render(*f.scene, f.camera, f.tree, f.build_ms, timings);
+  return renderer.render(*f.scene, f.camera, f.tree, f.build_ms, timings, &f.light_buffers);
 }
 
 }  // namespace mobirt

@@ -19,10 +19,12 @@
 #include <cstdint>
 #include <functional>
 #include <future>
+#include <optional>
 #include <utility>
 #include <vector>
 
 #include "accel/kdtree.h"
+#include "accel/light_buffer.h"
 #include "core/camera.h"
 #include "core/image.h"
 #include "render/engine.h"
@@ -41,9 +43,13 @@ struct PreparedFrame {
                                 // render_prepared, the renderer's previous tree (its memory for
                                 // the slot's next build)
   bool tree_built = false;      // false: the triangles did not move since the last tree built
+  // With tree_built and set_render_settings: the shadow lights' light buffers (frame_light_buffers),
+  // built with the tree; handed to the renderer as the tree is.
+  std::vector<LightBuffer> light_buffers;
   double pose_ms = 0.0;         // posing the scene
-  double build_ms = 0.0;        // the kd-tree build's wall clock; pipelined, on the worker while
-                                // the previous frame rendered, so not part of this frame's time
+  double build_ms = 0.0;        // the kd-tree and light buffers' build, wall clock; pipelined, on
+                                // the worker while the previous frame rendered, so not part of
+                                // this frame's time
 };
 
 // What one step cost, on the rendering thread's clock (milliseconds).
@@ -81,10 +87,11 @@ class FramePipeline {
 
   bool pipelined() const { return pipelined_; }
 
-  // Which frames walk a kd-tree (frame_walks_tree with the renderer's settings); the others get
-  // only the primitives' texels (flatten_primitives) where a build would be. By default every
-  // frame walks one. Set before the first step.
-  void set_walks_tree(std::function<bool(const Scene&)> walks) { walks_tree_ = std::move(walks); }
+  // The renderer's settings: a frame gets a kd-tree where frame_walks_tree says it walks one, else
+  // only the primitives' texels (flatten_primitives), and its light buffers (frame_light_buffers)
+  // are built with it. Without, every frame gets a kd-tree and no light buffer is built ahead. Set
+  // before the first step.
+  void set_render_settings(const RenderSettings& settings) { settings_ = settings; }
 
  private:
   double prepare(size_t index);  // into slots_[index % 2]; returns its milliseconds
@@ -94,7 +101,7 @@ class FramePipeline {
   KdBuildOptions kd_;
   bool always_rebuild_;
   bool pipelined_;
-  std::function<bool(const Scene&)> walks_tree_;  // empty: every frame walks a tree
+  std::optional<RenderSettings> settings_;  // empty: every frame walks a tree, no light buffers ahead
   PreparedFrame slots_[2];
   std::vector<glm::vec3> built_positions_;  // of the last tree built (when not always_rebuild)
   std::vector<Shape> built_shapes_;         // and its analytic shapes

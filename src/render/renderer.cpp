@@ -129,13 +129,55 @@ bool raster_pays(size_t triangles, int width, int height, bool tree_per_frame, b
 
 namespace {
 
-// Whether a frame with rasterized primaries still walks a kd-tree: its shadow and secondary rays.
+// Whether a frame with rasterized primaries still walks a kd-tree: its secondary rays, and shadow
+// rays without light buffers.
 bool rays_walk_tree(const Scene& scene, const RenderSettings& settings) {
-  if (settings.shadows && !scene.lights.empty()) return true;
+  if (!shadow_rays_buffered(scene, settings)) return true;
   return settings.depth > 0 && scene_has_secondary_rays(scene);
 }
 
 }  // namespace
+
+int shadow_cells(size_t triangles, const RenderSettings& settings) {
+  if (settings.shadow_cells >= 0) return settings.shadow_cells;
+  // Under emulated mediump the test's fp16 rounding moves triangles out of the cells they were
+  // listed in, where the walk's leaves still test them as the CPU's does: auto walks there.
+  const bool highp = settings.shadow_rays.ray_test.precision == Precision::High;
+  return highp && triangles <= kAutoShadowCellsTriangles ? kAutoShadowCells : 0;
+}
+
+bool shadow_rays_buffered(const Scene& scene, const RenderSettings& settings) {
+  if (!settings.shadows || scene.lights.empty()) return true;
+  if (!scene.shapes.empty() || shadow_cells(scene.mesh.triangle_count(), settings) <= 0) return false;
+  return std::all_of(scene.lights.begin(), scene.lights.end(),
+                     [](const Light& l) { return l.type != LightType::Directional; });
+}
+
+namespace {
+
+// One light buffer per light of `lights` at `res` cells a face edge over the triangles
+// `positions`; resolution 0 for a directional light.
+void light_buffers_for(std::span<const glm::vec3> positions, std::span<const Light> lights, int res,
+                       std::vector<LightBuffer>& out) {
+  out.resize(lights.size());
+  for (size_t l = 0; l < lights.size(); ++l) {
+    out[l] = lights[l].type == LightType::Directional ? LightBuffer{}
+                                                      : build_light_buffer(positions, lights[l].position, res);
+  }
+}
+
+}  // namespace
+
+void frame_light_buffers(const Scene& scene, const RenderSettings& settings, std::vector<LightBuffer>& out) {
+  out.clear();
+  if (!settings.shadows) return;
+  const int res = shadow_cells(scene.mesh.triangle_count(), settings);
+  if (res <= 0 || !scene.shapes.empty()) {
+    out.resize(scene.lights.size());
+    return;
+  }
+  light_buffers_for(scene.mesh.positions, scene.lights, res, out);
+}
 
 bool primaries_rasterized(const Scene& scene, const RenderSettings& settings) {
   if (!scene.shapes.empty()) return false;
@@ -289,9 +331,12 @@ struct Renderer::Data {
   // where it has none), the lights' positions they were built for, and the arrays uploaded (the
   // tree's nodes and leaf entries with the light buffers after them; memory kept).
   std::vector<glm::vec4> light_buffer_heads;
-  std::vector<glm::vec3> light_buffer_positions;  // empty where none was built
+  std::vector<glm::vec3> light_buffer_positions;  // the shadow lights of the last upload
   std::vector<LightType> light_buffer_types;
   bool light_buffers = false;  // some light has one
+  // Built with a tree handed in (Renderer::render with light buffers), for the next upload.
+  std::vector<LightBuffer> prebuilt_light_buffers;
+  bool light_buffers_prebuilt = false;
   TexelArray nodes_with_cells, entries_with_cells;
   // (lights, packing, analytic, wide, primary hits, light buffers)
   std::map<std::tuple<int, int, int, bool, bool, bool>, PassHandle> trace_passes;
@@ -340,9 +385,10 @@ class Renderer::Engine final : public WhittedEngine {
       cache.tree_shapes = scene.shapes;
       t.build_ms = elapsed_ms(stage);
     }
-    // A kept tree whose lights moved needs new light buffers (--shadow-cells).
+    // A kept tree whose lights moved needs new light buffers (--shadow-cells); so does one without
+    // a kd-tree, whose shadow rays have nothing else (a light added where none had a buffer).
     bool lights_moved = false;
-    if (cache.light_buffers) {
+    if (cache.light_buffers || !cache.tree_walkable) {
       const std::span<const Light> lights = r_.shadow_lights(scene);
       lights_moved = lights.size() != cache.light_buffer_positions.size();
       for (size_t l = 0; !lights_moved && l < lights.size(); ++l) {
@@ -350,14 +396,32 @@ class Renderer::Engine final : public WhittedEngine {
       }
     }
     if (!reuse || lights_moved) {
-      r_.upload_tree(cache.tree, r_.shadow_lights(scene));
+      // The light buffers are part of the acceleration structure: their build (on this thread,
+      // also where the tree was built ahead) counts as build time.
+      t.build_ms += r_.upload_tree(cache.tree, r_.shadow_lights(scene));
       cache.tree_valid = true;
+      // A frame without a tree with a light that turned out to get no buffer (its lists too long,
+      // past a texture's reach): that light's shadow rays walk, so the tree is built after all.
+      if (!cache.tree_walkable && r_.light_buffers_used() < int(r_.shadow_lights(scene).size())) {
+        t.build_ms += make_walkable(scene);
+        t.build_ms += r_.upload_tree(cache.tree, r_.shadow_lights(scene));
+      }
     }
     t.tree_rebuilt = !reuse;
     r_.upload_materials(scene);
   }
 
   const FlatKdTree& tree() const override { return r_.data_->tree; }
+
+  // The frame's kd-tree built over the primitives' texels it had (the same triangles, in the same
+  // order: flatten_primitives); returns its milliseconds.
+  double make_walkable(const Scene& scene) {
+    const auto start = Clock::now();
+    Data& cache = *r_.data_;
+    rebuild_kdtree(cache.tree, scene.mesh.positions, scene.shapes, r_.settings_.kd);
+    cache.tree_walkable = true;
+    return elapsed_ms(start);
+  }
 
   TracedGeneration trace(const Scene& scene, const RayBatch& rays, GenerationTimings& g) override {
     TraceResult result = r_.trace_uploaded(scene, r_.data_->tree, rays);
@@ -372,7 +436,19 @@ class Renderer::Engine final : public WhittedEngine {
   TracedGeneration trace_primary(const Scene& scene, const Camera& camera, const RayBatch& rays,
                                  GenerationTimings& g) override {
     if (!primaries_rasterized(scene, r_.settings_)) return trace(scene, rays, g);
-    return r_.trace_rasterized(scene, camera, r_.data_->tree, rays, g);
+    TracedGeneration traced = r_.trace_rasterized(scene, camera, r_.data_->tree, rays, g);
+    // A ray the loop cap stopped (a light buffer's cell listing more than --max-steps triangles)
+    // is retraced on the CPU through the kd-tree (decode_hits): a frame without one builds it now,
+    // counted with the decoding. The GPU keeps the primitives' texels: the next frame uploads anew.
+    Data& cache = *r_.data_;
+    if (!cache.tree_walkable) {
+      const uint32_t capped = pack_capped(traced.packing);
+      if (std::find(traced.texels.begin(), traced.texels.end(), capped) != traced.texels.end()) {
+        g.decode_ms += make_walkable(scene);
+        cache.tree_valid = false;
+      }
+    }
+    return traced;
   }
 
   std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, const SurfaceHits& hits,
@@ -544,29 +620,39 @@ void Renderer::build_light_buffers(const FlatKdTree& tree, std::span<const Light
   Data& d = *data_;
   d.light_buffers = false;
   d.light_buffer_heads.assign(lights.size(), glm::vec4(0.0f));
+  // What the buffers were built for: a kept tree's lights that move or change kind rebuild them.
   d.light_buffer_positions.clear();
   d.light_buffer_types.clear();
-  // A tree of triangles only (analytic shapes have no light-buffer test), and a walkable one.
+  for (const Light& light : lights) {
+    d.light_buffer_positions.push_back(light.position);
+    d.light_buffer_types.push_back(light.type);
+  }
+  // A scene of triangles only (analytic shapes have no light-buffer test); the tree may be the
+  // primitives' texels alone (a frame that walks none: frame_walks_tree).
   const size_t triangles = tree.triangles.size() / MOBIRT_TEXELS_PER_TRIANGLE;
-  // Under emulated mediump the test's fp16 rounding moves triangles out of the cells they were
-  // listed in, where the walk's leaves still test them as the CPU's does: auto walks there.
-  const bool highp = settings_.shadow_rays.ray_test.precision == Precision::High;
-  const int res = settings_.shadow_cells >= 0                                  ? settings_.shadow_cells
-                  : highp && triangles <= kAutoShadowCellsTriangles ? kAutoShadowCells
-                                                                    : 0;
+  const int res = shadow_cells(triangles, settings_);
   bool analytic = false;
   for (size_t t = 0; t < triangles && !analytic; ++t) {
     analytic = tree.triangles[t * MOBIRT_TEXELS_PER_TRIANGLE][MOBIRT_PRIM_KIND] != MOBIRT_PRIM_TRIANGLE;
   }
   const bool points = std::any_of(lights.begin(), lights.end(), [](const Light& l) { return l.type != LightType::Directional; });
-  if (res <= 0 || tree.nodes.empty() || analytic || !points) return;
-  std::vector<glm::vec3> positions(triangles * 3);
-  for (size_t t = 0; t < triangles; ++t) {
-    for (size_t k = 0; k < 3; ++k) positions[3 * t + k] = glm::vec3(tree.triangles[t * MOBIRT_TEXELS_PER_TRIANGLE + k]);
+  // Built with the tree handed in (the frame pipeline's worker), for these lights at this resolution.
+  std::vector<LightBuffer>& buffers = d.prebuilt_light_buffers;
+  bool prebuilt = std::exchange(d.light_buffers_prebuilt, false) && buffers.size() == lights.size();
+  for (size_t l = 0; prebuilt && l < lights.size(); ++l) {
+    prebuilt = buffers[l].resolution == 0 || (buffers[l].resolution == res && buffers[l].light == lights[l].position);
+  }
+  if (res <= 0 || analytic || !points) return;
+  if (!prebuilt) {
+    std::vector<glm::vec3> positions(triangles * 3);
+    for (size_t t = 0; t < triangles; ++t) {
+      for (size_t k = 0; k < 3; ++k) positions[3 * t + k] = glm::vec3(tree.triangles[t * MOBIRT_TEXELS_PER_TRIANGLE + k]);
+    }
+    light_buffers_for(positions, lights, res, buffers);
   }
   for (size_t l = 0; l < lights.size(); ++l) {
-    if (lights[l].type == LightType::Directional) continue;
-    const LightBuffer lb = build_light_buffer(positions, lights[l].position, res);
+    const LightBuffer& lb = buffers[l];
+    if (lb.resolution <= 0) continue;                   // a directional light
     if (lb.mean_list() > kLightBufferMaxMeanList) continue;  // long lists: the walk is faster
     if (!d.light_buffers) {  // the first buffer: the tree's arrays, the buffers after them
       d.nodes_with_cells = tree.nodes;
@@ -592,13 +678,6 @@ void Renderer::build_light_buffers(const FlatKdTree& tree, std::span<const Light
     d.light_buffer_heads[l] = glm::vec4(float(head), float(res), 1.0f, 0.0f);
     d.light_buffers = true;
   }
-  // What the buffers were built for: a kept tree's lights that move or change kind rebuild them.
-  if (d.light_buffers) {
-    for (const Light& light : lights) {
-      d.light_buffer_positions.push_back(light.position);
-      d.light_buffer_types.push_back(light.type);
-    }
-  }
 }
 
 int Renderer::light_buffers_used() const {
@@ -608,9 +687,11 @@ int Renderer::light_buffers_used() const {
                            [](const glm::vec4& h) { return h.z > 0.5f; }));
 }
 
-void Renderer::upload_tree(const FlatKdTree& tree, std::span<const Light> lights) {
+double Renderer::upload_tree(const FlatKdTree& tree, std::span<const Light> lights) {
   Data& d = *data_;
+  const auto start = Clock::now();
   build_light_buffers(tree, lights);
+  const double buffers_ms = elapsed_ms(start);
   const TexelArray& nodes = d.light_buffers ? d.nodes_with_cells : tree.nodes;
   const TexelArray& entries = d.light_buffers ? d.entries_with_cells : tree.leaf_prims;
   // Texture rows are uploaded whole: pad each array to full rows.
@@ -630,6 +711,7 @@ void Renderer::upload_tree(const FlatKdTree& tree, std::span<const Light> lights
   upload_padded(d.leaf_prims, entries.data(), entries.size(), sizeof(glm::vec4), TexelFormat::RGBA32F);
   upload_padded(d.triangles, tree.triangles.data(), tree.triangles.size(), sizeof(glm::vec4),
                 TexelFormat::RGBA32F);
+  return buffers_ms;
 }
 
 void Renderer::fit_ray_layout(uint32_t width) {
@@ -963,7 +1045,7 @@ Image Renderer::render(const Scene& scene, const Camera& camera, FrameTimings* t
 }
 
 Image Renderer::render(const Scene& scene, const Camera& camera, FlatKdTree& tree, double build_ms,
-                       FrameTimings* timings) {
+                       FrameTimings* timings, std::vector<LightBuffer>* light_buffers) {
   Data& d = *data_;
   std::swap(d.tree, tree);
   // Kept as the cache of the triangles the tree was built on, as a tree built here would be; valid
@@ -973,6 +1055,8 @@ Image Renderer::render(const Scene& scene, const Camera& camera, FlatKdTree& tre
   d.tree_valid = false;
   d.tree_prebuilt = true;
   d.prebuilt_ms = build_ms;
+  d.light_buffers_prebuilt = light_buffers != nullptr;
+  if (light_buffers) std::swap(d.prebuilt_light_buffers, *light_buffers);
   return render_whitted(scene, camera, settings_, *engine_, timings);
 }
 

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "accel/kdtree.h"
+#include "accel/light_buffer.h"
 #include "backend/backend.h"
 #include "core/camera.h"
 #include "core/image.h"
@@ -100,8 +101,10 @@ class Renderer {
   // frame pipeline's worker, render/frame_pipeline.h), uploaded instead of built; timings->build_ms
   // is `build_ms`, the build's own wall clock. The tree is swapped in: `tree` comes back holding
   // the renderer's previous one, whose arrays the caller's next rebuild_kdtree reuses.
+  // light_buffers: the frame's, built with the tree (frame_light_buffers; swapped in as the tree
+  // is), or null: the renderer builds them.
   Image render(const Scene& scene, const Camera& camera, FlatKdTree& tree, double build_ms,
-               FrameTimings* timings = nullptr);
+               FrameTimings* timings = nullptr, std::vector<LightBuffer>* light_buffers = nullptr);
 
   // The traversal pass alone over the given rays (for tests and benchmarks). The tree must have
   // been built from scene.mesh.
@@ -150,8 +153,9 @@ class Renderer {
   PassHandle shade_pass(int lights, int textures, int pages, int colour, bool wide);
   void prepare_atlas(const Scene& scene);
   // lights: the shadow rays' (shadow_lights): with --shadow-cells their light buffers go with the
-  // tree, past its nodes and leaf entries (glsl/layout.h, MOBIRT_TP_LIGHT_BUFFERS).
-  void upload_tree(const FlatKdTree& tree, std::span<const Light> lights);
+  // tree, past its nodes and leaf entries (glsl/layout.h, MOBIRT_TP_LIGHT_BUFFERS). Returns the
+  // milliseconds spent building the light buffers.
+  double upload_tree(const FlatKdTree& tree, std::span<const Light> lights);
   void build_light_buffers(const FlatKdTree& tree, std::span<const Light> lights);
 
  public:
@@ -187,9 +191,24 @@ class Renderer {
 };
 
 // Whether a frame of `scene` with `settings` walks a kd-tree: every frame does, but one whose
-// primary hits are rasterized and that casts no shadow ray and no secondary ray. That one gets only
-// the primitives' texels (flatten_primitives): decoding reads the triangles, nothing walks a tree.
+// primary hits are rasterized, that casts no secondary ray and whose shadow rays (if any) all have
+// light buffers (shadow_rays_buffered). That one gets only the primitives' texels
+// (flatten_primitives), with the light buffers after them: decoding reads the triangles, the shadow
+// rays their lights' cells, nothing walks a tree. Where a light's buffer then turns out not worth
+// using (kLightBufferMaxMeanList, a texture limit) or a ray hits the loop cap, the frame builds its
+// tree after all (Renderer::Engine).
 bool frame_walks_tree(const Scene& scene, const RenderSettings& settings);
+// --shadow-cells for a scene of `triangles` under `settings`: its cells per face edge, 0 = none.
+int shadow_cells(size_t triangles, const RenderSettings& settings);
+// Whether every shadow ray of a frame is to test a light buffer's cell rather than walk: shadows on,
+// a scene of triangles only, shadow_cells > 0 and every light a point or spot light. True too when
+// the frame casts no shadow ray.
+bool shadow_rays_buffered(const Scene& scene, const RenderSettings& settings);
+// The light buffers of a frame of `scene` under `settings`, one per shadow light (none without
+// shadows), built on all cores: resolution 0 where the light gets none (a directional light,
+// shadow_cells 0, analytic shapes). The renderer packs them into the passes' data, and still
+// leaves out a light whose lists run long (kLightBufferMaxMeanList) or past a texture's reach.
+void frame_light_buffers(const Scene& scene, const RenderSettings& settings, std::vector<LightBuffer>& out);
 // Whether a frame rasterizes its primary hits: --primary raster, or auto where raster_pays, and a
 // scene of triangles only (analytic shapes have none to draw: their scenes' primaries are traced).
 bool primaries_rasterized(const Scene& scene, const RenderSettings& settings);

@@ -123,7 +123,7 @@ int main(int argc, char** argv) {
         },
         settings.kd, settings.always_rebuild, true);
     // Both sides build what the frame walks (no tree where the primaries are rasterized and no ray walks one).
-    pipeline.set_walks_tree([&settings](const Scene& sc) { return frame_walks_tree(sc, settings); });
+    pipeline.set_render_settings(settings);
     Mode s, p;
     size_t differing = 0;
     for (size_t f = 0; f < total; ++f) {
