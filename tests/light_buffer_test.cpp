@@ -187,6 +187,96 @@ TEST_P(LightBufferPass, DirectionalLightsWalkAndMovedLightsRebuild) {
   EXPECT_EQ(compare_images(moved, fresh).max_error, 0.0f);
 }
 
+// With rasterized primaries, no secondary rays and a buffer for every light, the frame builds no
+// kd-tree: its image is the walking frame's but for pixels whose centre sits on an edge (the
+// rasterizer's triangle stands there, README *Primary hits rasterized*). A directional light
+// walks, so its frame has a tree.
+TEST_P(LightBufferPass, ShadowFramesWithoutAKdTree) {
+  for (const char* name : {"toaster", "marbles", "fish"}) {
+    SCOPED_TRACE(name);
+    const Scene scene = load_scene(std::string(MOBIRT_SOURCE_DIR "/scenes/") + name + ".gltf");
+    RenderSettings settings;
+    settings.width = 120;
+    settings.height = 72;
+    settings.depth = 0;
+    settings.primary = PrimaryHits::Raster;
+    ASSERT_FALSE(frame_walks_tree(scene, settings));
+    Renderer buffered(*backend, settings);
+    const Image a = buffered.render(scene, *scene.camera);
+    EXPECT_FALSE(buffered.frame_had_kd_tree());
+    EXPECT_EQ(buffered.light_buffers_used(), int(scene.lights.size()));
+    settings.primary = PrimaryHits::Trace;
+    settings.shadow_cells = 0;
+    Renderer walk(*backend, settings);
+    const ImageDiff d = compare_images(a, walk.render(scene, *scene.camera), 2.0f / 255.0f);
+    EXPECT_TRUE(walk.frame_had_kd_tree());
+    EXPECT_LE(d.share_over, 0.005);
+    EXPECT_GE(d.psnr, 38.0);
+  }
+  Scene boxes = test::box_grid_scene();  // a point light and the sun
+  RenderSettings settings;
+  settings.width = 96;
+  settings.height = 64;
+  settings.depth = 0;
+  settings.primary = PrimaryHits::Raster;
+  Renderer renderer(*backend, settings);
+  renderer.render(boxes, *boxes.camera);
+  EXPECT_TRUE(renderer.frame_had_kd_tree()) << "the sun's rays walk";
+  EXPECT_EQ(renderer.light_buffers_used(), 1);
+}
+
+// A frame planned without a tree builds it after all where a light's buffer is not used (lists
+// past kLightBufferMaxMeanList: wide quads stacked over the light, each in every cell of its
+// face), and where a list stops a ray at the loop cap (thin slivers whose bounding rectangles
+// cover the face: every list holds them all, the rays pass between them), so that the CPU retraces
+// it. Each image is the walking frame's.
+TEST_P(LightBufferPass, FramesWithoutATreeBuildOneWhereTheyNeedIt) {
+  for (const bool slivers : {false, true}) {
+    SCOPED_TRACE(slivers ? "slivers, loop cap 16" : "stacked quads");
+    Scene s = test::box_grid_scene();
+    s.lights.resize(1);  // the point light at (-4, 9, 6)
+    const int layers = slivers ? 40 : 120;
+    for (int i = 0; i < layers; ++i) {
+      const float y = 7.0f + 0.01f * float(i);
+      if (slivers) {
+        const float x = -9.0f + 0.45f * float(i);
+        test::add_triangle(s, {x, y, -4.0f}, {x + 0.02f, y, -4.0f}, {x + 6.0f, y, 15.0f}, 0);
+      } else {
+        // Above the light (out of the camera's view, shading nothing below): each in every cell
+        // of the light's upward face.
+        const float above = y + 3.0f;
+        test::add_triangle(s, {-30, above, -30}, {30, above, -30}, {30, above, 30}, 0);
+        test::add_triangle(s, {-30, above, -30}, {30, above, 30}, {-30, above, 30}, 0);
+      }
+    }
+    RenderSettings settings;
+    settings.width = 96;
+    settings.height = 64;
+    settings.depth = 0;
+    settings.primary = PrimaryHits::Raster;
+    settings.shadow_cells = 64;
+    if (slivers) settings.max_steps = 16;
+    ASSERT_FALSE(frame_walks_tree(s, settings));
+    Renderer renderer(*backend, settings);
+    FrameTimings t;
+    const Image a = renderer.render(s, *s.camera, &t);
+    EXPECT_TRUE(renderer.frame_had_kd_tree());
+    if (slivers) {
+      EXPECT_EQ(renderer.light_buffers_used(), 1);
+      EXPECT_GT(t.sum.capped, 0u);
+    } else {
+      EXPECT_EQ(renderer.light_buffers_used(), 0);
+    }
+    settings.primary = PrimaryHits::Trace;
+    settings.shadow_cells = 0;
+    settings.max_steps = RenderSettings{}.max_steps;
+    const ImageDiff d = compare_images(a, Renderer(*backend, settings).render(s, *s.camera), 2.0f / 255.0f);
+    EXPECT_LE(d.share_over, 0.005);
+    // And the next frame of the still scene, with the tree it built, is the same.
+    EXPECT_EQ(compare_images(a, renderer.render(s, *s.camera)).max_error, 0.0f);
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Backends, LightBufferPass, ::testing::Values(Api::Vulkan, Api::Gles), test::api_param_name);
 
 // A light in a triangle's plane, and one inside a triangle: the triangles through the light cover

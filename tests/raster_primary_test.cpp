@@ -226,7 +226,16 @@ TEST(RasterPrimaryFrame, WalksATreeOnlyWhereARayWalksOne) {
   s.primary = PrimaryHits::Trace;
   EXPECT_TRUE(frame_walks_tree(boxes, s)) << "traced primaries";
   s.primary = PrimaryHits::Raster;
-  EXPECT_TRUE(frame_walks_tree(boxes, s)) << "shadow rays";
+  EXPECT_TRUE(frame_walks_tree(boxes, s)) << "the sun's shadow rays (a directional light has no light buffer)";
+  Scene key_only = boxes;
+  key_only.lights.resize(1);
+  EXPECT_FALSE(frame_walks_tree(key_only, s)) << "a point light's shadow rays test its light buffer";
+  s.shadow_cells = 0;
+  EXPECT_TRUE(frame_walks_tree(key_only, s)) << "--shadow-cells 0: they walk";
+  s.shadow_cells = -1;
+  s.shadow_rays.ray_test.precision = Precision::Medium;
+  EXPECT_TRUE(frame_walks_tree(key_only, s)) << "auto under mediump: they walk";
+  s.shadow_rays.ray_test.precision = Precision::High;
   s.shadows = false;
   EXPECT_FALSE(frame_walks_tree(boxes, s));
   s.depth = 2;

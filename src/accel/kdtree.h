@@ -182,8 +182,8 @@ void rebuild_kdtree(FlatKdTree& tree, std::span<const glm::vec3> positions, std:
                     const KdBuildOptions& options = {});
 
 // No tree at all: only the primitives' texels (`triangles`, as a build writes them) and the scene
-// box, for a frame that never walks a tree (--primary raster without shadow or secondary rays:
-// decoding reads the triangles, offsets read the box). nodes and leaf_prims are left empty.
+// box, for a frame that never walks a tree (--primary raster without secondary rays, its shadow
+// rays, if any, testing light buffers: decoding reads the triangles, offsets read the box). nodes and leaf_prims are left empty.
 // Non-finite input is refused as the build refuses it; on an error the tree is left empty.
 void flatten_primitives(FlatKdTree& tree, std::span<const glm::vec3> positions, std::span<const Shape> shapes);
 

@@ -899,8 +899,9 @@ int cmd_bench(const std::vector<std::string>& args) {
   if (o.settings.primary != PrimaryHits::Trace) {
     std::printf("--primary %s: mobirt's primary hits rasterized (a depth-tested draw of the triangles)%s, not\n"
                 "traced as in the paper and as every peer traces them (--primary trace: as the paper); no kd-tree\n"
-                "in a frame without shadow and secondary rays; where rasterized, mobirt's \"traversal\" is the\n"
-                "raster pass plus the shadow pass from its hits\n",
+                "in a frame without secondary rays whose shadow rays all test light buffers (--shadow-cells; each\n"
+                "cell's \"kd_tree_built\" in the JSON); where rasterized, mobirt's \"traversal\" is the raster\n"
+                "pass plus the shadow pass from its hits\n",
                 primary_hits_name(o.settings.primary),
                 o.settings.primary == PrimaryHits::Auto ? " where that pays (each cell's \"primary\" in the JSON)" : "");
   }

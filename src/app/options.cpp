@@ -185,11 +185,12 @@ const Setting kSettings[] = {
      "how the primary rays' closest hits are found: trace (through the\n"
      "kd-tree, as every generation: the paper's pipeline), raster (the\n"
      "triangles drawn with a depth test, shadow rays traced from them; no\n"
-     "kd-tree at all without shadow and secondary rays; scenes with\n"
-     "analytic shapes are traced) or auto (raster up to 0.5 triangles per\n"
-     "pixel, and past it when that spares the frame a kd-tree it would\n"
-     "build: --always-rebuild or an animation's --frames, no shadow or\n"
-     "secondary ray; trace elsewhere) (default auto)",
+     "kd-tree at all without secondary rays where every shadow ray tests\n"
+     "a light buffer (--shadow-cells); scenes with analytic shapes are\n"
+     "traced) or auto (raster up to 0.5 triangles per pixel, and past it\n"
+     "when that spares the frame a kd-tree it would build: --always-rebuild\n"
+     "or an animation's --frames, no ray that walks one; trace elsewhere)\n"
+     "(default auto)",
      [](CommonOptions& o, const Value& v) {
        static constexpr std::pair<const char*, PrimaryHits> hits[] = {
            {"trace", PrimaryHits::Trace}, {"raster", PrimaryHits::Raster}, {"auto", PrimaryHits::Auto}};

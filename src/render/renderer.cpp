@@ -360,8 +360,8 @@ class Renderer::Engine final : public WhittedEngine {
     // as in the paper); a static scene, or a frame whose triangles did not move, keeps it.
     const auto stage = Clock::now();
     Data& cache = *r_.data_;
-    // A frame that walks no tree (--primary raster, no shadow or secondary rays) gets only the
-    // primitives' texels; a cached one of those never serves a frame that walks.
+    // A frame that walks no tree (frame_walks_tree) gets only the primitives' texels; a cached one
+    // of those never serves a frame that walks.
     const bool walks = frame_walks_tree(scene, r_.settings_);
     const bool reuse = !prebuilt && !r_.settings_.always_rebuild && cache.tree_valid &&
                        (cache.tree_walkable || !walks) && cache.tree_positions == scene.mesh.positions &&
@@ -686,6 +686,8 @@ int Renderer::light_buffers_used() const {
   return int(std::count_if(d.light_buffer_heads.begin(), d.light_buffer_heads.end(),
                            [](const glm::vec4& h) { return h.z > 0.5f; }));
 }
+
+bool Renderer::frame_had_kd_tree() const { return data_->tree_walkable; }
 
 double Renderer::upload_tree(const FlatKdTree& tree, std::span<const Light> lights) {
   Data& d = *data_;

@@ -39,9 +39,9 @@ enum class DataReads { TexelBuffers, Images, StorageBuffers, DeviceAddresses };
 // (Backend::run_raster), each pixel centre's closest triangle found by the rasterizer where the
 // primary ray through it would find it by a walk, a hybrid renderer's G-buffer step; the shadow
 // rays then start from that triangle's hit (glsl/trace_main.glsl, PRIMARY_HITS), and a frame
-// without shadow or secondary rays builds no kd-tree at all (frame_walks_tree). Pixels whose
-// centre lies on an edge between two triangles may take the other one (README, *Primary hits
-// rasterized*). A scene with analytic shapes (spheres, cones) has its primaries traced. Auto (the
+// without secondary rays whose shadow rays all test light buffers builds no kd-tree at all
+// (frame_walks_tree). Pixels whose centre lies on an edge between two triangles may take the other
+// one (README, *Primary hits rasterized*). A scene with analytic shapes (spheres, cones) has its primaries traced. Auto (the
 // default): rasterized where that is measured to be faster (raster_pays), traced elsewhere.
 enum class PrimaryHits { Trace, Raster, Auto };
 const char* primary_hits_name(PrimaryHits primary);
@@ -162,6 +162,8 @@ class Renderer {
   // The lights whose shadow rays test a light buffer in the passes now (--shadow-cells), of the
   // tree uploaded last.
   int light_buffers_used() const;
+  // Whether the last frame had a kd-tree (false: only the primitives' texels, frame_walks_tree).
+  bool frame_had_kd_tree() const;
 
  private:
   // The textures laid out in rows of the rays' width (rays and shading inputs), made again when
@@ -216,7 +218,7 @@ bool primaries_rasterized(const Scene& scene, const RenderSettings& settings);
 // triangle (llvmpipe sets up each one, however small), the primary walk per pixel: rasterized up
 // to kRasterTrianglesPerPixel triangles per pixel, where the two passes cost about the same
 // (README, *Primary hits rasterized*: where it loses); past it too when rasterizing spares the
-// frame its kd-tree (walks_tree false: no shadow or secondary ray) and the tree would be built for
+// frame its kd-tree (walks_tree false: no ray walks one) and the tree would be built for
 // every frame (tree_per_frame: --always-rebuild, the paper's model and the bench's, or an
 // animation played frame by frame).
 inline constexpr double kRasterTrianglesPerPixel = 0.5;
