@@ -197,8 +197,13 @@
                                    // 0 = triangles only: no code for the others at all
 #define MOBIRT_SPEC_WIDE_INDICES 11  // trace, shade (Vulkan buffers): 1 = the pass binds a buffer of more
                                      // than MOBIRT_NARROW_INDEX_TEXELS texels: data_index() converts up to 2^24
-#define MOBIRT_SPEC_PRIMARY_HITS 12  // trace: 1 = each ray's closest primitive is known (--primary raster): its
-                                     // index + 1 in the ray direction's w (0: none), tested alone, no walk
+#define MOBIRT_SPEC_PRIMARY_HITS 12  // trace: each ray's closest primitive is known (--primary raster): its
+                                     // index + 1 in the ray direction's w (0: none), tested alone; where
+                                     // that test misses (an edge), MOBIRT_PRIMARY_HITS_WALK walks the
+                                     // tree, MOBIRT_PRIMARY_HITS_PLANE (a frame without a kd-tree) keeps
+                                     // the triangle, t from its plane
+#define MOBIRT_PRIMARY_HITS_WALK 1
+#define MOBIRT_PRIMARY_HITS_PLANE 2
 #define MOBIRT_SPEC_LIGHT_BUFFERS 13  // trace: 1 = point and spot lights' shadow rays test their light
                                       // buffer's cell (MOBIRT_TP_LIGHT_BUFFERS) instead of walking the tree
 // Element indices reach the shaders as exact floats: below 2^24 (a float's consecutive integers end

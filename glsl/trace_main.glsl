@@ -19,10 +19,10 @@ void main() {
     // --primary raster: the raster pass found the ray's closest triangle, its index + 1 in the
     // direction's w (0: none covers the pixel's centre; the ray's tmax is infinite). Only that
     // triangle is tested, for the hit point the shadow rays start from. Where this test misses it
-    // (the pixel centre on an edge, rounded the other way) the rasterizer's choice stands, as it
-    // does in a frame without shadow rays: t from the triangle's plane (the CPU's decoding clamps
-    // the barycentrics into the triangle, surface_hit). No walk: a frame whose shadow rays all
-    // have light buffers builds no kd-tree (frame_walks_tree).
+    // (the pixel centre on an edge, rounded the other way) the ray walks the tree as usual; in a
+    // frame without a kd-tree (its shadow rays all test light buffers: frame_walks_tree) the
+    // rasterizer's choice stands, as it does in a frame without shadow rays: t from the
+    // triangle's plane (the CPU's decoding clamps the barycentrics into the triangle, surface_hit).
     float prim = direction.w - 1.0;
     if (prim < 0.0) {
       OUTPUT(pack_trace(0.0, 0.0));
@@ -33,12 +33,15 @@ void main() {
     vec3 v1 = DATA_TEXEL(u_triangles, base + 1.0).xyz;
     vec3 v2 = DATA_TEXEL(u_triangles, base + 2.0).xyz;
     vec3 tuv = intersect_triangle_texels(v0, v1, v2, origin.xyz, direction.xyz, origin.w, 3.0e38);
-    if (tuv.x < 0.0) {
+    if (tuv.x >= 0.0) {
+      hit = vec3(prim, tuv.x, 0.0);
+    } else if (PRIMARY_HITS == MOBIRT_PRIMARY_HITS_PLANE) {
       vec3 ng = cross(v1 - v0, v2 - v0);
       float denom = dot(ng, direction.xyz);
-      tuv.x = denom != 0.0 ? dot(ng, v0 - origin.xyz) / denom : origin.w;
+      hit = vec3(prim, denom != 0.0 ? dot(ng, v0 - origin.xyz) / denom : origin.w, 0.0);
+    } else {
+      hit = traverse(origin.xyz, direction.xyz, origin.w, 3.0e38, false);
     }
-    hit = vec3(prim, tuv.x, 0.0);
   } else {
     hit = traverse(origin.xyz, direction.xyz, origin.w, direction.w, false);
   }

@@ -339,7 +339,7 @@ struct Renderer::Data {
   bool light_buffers_prebuilt = false;
   TexelArray nodes_with_cells, entries_with_cells;
   // (lights, packing, analytic, wide, primary hits, light buffers)
-  std::map<std::tuple<int, int, int, bool, bool, bool>, PassHandle> trace_passes;
+  std::map<std::tuple<int, int, int, bool, int, bool>, PassHandle> trace_passes;
   std::map<std::tuple<int, int, int, int, bool>, PassHandle> shade_passes;  // (lights, textures, pages, colour, wide)
 };
 
@@ -436,7 +436,7 @@ class Renderer::Engine final : public WhittedEngine {
   TracedGeneration trace_primary(const Scene& scene, const Camera& camera, const RayBatch& rays,
                                  GenerationTimings& g) override {
     if (!primaries_rasterized(scene, r_.settings_)) return trace(scene, rays, g);
-    TracedGeneration traced = r_.trace_rasterized(scene, camera, r_.data_->tree, rays, g);
+    TracedGeneration traced = r_.trace_rasterized(scene, camera, r_.data_->tree, rays, g, r_.data_->tree_walkable);
     // A ray the loop cap stopped (a light buffer's cell listing more than --max-steps triangles)
     // is retraced on the CPU through the kd-tree (decode_hits): a frame without one builds it now,
     // counted with the decoding. The GPU keeps the primitives' texels: the next frame uploads anew.
@@ -535,7 +535,7 @@ bool Renderer::wide_indices(std::initializer_list<std::pair<uint32_t, uint32_t>>
   });
 }
 
-PassHandle Renderer::trace_pass(int lights, Packing packing, bool analytic, bool wide, bool primary_hits,
+PassHandle Renderer::trace_pass(int lights, Packing packing, bool analytic, bool wide, int primary_hits,
                                 bool light_buffers) {
   auto key = std::make_tuple(lights, int(packing), int(analytic), wide, primary_hits, light_buffers);
   auto it = data_->trace_passes.find(key);
@@ -552,7 +552,7 @@ PassHandle Renderer::trace_pass(int lights, Packing packing, bool analytic, bool
                          {MOBIRT_SPEC_OFFSET, int(settings_.shadow_rays.offset.mode)},
                          {MOBIRT_SPEC_ANALYTIC, int(analytic)}};
   if (wide) desc.specialization.push_back({MOBIRT_SPEC_WIDE_INDICES, 1});
-  if (primary_hits) desc.specialization.push_back({MOBIRT_SPEC_PRIMARY_HITS, 1});
+  if (primary_hits) desc.specialization.push_back({MOBIRT_SPEC_PRIMARY_HITS, primary_hits});
   if (light_buffers) desc.specialization.push_back({MOBIRT_SPEC_LIGHT_BUFFERS, 1});
   desc.uniform_vec4s = light_buffers ? MOBIRT_TP_LIGHT_BUFFERS + uint32_t(lights)
                                      : MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * uint32_t(lights);
@@ -748,7 +748,8 @@ TraceResult Renderer::trace_primary(const Scene& scene, const Camera& camera, co
   data_->tree_valid = false;  // the GPU now holds this tree, not the cached one
   upload_tree(tree, shadow_lights(scene));
   GenerationTimings g;
-  TracedGeneration traced = trace_rasterized(scene, camera, tree, rays, g);
+  // Edge misses as the frame treats them: walked where it has a kd-tree (frame_walks_tree).
+  TracedGeneration traced = trace_rasterized(scene, camera, tree, rays, g, frame_walks_tree(scene, settings_));
   TraceResult result;
   result.texels = std::move(traced.texels);
   result.packing = traced.packing;
@@ -760,7 +761,7 @@ TraceResult Renderer::trace_primary(const Scene& scene, const Camera& camera, co
 }
 
 TraceResult Renderer::trace_uploaded(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays,
-                                     bool primary_hits) {
+                                     int primary_hits) {
   TraceResult result;
   // Without shadows the pass is specialised to no lights: it casts no shadow rays at all.
   const int lights = pass_lights(int(shadow_lights(scene).size()));
@@ -789,7 +790,10 @@ TraceResult Renderer::trace_uploaded(const Scene& scene, const FlatKdTree& tree,
 }
 
 TracedGeneration Renderer::trace_rasterized(const Scene& scene, const Camera& camera, const FlatKdTree& tree,
-                                            const RayBatch& rays, GenerationTimings& g) {
+                                            const RayBatch& rays, GenerationTimings& g, bool walk_edge_misses) {
+  if (walk_edge_misses && tree.nodes.empty()) {
+    throw Error(ErrorKind::Internal, "--primary raster: edge misses to walk a tree that has no nodes");
+  }
   Data& d = *data_;
   const uint32_t width = rays.width, height = rays.rows();
   std::atomic<uint32_t> out_of_order{0};
@@ -879,7 +883,9 @@ TracedGeneration Renderer::trace_rasterized(const Scene& scene, const Camera& ca
   g.upload_ms += elapsed_ms(stage);
   traced.texels.assign(n, pack_trace(traced.packing, 0, 0));
   if (hit_count == 0) return traced;
-  TraceResult result = trace_uploaded(scene, tree, hit_rays, true);
+  // Edge misses walk where the frame has a kd-tree, else keep their triangle (trace_main.glsl).
+  TraceResult result = trace_uploaded(scene, tree, hit_rays,
+                                      walk_edge_misses ? MOBIRT_PRIMARY_HITS_WALK : MOBIRT_PRIMARY_HITS_PLANE);
   add_pass(g, result.timing);
   if (result.packing != traced.packing) throw Error(ErrorKind::Internal, "--primary raster: the shadow pass packed otherwise");
   parallel_for(hit_count, 0, [&](uint32_t k) { traced.texels[hit_rays.pixel[k]] = result.texels[k]; }, 4096);

@@ -148,7 +148,7 @@ class Renderer {
   // must be specialised to WIDE_INDICES: one of more than 2^23 texels (glsl/layout.h).
   bool wide_indices(std::initializer_list<std::pair<uint32_t, uint32_t>> rows_and_widths) const;
   // wide: the pass binds such a buffer. primary_hits: specialised to PRIMARY_HITS (--primary raster).
-  PassHandle trace_pass(int lights, Packing packing, bool analytic, bool wide, bool primary_hits = false,
+  PassHandle trace_pass(int lights, Packing packing, bool analytic, bool wide, int primary_hits = 0,
                         bool light_buffers = false);
   PassHandle shade_pass(int lights, int textures, int pages, int colour, bool wide);
   void prepare_atlas(const Scene& scene);
@@ -174,14 +174,15 @@ class Renderer {
   // The light count a pass is built for: the scene's, or the packing's maximum when general.
   int pass_lights(int scene_lights) const;
   // primary_hits: the pass specialised to PRIMARY_HITS (each ray's rasterized index + 1 in its
-  // direction's w).
+  // direction's w), MOBIRT_PRIMARY_HITS_WALK or _PLANE; 0: not.
   TraceResult trace_uploaded(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays,
-                             bool primary_hits = false);
+                             int primary_hits = 0);
   // The primary generation with its hits rasterized (--primary raster) and, with shadows, the trace
   // pass specialised to PRIMARY_HITS casting the shadow rays from them, over the hits alone.
-  // `tree`: the one uploaded, whose triangles and box the shadow pass reads.
+  // `tree`: the one uploaded, whose triangles and box the shadow pass reads. walk_edge_misses: a ray
+  // whose rasterized triangle's test misses walks `tree` (a kd-tree), else keeps that triangle.
   TracedGeneration trace_rasterized(const Scene& scene, const Camera& camera, const FlatKdTree& tree,
-                                    const RayBatch& rays, GenerationTimings& g);
+                                    const RayBatch& rays, GenerationTimings& g, bool walk_edge_misses);
 
   Backend& backend_;
   RenderSettings settings_;
