@@ -217,6 +217,42 @@ TEST(FramePipeline, KeepsTheTreeWhileTheTrianglesStay) {
   }
 }
 
+// With the renderer's settings, a frame that walks no tree (rasterized primaries, a point light's
+// shadow rays through its light buffer) gets only the primitives' texels and its light buffers;
+// one whose light's lists run long (quads stacked over the light, each in every cell of its face)
+// gets its kd-tree on the worker; without shadows no buffer is built.
+TEST(FramePipeline, BuildsLightBuffersAndTheTreeOnlyWhereAFrameWalksIt) {
+  Scene lit = test::box_grid_scene();
+  lit.lights.resize(1);  // the point light at (-4, 9, 6)
+  Scene stacked = lit;
+  for (int i = 0; i < 120; ++i) {
+    const float y = 10.0f + 0.01f * float(i);
+    test::add_triangle(stacked, {-30, y, -30}, {30, y, -30}, {30, y, 30}, 0);
+    test::add_triangle(stacked, {-30, y, -30}, {30, y, 30}, {-30, y, 30}, 0);
+  }
+  RenderSettings settings;
+  settings.depth = 0;
+  settings.primary = PrimaryHits::Raster;
+  for (const bool shadows : {true, false}) {
+    settings.shadows = shadows;
+    const Scene* scenes[2] = {&lit, &stacked};
+    FramePipeline pipeline(
+        2, [&](int, size_t index) { return std::make_pair(scenes[index], *lit.camera); }, KdBuildOptions{}, true,
+        true);
+    pipeline.set_render_settings(settings);
+    for (size_t i = 0; i < 2; ++i) {
+      SCOPED_TRACE(std::string(i == 0 ? "short lists" : "long lists") + (shadows ? "" : ", no shadows"));
+      pipeline.step(i, [&](PreparedFrame& f) {
+        ASSERT_TRUE(f.tree_built);
+        EXPECT_FALSE(f.tree.triangles.empty());
+        EXPECT_EQ(f.tree.nodes.empty(), i == 0 || !shadows);
+        ASSERT_EQ(f.light_buffers.size(), shadows ? 1u : 0u);
+        if (shadows) EXPECT_EQ(light_buffer_pays(f.light_buffers[0]), i == 0);
+      });
+    }
+  }
+}
+
 TEST(FramePipeline, RethrowsTheWorkersErrorAndChecksTheOrder) {
   MovingScene moving;
   FramePipeline pipeline(

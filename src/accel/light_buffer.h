@@ -45,6 +45,11 @@ struct LightBuffer {
 // tessellated sphereflake's lights, 19-123x the toaster's lists, took 3x the walk's pass.
 inline constexpr double kLightBufferMaxMeanList = 100.0;
 
+// Whether a light's shadow rays test `lb` rather than walk: built (resolution > 0), lists not long.
+inline bool light_buffer_pays(const LightBuffer& lb) {
+  return lb.resolution > 0 && lb.mean_list() <= kLightBufferMaxMeanList;
+}
+
 // The light buffer of the triangles `positions` (three vertices each) around `light`, into `out`
 // (its arrays' memory reused), on `threads` threads (0 = all cores). The same buffer for any
 // thread count.

@@ -1,6 +1,7 @@
 #include "render/frame_pipeline.h"
 
 #include <chrono>
+#include <span>
 #include <string>
 
 #include "core/cpu_time.h"
@@ -29,15 +30,24 @@ double FramePipeline::prepare(size_t index) {
   // Into the slot's tree, which holds the arrays of an older tree (render_prepared swaps them
   // out of the renderer): their memory is reused. A frame without a build carries no tree, its
   // arrays emptied but their memory kept.
-  if (f.tree_built && settings_ && !frame_walks_tree(*scene, *settings_)) {
+  // The light buffers first: a frame planned without a kd-tree whose light's lists run long
+  // (light_buffer_pays) walks for that light, so it gets its tree here rather than on the
+  // rendering thread (Renderer::Engine::begin_frame builds one where a buffer fails later still).
+  f.light_buffers.clear();
+  bool walks = !settings_ || frame_walks_tree(*scene, *settings_);
+  if (f.tree_built && settings_) {
+    frame_light_buffers(*scene, *settings_, f.light_buffers);
+    const std::span<const Light> lights = settings_->shadows ? std::span<const Light>(scene->lights)
+                                                             : std::span<const Light>();
+    for (size_t l = 0; !walks && l < lights.size(); ++l) walks = !light_buffer_pays(f.light_buffers[l]);
+  }
+  if (f.tree_built && !walks) {
     flatten_primitives(f.tree, scene->mesh.positions, scene->shapes);
   } else if (f.tree_built) {
     rebuild_kdtree(f.tree, scene->mesh.positions, scene->shapes, kd_);
   } else {
     f.tree.clear();
   }
-  f.light_buffers.clear();
-  if (f.tree_built && settings_) frame_light_buffers(*scene, *settings_, f.light_buffers);
   f.build_ms = f.tree_built ? elapsed_ms(build_start) : 0.0;
   if (f.tree_built && !always_rebuild_) {
     built_positions_ = scene->mesh.positions;

@@ -652,8 +652,7 @@ void Renderer::build_light_buffers(const FlatKdTree& tree, std::span<const Light
   }
   for (size_t l = 0; l < lights.size(); ++l) {
     const LightBuffer& lb = buffers[l];
-    if (lb.resolution <= 0) continue;                   // a directional light
-    if (lb.mean_list() > kLightBufferMaxMeanList) continue;  // long lists: the walk is faster
+    if (!light_buffer_pays(lb)) continue;  // a directional light, or long lists: the walk is faster
     if (!d.light_buffers) {  // the first buffer: the tree's arrays, the buffers after them
       d.nodes_with_cells = tree.nodes;
       d.entries_with_cells = tree.leaf_prims;
