@@ -38,7 +38,8 @@ void main() {
     } else if (PRIMARY_HITS == MOBIRT_PRIMARY_HITS_PLANE) {
       vec3 ng = cross(v1 - v0, v2 - v0);
       float denom = dot(ng, direction.xyz);
-      hit = vec3(prim, denom != 0.0 ? dot(ng, v0 - origin.xyz) / denom : origin.w, 0.0);
+      float t = mp(denom != 0.0 ? dot(ng, v0 - origin.xyz) / denom : origin.w);
+      hit = vec3(prim, t >= origin.w ? t : origin.w, 0.0);
     } else {
       hit = traverse(origin.xyz, direction.xyz, origin.w, 3.0e38, false);
     }

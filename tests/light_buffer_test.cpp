@@ -4,9 +4,12 @@
 // direction from the light too), at every resolution.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <memory>
 #include <random>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "accel/kdtree.h"
 #include "accel/light_buffer.h"
@@ -74,6 +77,37 @@ TEST(LightBuffer, EveryAnswerIsBruteForcesWhereverTheLightIs) {
   for (const glm::vec3 light : {glm::vec3(0, 0, 0), glm::vec3(2, 1, -1), glm::vec3(0, 40, 0), glm::vec3(30, 30, 30)}) {
     for (int res : {1, 8, 64}) expect_exact(soup, light, origins, res);
   }
+}
+
+// The build on all cores is the serial build's, bit for bit, and each cell's list is in the order of
+// nearest distance, ties by triangle index: checked on 12K triangles (past the parallel loops'
+// chunks) with every tenth triangle duplicated (equal distances), against lists made here with a
+// stable sort.
+TEST(LightBuffer, TheSameBufferOnAnyThreadCount) {
+  Scene soup = test::random_soup_scene(12000, 21);
+  const size_t n = soup.mesh.triangle_count();
+  for (size_t t = 0; t < n; t += 10) {
+    test::add_triangle(soup, soup.mesh.positions[3 * t], soup.mesh.positions[3 * t + 1], soup.mesh.positions[3 * t + 2], 0);
+  }
+  const glm::vec3 light(0.5f, 2.0f, -0.25f);
+  LightBuffer serial, parallel;
+  build_light_buffer(soup.mesh.positions, light, 32, serial, 1);
+  build_light_buffer(soup.mesh.positions, light, 32, parallel, 0);
+  build_light_buffer(soup.mesh.positions, light, 32, parallel, 0);  // into its own memory again
+  for (size_t f = 0; f < 6; ++f) EXPECT_EQ(serial.window[f], parallel.window[f]) << f;
+  EXPECT_EQ(serial.first, parallel.first);
+  EXPECT_EQ(serial.prims, parallel.prims);
+  EXPECT_EQ(serial.near, parallel.near);
+  size_t ties = 0;
+  for (size_t c = 0; c < serial.cells(); ++c) {
+    std::vector<std::pair<float, uint32_t>> list;
+    for (uint32_t k = serial.first[c]; k < serial.first[c + 1]; ++k) list.emplace_back(serial.near[k], serial.prims[k]);
+    std::vector<std::pair<float, uint32_t>> sorted = list;
+    std::stable_sort(sorted.begin(), sorted.end());  // by distance, then index
+    ASSERT_EQ(list, sorted) << "cell " << c;
+    for (size_t k = 1; k < list.size(); ++k) ties += list[k].first == list[k - 1].first ? 1 : 0;
+  }
+  EXPECT_GT(ties, 100u) << "the duplicates give equal distances";
 }
 
 // Segments along the cube's edges and corners seen from the light (|x| = |y| and the like), where
@@ -272,8 +306,14 @@ TEST_P(LightBufferPass, FramesWithoutATreeBuildOneWhereTheyNeedIt) {
     settings.max_steps = RenderSettings{}.max_steps;
     const ImageDiff d = compare_images(a, Renderer(*backend, settings).render(s, *s.camera), 2.0f / 255.0f);
     EXPECT_LE(d.share_over, 0.005);
-    // And the next frame of the still scene, with the tree it built, is the same.
-    EXPECT_EQ(compare_images(a, renderer.render(s, *s.camera)).max_error, 0.0f);
+    // The next frame of the still scene keeps the tree it built (uploaded again where a capped ray
+    // made it after the upload; its edge misses then walk it), and gives the same image but for
+    // those edge pixels.
+    FrameTimings next;
+    const Image b = renderer.render(s, *s.camera, &next);
+    EXPECT_FALSE(next.tree_rebuilt);
+    EXPECT_TRUE(renderer.frame_had_kd_tree());
+    EXPECT_LE(compare_images(a, b, 2.0f / 255.0f).share_over, 0.005);
   }
 }
 

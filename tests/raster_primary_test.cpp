@@ -309,7 +309,7 @@ TEST(RasterPrimaryFrame, FlattenedPrimitivesAreTheBuildsTexels) {
 }
 
 // The shapes scene's primaries are traced whatever --primary says. A frame without shadow and
-// secondary rays builds no tree, only the primitives' texels, kept while the triangles stay; its
+// secondary rays (or with a light buffer for every shadow light) builds no tree, only the primitives' texels, kept while the triangles stay; its
 // image is the traced frame's.
 class RasterPrimaryVulkan : public test::VulkanTest {};
 

@@ -159,8 +159,7 @@ namespace {
 constexpr uint8_t kClipped = 6;
 constexpr uint8_t kEverywhere = 7;
 
-// A build's working arrays, kept from build to build on each thread (an animation builds every
-// frame's buffers on the frame pipeline's worker): no page faults on fresh memory per build.
+// A build's working arrays.
 struct BuildScratch {
   std::vector<float> near;        // per triangle
   std::vector<uint8_t> kind;      // per triangle: its face, kClipped or kEverywhere
@@ -191,9 +190,9 @@ void radix_sort_upper(std::vector<uint64_t>& keys, std::vector<uint64_t>& tmp) {
 
 void build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 light, int resolution, LightBuffer& lb,
                         unsigned threads) {
-  // The calling thread's (a reference: the parallel loops' chunks on other threads use it too).
-  thread_local BuildScratch scratch;
-  BuildScratch& s = scratch;
+  // Made per build, not kept per thread: the frame pipeline's worker is a new thread each frame
+  // (std::async), and a thread's copy would keep a large mesh's arrays for the process's life.
+  BuildScratch s;
   lb.light = light;
   lb.resolution = resolution;
   const uint32_t triangles = uint32_t(positions.size() / 3);

@@ -314,6 +314,7 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
   // Embree and the driver's ray queries take triangles only: they get the analytic shapes
   // tessellated (the triangles --primitives tessellated loads), made outside the timed frames.
   std::optional<Scene> tessellated;
+  bool any_kd_tree = false;  // some timed frame of a GPU column had a kd-tree
   for (int f = 0; f < o.warmup + o.frames; ++f) {
     const bool timed = f >= o.warmup;
     const double t = double(f) / fps;
@@ -340,6 +341,9 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
       const double cpu_ms = process_cpu_ms() - cpu_start;
       check_messages(columns[c].backend->take_debug_messages());
       if (timed) add_frame(samples, pose_ms, ft, cpu_ms, &step);
+      // What the frame had, not what was planned: a light whose buffer does not pay, or a capped
+      // ray, makes a frame planned without a kd-tree build one (Renderer::Engine).
+      if (timed && renderer.frame_had_kd_tree()) any_kd_tree = true;
     };
     for (size_t c = 0; c < columns.size(); ++c) {
       gpu_frame(c, *pipelines[c], *renderers[c], gpu[c]);
@@ -385,9 +389,10 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
   cell["shadows"] = level.shadows;
   cell["triangles"] = scene.mesh.triangle_count();
   cell["primary"] = primaries_rasterized(scene, settings) ? "raster" : "trace";  // what --primary chose
-  // False where no ray walks a tree: the frames' "build" is then only the primitives' texels
-  // (flatten_primitives), not a kd-tree, and no build ratio is given.
-  const bool tree_built = frame_walks_tree(scene, settings);
+  // False where no timed frame had a kd-tree (frame_walks_tree, and no light's buffer or capped ray
+  // made one needed): the frames' "build" is then only the primitives' texels (flatten_primitives)
+  // and the light buffers, not a kd-tree, and no build ratio is given.
+  const bool tree_built = any_kd_tree;
   cell["kd_tree_built"] = tree_built;
   cell["shapes"] = scene.shapes.size();
   cell["lights"] = scene.lights.size();

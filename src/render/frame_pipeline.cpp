@@ -33,13 +33,14 @@ double FramePipeline::prepare(size_t index) {
   // The light buffers first: a frame planned without a kd-tree whose light's lists run long
   // (light_buffer_pays) walks for that light, so it gets its tree here rather than on the
   // rendering thread (Renderer::Engine::begin_frame builds one where a buffer fails later still).
-  f.light_buffers.clear();
   bool walks = !settings_ || frame_walks_tree(*scene, *settings_);
   if (f.tree_built && settings_) {
     frame_light_buffers(*scene, *settings_, f.light_buffers);
     const std::span<const Light> lights = settings_->shadows ? std::span<const Light>(scene->lights)
                                                              : std::span<const Light>();
     for (size_t l = 0; !walks && l < lights.size(); ++l) walks = !light_buffer_pays(f.light_buffers[l]);
+  } else {
+    f.light_buffers.clear();
   }
   if (f.tree_built && !walks) {
     flatten_primitives(f.tree, scene->mesh.positions, scene->shapes);

@@ -159,21 +159,27 @@ namespace {
 // `positions`; resolution 0 for a directional light.
 void light_buffers_for(std::span<const glm::vec3> positions, std::span<const Light> lights, int res,
                        std::vector<LightBuffer>& out) {
-  out.resize(lights.size());
+  out.resize(lights.size());  // each buffer built into its arrays' memory, when it has some
   for (size_t l = 0; l < lights.size(); ++l) {
-    out[l] = lights[l].type == LightType::Directional ? LightBuffer{}
-                                                      : build_light_buffer(positions, lights[l].position, res);
+    if (lights[l].type == LightType::Directional) {
+      out[l].resolution = 0;
+    } else {
+      build_light_buffer(positions, lights[l].position, res, out[l]);
+    }
   }
 }
 
 }  // namespace
 
 void frame_light_buffers(const Scene& scene, const RenderSettings& settings, std::vector<LightBuffer>& out) {
-  out.clear();
-  if (!settings.shadows) return;
+  if (!settings.shadows) {
+    out.clear();
+    return;
+  }
   const int res = shadow_cells(scene.mesh.triangle_count(), settings);
   if (res <= 0 || !scene.shapes.empty()) {
     out.resize(scene.lights.size());
+    for (LightBuffer& lb : out) lb.resolution = 0;
     return;
   }
   light_buffers_for(scene.mesh.positions, scene.lights, res, out);
@@ -319,6 +325,7 @@ struct Renderer::Data {
   std::vector<Shape> tree_shapes;
   bool tree_valid = false;
   bool tree_prebuilt = false;   // the next begin_frame uploads `tree`, built elsewhere in prebuilt_ms
+  bool upload_stale = false;    // `tree` was made a kd-tree after its upload (a capped ray): upload again
   double prebuilt_ms = 0.0;
   uint32_t ray_width = 0;  // the ray textures' row width; a change recreates them
   bool tree_walkable = false;   // `tree` is a kd-tree, not only the primitives' texels (frame_walks_tree)
@@ -334,7 +341,8 @@ struct Renderer::Data {
   std::vector<glm::vec3> light_buffer_positions;  // the shadow lights of the last upload
   std::vector<LightType> light_buffer_types;
   bool light_buffers = false;  // some light has one
-  // Built with a tree handed in (Renderer::render with light buffers), for the next upload.
+  // Built with a tree handed in (Renderer::render with light buffers), or by the last upload, for
+  // the triangles of `tree`; light_buffers_prebuilt: for the next upload to use.
   std::vector<LightBuffer> prebuilt_light_buffers;
   bool light_buffers_prebuilt = false;
   TexelArray nodes_with_cells, entries_with_cells;
@@ -353,6 +361,7 @@ class Renderer::Engine final : public WhittedEngine {
   void begin_frame(const Scene& scene, const RenderSettings&, FrameTimings& t) override {
     // A tree built elsewhere is this frame's only (taken first, so that a refused frame leaves none).
     const bool prebuilt = std::exchange(r_.data_->tree_prebuilt, false);
+    const bool buffers_prebuilt = std::exchange(r_.data_->light_buffers_prebuilt, false);
     // Refuse a scene over a limit before any work.
     choose_packing(scene.primitive_count(), r_.pass_lights(int(r_.shadow_lights(scene).size())),
                    scene.source);
@@ -395,19 +404,24 @@ class Renderer::Engine final : public WhittedEngine {
         lights_moved = lights[l].position != cache.light_buffer_positions[l] || lights[l].type != cache.light_buffer_types[l];
       }
     }
-    if (!reuse || lights_moved) {
+    if (!reuse || lights_moved || cache.upload_stale) {
       // The light buffers are part of the acceleration structure: their build (on this thread,
-      // also where the tree was built ahead) counts as build time.
+      // unless built with the tree ahead) and their packing count as build time.
+      cache.light_buffers_prebuilt = buffers_prebuilt && prebuilt;
       t.build_ms += r_.upload_tree(cache.tree, r_.shadow_lights(scene));
       cache.tree_valid = true;
+      cache.upload_stale = false;
       // A frame without a tree with a light that turned out to get no buffer (its lists too long,
-      // past a texture's reach): that light's shadow rays walk, so the tree is built after all.
+      // past a texture's reach): that light's shadow rays walk, so the tree is built after all
+      // (its buffers, just made for these triangles, kept).
       if (!cache.tree_walkable && r_.light_buffers_used() < int(r_.shadow_lights(scene).size())) {
         t.build_ms += make_walkable(scene);
+        cache.light_buffers_prebuilt = true;
         t.build_ms += r_.upload_tree(cache.tree, r_.shadow_lights(scene));
+        t.tree_rebuilt = true;
       }
     }
-    t.tree_rebuilt = !reuse;
+    t.tree_rebuilt = t.tree_rebuilt || !reuse;
     r_.upload_materials(scene);
   }
 
@@ -439,13 +453,14 @@ class Renderer::Engine final : public WhittedEngine {
     TracedGeneration traced = r_.trace_rasterized(scene, camera, r_.data_->tree, rays, g, r_.data_->tree_walkable);
     // A ray the loop cap stopped (a light buffer's cell listing more than --max-steps triangles)
     // is retraced on the CPU through the kd-tree (decode_hits): a frame without one builds it now,
-    // counted with the decoding. The GPU keeps the primitives' texels: the next frame uploads anew.
+    // counted with the decoding. The GPU still holds the primitives' texels alone: the next frame
+    // uploads the tree it keeps (upload_stale), and its edge misses walk it.
     Data& cache = *r_.data_;
     if (!cache.tree_walkable) {
       const uint32_t capped = pack_capped(traced.packing);
       if (std::find(traced.texels.begin(), traced.texels.end(), capped) != traced.texels.end()) {
         g.decode_ms += make_walkable(scene);
-        cache.tree_valid = false;
+        cache.upload_stale = true;
       }
     }
     return traced;
@@ -640,7 +655,9 @@ void Renderer::build_light_buffers(const FlatKdTree& tree, std::span<const Light
   std::vector<LightBuffer>& buffers = d.prebuilt_light_buffers;
   bool prebuilt = std::exchange(d.light_buffers_prebuilt, false) && buffers.size() == lights.size();
   for (size_t l = 0; prebuilt && l < lights.size(); ++l) {
-    prebuilt = buffers[l].resolution == 0 || (buffers[l].resolution == res && buffers[l].light == lights[l].position);
+    prebuilt = lights[l].type == LightType::Directional
+                   ? buffers[l].resolution == 0
+                   : buffers[l].resolution == res && buffers[l].light == lights[l].position;
   }
   if (res <= 0 || analytic || !points) return;
   if (!prebuilt) {
@@ -747,8 +764,10 @@ TraceResult Renderer::trace_primary(const Scene& scene, const Camera& camera, co
   data_->tree_valid = false;  // the GPU now holds this tree, not the cached one
   upload_tree(tree, shadow_lights(scene));
   GenerationTimings g;
-  // Edge misses as the frame treats them: walked where it has a kd-tree (frame_walks_tree).
-  TracedGeneration traced = trace_rasterized(scene, camera, tree, rays, g, frame_walks_tree(scene, settings_));
+  // Edge misses as the frame treats them: walked where it has a kd-tree (frame_walks_tree, or a
+  // light whose buffer did not pay, for which the frame builds one).
+  const bool walks = frame_walks_tree(scene, settings_) || light_buffers_used() < int(shadow_lights(scene).size());
+  TracedGeneration traced = trace_rasterized(scene, camera, tree, rays, g, walks);
   TraceResult result;
   result.texels = std::move(traced.texels);
   result.packing = traced.packing;
