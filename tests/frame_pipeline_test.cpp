@@ -36,61 +36,72 @@ std::unique_ptr<Backend> make_backend(Api api) {
 
 class PipelinePerBackend : public ::testing::TestWithParam<Api> {};
 
-// The fish: refraction, reflection, textures and a swimming goldfish; frames 1/8 s apart move it.
+// The fish at depth 2: refraction, reflection, textures and a swimming goldfish (seen through the
+// glass); frames 1/8 s apart move it; a tree walked every frame. The toaster at depth 0: rasterized
+// primaries, its light's shadow rays through the light buffer built on the worker with the
+// renderer's settings, no kd-tree.
 TEST_P(PipelinePerBackend, PipelinedFramesEqualSerialFrames) {
-  const AnimatedScene animation = load_animated_scene(std::string(MOBIRT_SOURCE_DIR) + "/scenes/fish.gltf");
-  ASSERT_TRUE(animation.animated());
-  RenderSettings settings;
-  settings.width = 64;
-  settings.height = 40;
-  settings.depth = 2;
-  settings.always_rebuild = true;  // as the bench renders
-  settings.kd.threads = 2;
-  constexpr size_t kFrames = 4;
-  auto seconds = [](size_t index) { return double(index) / 8.0; };
+  for (const int depth : {2, 0}) {
+    SCOPED_TRACE("depth " + std::to_string(depth));
+    const AnimatedScene animation = load_animated_scene(std::string(MOBIRT_SOURCE_DIR) +
+                                                        (depth == 2 ? "/scenes/fish.gltf" : "/scenes/toaster.gltf"));
+    ASSERT_TRUE(animation.animated());
+    RenderSettings settings;
+    settings.width = 64;
+    settings.height = 40;
+    settings.depth = depth;
+    settings.always_rebuild = true;  // as the bench renders
+    settings.kd.threads = 2;
+    constexpr size_t kFrames = 4;
+    auto seconds = [](size_t index) { return double(index) / 8.0; };
 
-  std::unique_ptr<Backend> serial_backend = make_backend(GetParam());
-  std::vector<Image> serial;
-  {
-    Renderer renderer(*serial_backend, settings);
-    Scene scene;
-    for (size_t i = 0; i < kFrames; ++i) {
-      animation.evaluate(seconds(i), scene);
-      serial.push_back(renderer.render(scene, *scene.camera));
+    std::unique_ptr<Backend> serial_backend = make_backend(GetParam());
+    std::vector<Image> serial;
+    {
+      Renderer renderer(*serial_backend, settings);
+      Scene scene;
+      for (size_t i = 0; i < kFrames; ++i) {
+        animation.evaluate(seconds(i), scene);
+        serial.push_back(renderer.render(scene, *scene.camera));
+      }
     }
-  }
 
-  std::unique_ptr<Backend> backend = make_backend(GetParam());
-  Renderer renderer(*backend, settings);
-  Scene slots[2];
-  FramePipeline pipeline(
-      kFrames,
-      [&](int slot, size_t index) {
-        animation.evaluate(seconds(index), slots[slot]);
-        return std::make_pair(static_cast<const Scene*>(&slots[slot]), *slots[slot].camera);
-      },
-      settings.kd, settings.always_rebuild, true);
-  for (size_t i = 0; i < kFrames; ++i) {
-    Image image;
-    FrameTimings t;
-    pipeline.step(i, [&](PreparedFrame& f) {
-      EXPECT_EQ(f.index, i);
-      EXPECT_TRUE(f.tree_built);
-      image = render_prepared(renderer, f, &t);
-    });
-    EXPECT_TRUE(t.tree_rebuilt);
-    ASSERT_EQ(image.pixels.size(), serial[i].pixels.size());
-    size_t differing = 0;
-    for (size_t p = 0; p < image.pixels.size(); ++p) differing += image.pixels[p] != serial[i].pixels[p];
-    EXPECT_EQ(differing, 0u) << "frame " << i << ": pixels that differ from the serial loop's";
-  }
-  // The frames really differ, so that equal images say the right tree reached each frame.
-  size_t moved = 0;
-  for (size_t p = 0; p < serial[0].pixels.size(); ++p) moved += serial[0].pixels[p] != serial[kFrames - 1].pixels[p];
-  EXPECT_GT(moved, 0u);
-  for (Backend* b : {serial_backend.get(), backend.get()}) {
-    const std::vector<std::string> messages = b->take_debug_messages();
-    EXPECT_TRUE(messages.empty()) << test::join(messages);
+    std::unique_ptr<Backend> backend = make_backend(GetParam());
+    Renderer renderer(*backend, settings);
+    Scene slots[2];
+    FramePipeline pipeline(
+        kFrames,
+        [&](int slot, size_t index) {
+          animation.evaluate(seconds(index), slots[slot]);
+          return std::make_pair(static_cast<const Scene*>(&slots[slot]), *slots[slot].camera);
+        },
+        settings.kd, settings.always_rebuild, true);
+    if (depth == 0) pipeline.set_render_settings(settings);
+    for (size_t i = 0; i < kFrames; ++i) {
+      Image image;
+      FrameTimings t;
+      pipeline.step(i, [&](PreparedFrame& f) {
+        EXPECT_EQ(f.index, i);
+        EXPECT_TRUE(f.tree_built);
+        EXPECT_EQ(f.light_buffers.size(), depth == 0 ? 1u : 0u);
+        image = render_prepared(renderer, f, &t);
+      });
+      EXPECT_TRUE(t.tree_rebuilt);
+      EXPECT_EQ(renderer.frame_had_kd_tree(), depth == 2);
+      EXPECT_EQ(renderer.light_buffers_used(), 1);
+      ASSERT_EQ(image.pixels.size(), serial[i].pixels.size());
+      size_t differing = 0;
+      for (size_t p = 0; p < image.pixels.size(); ++p) differing += image.pixels[p] != serial[i].pixels[p];
+      EXPECT_EQ(differing, 0u) << "frame " << i << ": pixels that differ from the serial loop's";
+    }
+    // The frames really differ, so that equal images say the right tree reached each frame.
+    size_t moved = 0;
+    for (size_t p = 0; p < serial[0].pixels.size(); ++p) moved += serial[0].pixels[p] != serial[kFrames - 1].pixels[p];
+    EXPECT_GT(moved, 0u);
+    for (Backend* b : {serial_backend.get(), backend.get()}) {
+      const std::vector<std::string> messages = b->take_debug_messages();
+      EXPECT_TRUE(messages.empty()) << test::join(messages);
+    }
   }
 }
 
