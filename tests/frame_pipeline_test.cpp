@@ -258,7 +258,9 @@ TEST(FramePipeline, BuildsLightBuffersAndTheTreeOnlyWhereAFrameWalksIt) {
         EXPECT_FALSE(f.tree.triangles.empty());
         EXPECT_EQ(f.tree.nodes.empty(), i == 0 || !shadows);
         ASSERT_EQ(f.light_buffers.size(), shadows ? 1u : 0u);
-        if (shadows) EXPECT_EQ(light_buffer_pays(f.light_buffers[0]), i == 0);
+        if (shadows) {
+          EXPECT_EQ(light_buffer_pays(f.light_buffers[0]), i == 0);
+        }
       });
     }
   }
