@@ -1,7 +1,6 @@
 #include "render/frame_pipeline.h"
 
 #include <chrono>
-#include <span>
 #include <string>
 
 #include "core/cpu_time.h"
@@ -35,10 +34,8 @@ double FramePipeline::prepare(size_t index) {
   // rendering thread (Renderer::Engine::begin_frame builds one where a buffer fails later still).
   bool walks = !settings_ || frame_walks_tree(*scene, *settings_);
   if (f.tree_built && settings_) {
-    frame_light_buffers(*scene, *settings_, f.light_buffers);
-    const std::span<const Light> lights = settings_->shadows ? std::span<const Light>(scene->lights)
-                                                             : std::span<const Light>();
-    for (size_t l = 0; !walks && l < lights.size(); ++l) walks = !light_buffer_pays(f.light_buffers[l]);
+    frame_light_buffers(*scene, *settings_, f.light_buffers);  // one per shadow light
+    for (const LightBuffer& lb : f.light_buffers) walks = walks || !light_buffer_pays(lb);
   } else {
     f.light_buffers.clear();
   }

@@ -146,22 +146,31 @@ int shadow_cells(size_t triangles, const RenderSettings& settings) {
   return highp && triangles <= kAutoShadowCellsTriangles ? kAutoShadowCells : 0;
 }
 
+namespace {
+
+// shadow_cells for `scene`: 0 with analytic shapes (light buffers test triangles only).
+int scene_shadow_cells(const Scene& scene, const RenderSettings& settings) {
+  return scene.shapes.empty() ? shadow_cells(scene.mesh.triangle_count(), settings) : 0;
+}
+
+}  // namespace
+
 bool shadow_rays_buffered(const Scene& scene, const RenderSettings& settings) {
   if (!settings.shadows || scene.lights.empty()) return true;
-  if (!scene.shapes.empty() || shadow_cells(scene.mesh.triangle_count(), settings) <= 0) return false;
+  if (scene_shadow_cells(scene, settings) <= 0) return false;
   return std::all_of(scene.lights.begin(), scene.lights.end(),
                      [](const Light& l) { return l.type != LightType::Directional; });
 }
 
 namespace {
 
-// One light buffer per light of `lights` at `res` cells a face edge over the triangles
-// `positions`; resolution 0 for a directional light.
+// One light buffer per light of `lights` at `res` cells a face edge (none where res <= 0) over the
+// triangles `positions`; resolution 0 where a light gets none (a directional light).
 void light_buffers_for(std::span<const glm::vec3> positions, std::span<const Light> lights, int res,
                        std::vector<LightBuffer>& out) {
   out.resize(lights.size());  // each buffer built into its arrays' memory, when it has some
   for (size_t l = 0; l < lights.size(); ++l) {
-    if (lights[l].type == LightType::Directional) {
+    if (res <= 0 || lights[l].type == LightType::Directional) {
       out[l].resolution = 0;
     } else {
       build_light_buffer(positions, lights[l].position, res, out[l]);
@@ -176,13 +185,7 @@ void frame_light_buffers(const Scene& scene, const RenderSettings& settings, std
     out.clear();
     return;
   }
-  const int res = shadow_cells(scene.mesh.triangle_count(), settings);
-  if (res <= 0 || !scene.shapes.empty()) {
-    out.resize(scene.lights.size());
-    for (LightBuffer& lb : out) lb.resolution = 0;
-    return;
-  }
-  light_buffers_for(scene.mesh.positions, scene.lights, res, out);
+  light_buffers_for(scene.mesh.positions, scene.lights, scene_shadow_cells(scene, settings), out);
 }
 
 bool primaries_rasterized(const Scene& scene, const RenderSettings& settings) {
@@ -341,8 +344,8 @@ struct Renderer::Data {
   std::vector<glm::vec3> light_buffer_positions;  // the shadow lights of the last upload
   std::vector<LightType> light_buffer_types;
   bool light_buffers = false;  // some light has one
-  // Built with a tree handed in (Renderer::render with light buffers), or by the last upload, for
-  // the triangles of `tree`; light_buffers_prebuilt: for the next upload to use.
+  // Built with a tree handed in (Renderer::render with light buffers; light_buffers_prebuilt until
+  // the next begin_frame takes them), or by the last upload.
   std::vector<LightBuffer> prebuilt_light_buffers;
   bool light_buffers_prebuilt = false;
   TexelArray nodes_with_cells, entries_with_cells;
@@ -407,8 +410,7 @@ class Renderer::Engine final : public WhittedEngine {
     if (!reuse || lights_moved || cache.upload_stale) {
       // The light buffers are part of the acceleration structure: their build (on this thread,
       // unless built with the tree ahead) and their packing count as build time.
-      cache.light_buffers_prebuilt = buffers_prebuilt && prebuilt;
-      t.build_ms += r_.upload_tree(cache.tree, r_.shadow_lights(scene));
+      t.build_ms += r_.upload_tree(cache.tree, scene, buffers_prebuilt && prebuilt);
       cache.tree_valid = true;
       cache.upload_stale = false;
       // A frame without a tree with a light that turned out to get no buffer (its lists too long,
@@ -416,8 +418,7 @@ class Renderer::Engine final : public WhittedEngine {
       // (its buffers, just made for these triangles, kept).
       if (!cache.tree_walkable && r_.light_buffers_used() < int(r_.shadow_lights(scene).size())) {
         t.build_ms += make_walkable(scene);
-        cache.light_buffers_prebuilt = true;
-        t.build_ms += r_.upload_tree(cache.tree, r_.shadow_lights(scene));
+        t.build_ms += r_.upload_tree(cache.tree, scene, true);
         t.tree_rebuilt = true;
       }
     }
@@ -631,8 +632,9 @@ void Renderer::prepare_atlas(const Scene& scene) {
   d.atlas_scene = key;
 }
 
-void Renderer::build_light_buffers(const FlatKdTree& tree, std::span<const Light> lights) {
+void Renderer::build_light_buffers(const FlatKdTree& tree, const Scene& scene, bool prebuilt) {
   Data& d = *data_;
+  const std::span<const Light> lights = shadow_lights(scene);
   d.light_buffers = false;
   d.light_buffer_heads.assign(lights.size(), glm::vec4(0.0f));
   // What the buffers were built for: a kept tree's lights that move or change kind rebuild them.
@@ -642,28 +644,28 @@ void Renderer::build_light_buffers(const FlatKdTree& tree, std::span<const Light
     d.light_buffer_positions.push_back(light.position);
     d.light_buffer_types.push_back(light.type);
   }
-  // A scene of triangles only (analytic shapes have no light-buffer test); the tree may be the
-  // primitives' texels alone (a frame that walks none: frame_walks_tree).
+  // Over the triangles of `tree` as uploaded (a tree handed to trace() need not be scene.mesh's:
+  // the buffers index its triangles); a tree of triangles only (analytic shapes have no
+  // light-buffer test). The tree may be the primitives' texels alone (frame_walks_tree).
   const size_t triangles = tree.triangles.size() / MOBIRT_TEXELS_PER_TRIANGLE;
-  const int res = shadow_cells(triangles, settings_);
   bool analytic = false;
   for (size_t t = 0; t < triangles && !analytic; ++t) {
     analytic = tree.triangles[t * MOBIRT_TEXELS_PER_TRIANGLE][MOBIRT_PRIM_KIND] != MOBIRT_PRIM_TRIANGLE;
   }
-  const bool points = std::any_of(lights.begin(), lights.end(), [](const Light& l) { return l.type != LightType::Directional; });
-  // Built with the tree handed in (the frame pipeline's worker), for these lights at this resolution.
+  const int res = analytic ? 0 : shadow_cells(triangles, settings_);
+  // The buffers built with the tree (the frame pipeline's worker, or the last upload of the same
+  // triangles) where they are these lights' at this resolution, else built here.
   std::vector<LightBuffer>& buffers = d.prebuilt_light_buffers;
-  bool prebuilt = std::exchange(d.light_buffers_prebuilt, false) && buffers.size() == lights.size();
+  prebuilt = prebuilt && buffers.size() == lights.size();
   for (size_t l = 0; prebuilt && l < lights.size(); ++l) {
-    prebuilt = lights[l].type == LightType::Directional
+    prebuilt = lights[l].type == LightType::Directional || res <= 0
                    ? buffers[l].resolution == 0
                    : buffers[l].resolution == res && buffers[l].light == lights[l].position;
   }
-  if (res <= 0 || analytic || !points) return;
   if (!prebuilt) {
-    std::vector<glm::vec3> positions(triangles * 3);
-    for (size_t t = 0; t < triangles; ++t) {
-      for (size_t k = 0; k < 3; ++k) positions[3 * t + k] = glm::vec3(tree.triangles[t * MOBIRT_TEXELS_PER_TRIANGLE + k]);
+    std::vector<glm::vec3> positions(res > 0 ? triangles * 3 : 0);
+    for (size_t i = 0; i < positions.size(); ++i) {
+      positions[i] = glm::vec3(tree.triangles[(i / 3) * MOBIRT_TEXELS_PER_TRIANGLE + i % 3]);
     }
     light_buffers_for(positions, lights, res, buffers);
   }
@@ -705,10 +707,10 @@ int Renderer::light_buffers_used() const {
 
 bool Renderer::frame_had_kd_tree() const { return data_->tree_walkable; }
 
-double Renderer::upload_tree(const FlatKdTree& tree, std::span<const Light> lights) {
+double Renderer::upload_tree(const FlatKdTree& tree, const Scene& scene, bool buffers_prebuilt) {
   Data& d = *data_;
   const auto start = Clock::now();
-  build_light_buffers(tree, lights);
+  build_light_buffers(tree, scene, buffers_prebuilt);
   const double buffers_ms = elapsed_ms(start);
   const TexelArray& nodes = d.light_buffers ? d.nodes_with_cells : tree.nodes;
   const TexelArray& entries = d.light_buffers ? d.entries_with_cells : tree.leaf_prims;
@@ -754,7 +756,7 @@ void Renderer::upload_rays(const RayBatch& rays) {
 
 TraceResult Renderer::trace(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays) {
   data_->tree_valid = false;  // the GPU now holds this tree, not the cached one
-  upload_tree(tree, shadow_lights(scene));
+  upload_tree(tree, scene, false);
   return trace_uploaded(scene, tree, rays);
 }
 
@@ -762,7 +764,7 @@ TraceResult Renderer::trace_primary(const Scene& scene, const Camera& camera, co
                                     const RayBatch& rays) {
   if (!primaries_rasterized(scene, settings_)) return trace(scene, tree, rays);
   data_->tree_valid = false;  // the GPU now holds this tree, not the cached one
-  upload_tree(tree, shadow_lights(scene));
+  upload_tree(tree, scene, false);
   GenerationTimings g;
   // Edge misses as the frame treats them: walked where it has a kd-tree (frame_walks_tree, or a
   // light whose buffer did not pay, for which the frame builds one).

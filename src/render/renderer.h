@@ -152,11 +152,12 @@ class Renderer {
                         bool light_buffers = false);
   PassHandle shade_pass(int lights, int textures, int pages, int colour, bool wide);
   void prepare_atlas(const Scene& scene);
-  // lights: the shadow rays' (shadow_lights): with --shadow-cells their light buffers go with the
-  // tree, past its nodes and leaf entries (glsl/layout.h, MOBIRT_TP_LIGHT_BUFFERS). Returns the
-  // milliseconds spent building the light buffers.
-  double upload_tree(const FlatKdTree& tree, std::span<const Light> lights);
-  void build_light_buffers(const FlatKdTree& tree, std::span<const Light> lights);
+  // With --shadow-cells the shadow lights' light buffers (over `tree`'s triangles) go with `tree`,
+  // past its nodes and leaf entries (glsl/layout.h, MOBIRT_TP_LIGHT_BUFFERS). buffers_prebuilt: the
+  // buffers held (built with the tree, or by the last upload of these triangles) serve where they
+  // are these lights' at this resolution. Returns the milliseconds spent building and packing them.
+  double upload_tree(const FlatKdTree& tree, const Scene& scene, bool buffers_prebuilt);
+  void build_light_buffers(const FlatKdTree& tree, const Scene& scene, bool prebuilt);
 
  public:
   // The lights whose shadow rays test a light buffer in the passes now (--shadow-cells), of the
