@@ -348,6 +348,7 @@ struct Renderer::Data {
   // the next begin_frame takes them), or by the last upload.
   std::vector<LightBuffer> prebuilt_light_buffers;
   bool light_buffers_prebuilt = false;
+  size_t light_buffers_built = 0;  // by this renderer itself, since it was made
   TexelArray nodes_with_cells, entries_with_cells;
   // (lights, packing, analytic, wide, primary hits, light buffers)
   std::map<std::tuple<int, int, int, bool, int, bool>, PassHandle> trace_passes;
@@ -668,6 +669,8 @@ void Renderer::build_light_buffers(const FlatKdTree& tree, const Scene& scene, b
       positions[i] = glm::vec3(tree.triangles[(i / 3) * MOBIRT_TEXELS_PER_TRIANGLE + i % 3]);
     }
     light_buffers_for(positions, lights, res, buffers);
+    d.light_buffers_built += size_t(std::count_if(buffers.begin(), buffers.end(),
+                                                  [](const LightBuffer& lb) { return lb.resolution > 0; }));
   }
   for (size_t l = 0; l < lights.size(); ++l) {
     const LightBuffer& lb = buffers[l];
@@ -706,6 +709,8 @@ int Renderer::light_buffers_used() const {
 }
 
 bool Renderer::frame_had_kd_tree() const { return data_->tree_walkable; }
+
+size_t Renderer::light_buffers_built() const { return data_->light_buffers_built; }
 
 double Renderer::upload_tree(const FlatKdTree& tree, const Scene& scene, bool buffers_prebuilt) {
   Data& d = *data_;

@@ -165,6 +165,9 @@ class Renderer {
   int light_buffers_used() const;
   // Whether the last frame had a kd-tree (false: only the primitives' texels, frame_walks_tree).
   bool frame_had_kd_tree() const;
+  // The light buffers this renderer built itself since it was made, on the rendering thread: none
+  // for frames handed their buffers with their tree (the frame pipeline's worker builds them).
+  size_t light_buffers_built() const;
 
  private:
   // The textures laid out in rows of the rays' width (rays and shading inputs), made again when
