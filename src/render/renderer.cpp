@@ -872,7 +872,7 @@ TracedGeneration Renderer::trace_rasterized(const Scene& scene, const Camera& ca
   // index + 1 in its direction's w (its tmax is infinite: a primary ray's). Over the hits alone,
   // as the shading pass shades the hits alone: a miss needs no fragment (its texel is 0, no hit and
   // no shadow bits), and the Utah wood doll's rays mostly miss. The hits in pixel order, 8 to a 4x2
-  // tile (order_in_simd_tiles): neighbouring pixels in one SIMD group.
+  // tile (order_in_simd_tiles' layout): neighbouring pixels in one SIMD group.
   stage = Clock::now();
   constexpr uint32_t kChunk = 4096;
   const uint32_t n = rays.count();
@@ -892,19 +892,22 @@ TracedGeneration Renderer::trace_rasterized(const Scene& scene, const Camera& ca
   hit_rays.direction.resize(hit_count);
   hit_rays.pixel.resize(hit_count);
   hit_rays.weight.resize(hit_count);
+  // The k-th hit straight to its place in the tiles (order_in_simd_tiles' layout, without its
+  // second pass over the rays and their arrays allocated again).
+  const uint32_t tiled = simd_tiled_rays(hit_rays);
   parallel_for_chunks(n, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
     uint32_t k = first[c];
     for (uint32_t i = begin; i < end; ++i) {
       const uint32_t index_plus_one = d.raster_texels[i] & 0xFFFFFFu;
       if (index_plus_one == 0) continue;
-      hit_rays.origin[k] = rays.origin[i];
-      hit_rays.direction[k] = glm::vec4(glm::vec3(rays.direction[i]), float(index_plus_one));
-      hit_rays.pixel[k] = i;  // the primary ray it stands for
-      hit_rays.weight[k] = glm::vec3(0.0f);
+      const uint32_t to = k < tiled ? simd_tile_texel(k, width) : k;
+      hit_rays.origin[to] = rays.origin[i];
+      hit_rays.direction[to] = glm::vec4(glm::vec3(rays.direction[i]), float(index_plus_one));
+      hit_rays.pixel[to] = i;  // the primary ray it stands for
+      hit_rays.weight[to] = glm::vec3(0.0f);
       ++k;
     }
   });
-  order_in_simd_tiles(hit_rays);
   g.upload_ms += elapsed_ms(stage);
   traced.texels.assign(n, pack_trace(traced.packing, 0, 0));
   if (hit_count == 0) return traced;
