@@ -7,6 +7,7 @@
 #include "backend/shader_constraints.h"
 #include "backend/vulkan/vk_pipeline.h"
 #include "core/error.h"
+#include "core/parallel.h"
 
 // SPIR-V of the raster pass, generated at build time from glsl/ (build/spirv/<name>.h).
 #include "raster.frag.h"
@@ -156,7 +157,7 @@ void RasterPass::prepare(uint32_t width, uint32_t height, std::span<const float>
     // With headroom, so that an animation whose triangle count changes does not reallocate often.
     vertices_ = create_host_buffer(device_, bytes + bytes / 4, VK_BUFFER_USAGE_VERTEX_BUFFER_BIT, false);
   }
-  if (!vertices.empty()) std::memcpy(vertices_.mapped, vertices.data(), vertices.size_bytes());
+  if (!vertices.empty()) parallel_copy(vertices_.mapped, vertices.data(), vertices.size_bytes());
   flush_mapped(vk_device, vertices_.memory.get(), vertices_.coherent);
   vertex_count_ = uint32_t(vertices.size() / kVertexFloats);
 }

@@ -33,6 +33,7 @@
 #include "backend/vulkan/vk_resources.h"
 #include "backend/vulkan/vk_util.h"
 #include "core/error.h"
+#include "core/parallel.h"
 #include "layout.h"
 
 namespace mobirt {
@@ -194,7 +195,7 @@ void Impl::flush(const vk::Memory& memory, bool coherent) {
 }
 
 void Impl::stage(const void* data, size_t bytes) {
-  std::memcpy(staging_.mapped, data, bytes);
+  parallel_copy(staging_.mapped, data, bytes);
   flush(staging_.memory, staging_.coherent);
 }
 
@@ -347,7 +348,7 @@ TextureHandle Impl::create_buffer(uint32_t texels, TexelFormat format, TextureKi
 
 // A buffer's upload: in place (every earlier pass was waited for).
 void Impl::upload_buffer(vk::Texture& texture, const void* data, size_t bytes) {
-  std::memcpy(texture.buffer.mapped, data, bytes);
+  parallel_copy(texture.buffer.mapped, data, bytes);
   flush(texture.buffer.memory, texture.buffer.coherent);
 }
 
@@ -357,7 +358,7 @@ void Impl::upload_mapped_image(vk::Texture& texture, const void* data, size_t by
   char* target = static_cast<char*>(texture.image.mapped);
   const char* source = static_cast<const char*>(data);
   if (texture.image.row_pitch == row_bytes) {
-    std::memcpy(target, source, bytes);
+    parallel_copy(target, source, bytes);
   } else {
     for (size_t done = 0; done < bytes; done += row_bytes, target += texture.image.row_pitch) {
       std::memcpy(target, source + done, std::min(row_bytes, bytes - done));
@@ -635,7 +636,7 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
     vk::invalidate_mapped(device_.handle(), readback_.memory.get(), readback_.coherent);
   }
   if (target_.linear && target_.image.row_pitch == VkDeviceSize(width) * 4) {
-    std::memcpy(out.data(), target_.image.mapped, size_t(count) * 4);
+    parallel_copy(out.data(), target_.image.mapped, size_t(count) * 4);
   } else if (target_.linear) {
     // Row by row: the target is as wide as the widest pass so far, its rows row_pitch apart.
     const char* rows = static_cast<const char*>(target_.image.mapped);
@@ -645,7 +646,7 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
                   size_t(std::min(width, count - first)) * 4);
     }
   } else {
-    std::memcpy(out.data(), readback_.mapped, size_t(count) * 4);
+    parallel_copy(out.data(), readback_.mapped, size_t(count) * 4);
   }
   const double copy_ms = elapsed_ms(copy_start);
 
@@ -701,7 +702,7 @@ PassTiming Impl::run_raster(std::span<const float> vertices, const RasterView& v
 
   const auto copy_start = Clock::now();
   vk::invalidate_mapped(device_.handle(), readback_.memory.get(), readback_.coherent);
-  std::memcpy(out.data(), readback_.mapped, out.size_bytes());
+  parallel_copy(out.data(), readback_.mapped, out.size_bytes());
   timing.readback_ms = elapsed_ms(copy_start);
   // The draw and the copy to the read-back buffer are one span of timestamps: the copy of 4 bytes
   // a pixel is a small part of it.
