@@ -215,6 +215,45 @@ TEST_P(RasterPrimary, NothingInFrontOfTheCamera) {
   }
 }
 
+// start_raster + finish_raster (the frame starts the draw before its uploads) read back what
+// run_raster does, with textures created, uploaded and destroyed in between; a second start drops
+// the first, and a finish without a start is refused.
+TEST_P(RasterPrimary, AStartedRasterFinishesAsRunRasterDoes) {
+  const Scene toaster = project_scene("toaster");
+  const Scene boxes = test::box_grid_scene();
+  const int width = 96, height = 64;
+  RasterView toaster_view{}, boxes_view{};
+  ASSERT_TRUE(raster_view(*toaster.camera, width, height, toaster.mesh.positions, toaster_view));
+  ASSERT_TRUE(raster_view(*boxes.camera, width, height, boxes.mesh.positions, boxes_view));
+  const std::vector<float> toaster_vertices = raster_vertices(toaster), boxes_vertices = raster_vertices(boxes);
+  std::vector<uint32_t> expected(size_t(width) * height), got(expected.size(), 0xFFFFFFFFu);
+  backend->run_raster(toaster_vertices, toaster_view, uint32_t(width), uint32_t(height), expected);
+
+  backend->start_raster(boxes_vertices, boxes_view, uint32_t(width), uint32_t(height));  // dropped below
+  backend->start_raster(toaster_vertices, toaster_view, uint32_t(width), uint32_t(height));
+  const std::vector<float> texels(4 * 64 * 64, 0.5f);
+  const TextureHandle texture = backend->create_texture(64, 64, TexelFormat::RGBA32F);
+  backend->upload(texture, texels.data(), texels.size() * sizeof(float));
+  backend->destroy(texture);
+  const PassTiming timing = backend->finish_raster(got);
+  EXPECT_EQ(timing.bytes_read, got.size() * 4);
+  size_t hits = 0, differing = 0;
+  for (size_t i = 0; i < got.size(); ++i) {
+    hits += got[i] != 0 ? 1 : 0;
+    differing += got[i] != expected[i] ? 1 : 0;
+  }
+  EXPECT_GT(hits, got.size() / 4);
+  EXPECT_EQ(differing, 0u);
+  try {
+    backend->finish_raster(got);
+    ADD_FAILURE() << "finish_raster without start_raster";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::Internal);
+  }
+  const std::vector<std::string> messages = backend->take_debug_messages();
+  EXPECT_TRUE(messages.empty()) << test::join(messages);
+}
+
 INSTANTIATE_TEST_SUITE_P(Backends, RasterPrimary, ::testing::Values(Api::Vulkan, Api::Gles), test::api_param_name);
 
 // ---- What the frame skips and refuses ---------------------------------------------------------

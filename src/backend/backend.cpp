@@ -2,6 +2,7 @@
 
 #include <regex>
 #include <set>
+#include <utility>
 
 #include "core/error.h"
 #include "layout.h"
@@ -79,6 +80,16 @@ TextureHandle Backend::create_storage_buffer(uint32_t, TexelFormat) {
 
 PassTiming Backend::run_raster(std::span<const float>, const RasterView&, uint32_t, uint32_t, std::span<uint32_t>) {
   throw Error(ErrorKind::Unsupported, "this backend cannot rasterize the primary hits: use --primary trace");
+}
+
+void Backend::start_raster(std::span<const float> vertices, const RasterView& view, uint32_t width, uint32_t height) {
+  pending_raster_ = {vertices, view, width, height, true};
+}
+
+PassTiming Backend::finish_raster(std::span<uint32_t> out) {
+  if (!pending_raster_.started) throw Error(ErrorKind::Internal, "finish_raster without start_raster");
+  const PendingRaster r = std::exchange(pending_raster_, PendingRaster{});
+  return run_raster(r.vertices, r.view, r.width, r.height, out);
 }
 
 void check_run_pass_arguments(const PassDesc& desc, size_t textures, size_t uniform_floats, uint32_t width,

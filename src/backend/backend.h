@@ -178,9 +178,27 @@ class Backend {
   // writes, no texture at all. Error(Unsupported) by default.
   virtual PassTiming run_raster(std::span<const float> vertices, const RasterView& view, uint32_t width,
                                 uint32_t height, std::span<uint32_t> out);
+  // run_raster in two halves, so that the caller's work overlaps the draw: start_raster submits it
+  // and returns (the driver sets up every triangle on a thread of its own while the rest of the
+  // frame waits otherwise); finish_raster waits for it and reads it back as run_raster does, into
+  // out[0, width x height) of the start's size. `vertices` must stay alive and unchanged until
+  // finish_raster. Between the two the caller may create, upload and destroy textures, but run no
+  // other pass; a second start_raster first waits for the one in flight and drops it. By default
+  // start_raster keeps the arguments and finish_raster runs run_raster (no overlap).
+  virtual void start_raster(std::span<const float> vertices, const RasterView& view, uint32_t width, uint32_t height);
+  virtual PassTiming finish_raster(std::span<uint32_t> out);
 
   // Every validation/debug message received since the last call (tests assert there are none).
   virtual std::vector<std::string> take_debug_messages() = 0;
+
+ private:
+  // The default start_raster's arguments, until finish_raster.
+  struct PendingRaster {
+    std::span<const float> vertices;
+    RasterView view{};
+    uint32_t width = 0, height = 0;
+    bool started = false;
+  } pending_raster_;
 };
 
 // The atlas pages' format on this device, and the page bindings its shading pass reads through a

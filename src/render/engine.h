@@ -97,6 +97,10 @@ class WhittedEngine {
   virtual ~WhittedEngine() = default;
   virtual const char* name() const = 0;
 
+  // Once per frame, first of all: an engine may start work here that runs beside begin_frame's and
+  // the primary rays' (the fragment passes' raster pass of the primary hits). Nothing by default.
+  virtual void start_frame(const Scene&, const Camera&, const RenderSettings&) {}
+
   // Once per frame, before the first generation: builds (or keeps) the acceleration structure over
   // scene.mesh as it is now and uploads what the passes read; fills frame.build_ms and
   // frame.tree_rebuilt. A scene over one of the engine's limits is refused here, before any work.

@@ -336,6 +336,8 @@ struct Renderer::Data {
   // its rasterized index + 1 in its direction's w (kept: their memory reused frame after frame).
   std::vector<float> raster_vertices;
   std::vector<uint32_t> raster_texels;
+  bool raster_started = false;  // by Engine::start_frame, for this frame's trace_primary
+  double raster_start_ms = 0.0;  // start_raster's CPU time, for the generation's upload stage
   RayBatch hit_rays;
   // --shadow-cells: per shadow light the head of its light buffer (MOBIRT_TP_LIGHT_BUFFERS; z = 0
   // where it has none), the lights' positions they were built for, and the arrays uploaded (the
@@ -449,10 +451,25 @@ class Renderer::Engine final : public WhittedEngine {
     return traced;
   }
 
+  // The raster pass starts before begin_frame's uploads and the primary rays: the driver sets up
+  // its triangles on a thread of its own while this thread works (alone, that setup left a core
+  // idle: README, *Session 30*).
+  void start_frame(const Scene& scene, const Camera& camera, const RenderSettings&) override {
+    Data& d = *r_.data_;
+    d.raster_started = false;
+    if (!primaries_rasterized(scene, r_.settings_)) return;
+    // A scene over a limit is refused here, as begin_frame would, before any pass starts.
+    choose_packing(scene.primitive_count(), r_.pass_lights(int(r_.shadow_lights(scene).size())), scene.source);
+    r_.start_raster(scene, camera, uint32_t(r_.settings_.width), uint32_t(r_.settings_.height));
+    d.raster_started = true;
+  }
+
   TracedGeneration trace_primary(const Scene& scene, const Camera& camera, const RayBatch& rays,
                                  GenerationTimings& g) override {
+    const bool started = std::exchange(r_.data_->raster_started, false);
     if (!primaries_rasterized(scene, r_.settings_)) return trace(scene, rays, g);
-    TracedGeneration traced = r_.trace_rasterized(scene, camera, r_.data_->tree, rays, g, r_.data_->tree_walkable);
+    TracedGeneration traced =
+        r_.trace_rasterized(scene, camera, r_.data_->tree, rays, g, r_.data_->tree_walkable, started);
     // A ray the loop cap stopped (a light buffer's cell listing more than --max-steps triangles)
     // is retraced on the CPU through the kd-tree (decode_hits): a frame without one builds it now,
     // counted with the decoding. The GPU still holds the primitives' texels alone: the next frame
@@ -814,24 +831,10 @@ TraceResult Renderer::trace_uploaded(const Scene& scene, const FlatKdTree& tree,
   return result;
 }
 
-TracedGeneration Renderer::trace_rasterized(const Scene& scene, const Camera& camera, const FlatKdTree& tree,
-                                            const RayBatch& rays, GenerationTimings& g, bool walk_edge_misses) {
-  if (walk_edge_misses && tree.nodes.empty()) {
-    throw Error(ErrorKind::Internal, "--primary raster: edge misses to walk a tree that has no nodes");
-  }
+void Renderer::start_raster(const Scene& scene, const Camera& camera, uint32_t width, uint32_t height) {
   Data& d = *data_;
-  const uint32_t width = rays.width, height = rays.rows();
-  std::atomic<uint32_t> out_of_order{0};
-  parallel_for_chunks(rays.count(), 16384, 0, [&](uint32_t, uint32_t begin, uint32_t end) {
-    uint32_t wrong = 0;
-    for (uint32_t i = begin; i < end; ++i) wrong += rays.pixel[i] != i ? 1u : 0u;
-    if (wrong) out_of_order.fetch_add(wrong, std::memory_order_relaxed);
-  });
-  if (uint64_t(width) * height != rays.count() || out_of_order.load() != 0) {
-    throw Error(ErrorKind::Internal, "--primary raster: the primary rays are not one per pixel in pixel order");
-  }
   // The vertices: each triangle's three, with its index + 1 (an exact float below 2^24), on all cores.
-  auto stage = Clock::now();
+  const auto stage = Clock::now();
   const std::vector<glm::vec3>& positions = scene.mesh.positions;
   const uint32_t triangles = uint32_t(scene.mesh.triangle_count());
   RasterView view{};
@@ -853,9 +856,31 @@ TracedGeneration Renderer::trace_rasterized(const Scene& scene, const Camera& ca
       }
     });
   }
-  g.upload_ms += elapsed_ms(stage);
+  backend_.start_raster(d.raster_vertices, view, width, height);
+  d.raster_start_ms = elapsed_ms(stage);
+}
+
+TracedGeneration Renderer::trace_rasterized(const Scene& scene, const Camera& camera, const FlatKdTree& tree,
+                                            const RayBatch& rays, GenerationTimings& g, bool walk_edge_misses,
+                                            bool started) {
+  if (walk_edge_misses && tree.nodes.empty()) {
+    throw Error(ErrorKind::Internal, "--primary raster: edge misses to walk a tree that has no nodes");
+  }
+  Data& d = *data_;
+  const uint32_t width = rays.width, height = rays.rows();
+  std::atomic<uint32_t> out_of_order{0};
+  parallel_for_chunks(rays.count(), 16384, 0, [&](uint32_t, uint32_t begin, uint32_t end) {
+    uint32_t wrong = 0;
+    for (uint32_t i = begin; i < end; ++i) wrong += rays.pixel[i] != i ? 1u : 0u;
+    if (wrong) out_of_order.fetch_add(wrong, std::memory_order_relaxed);
+  });
+  if (uint64_t(width) * height != rays.count() || out_of_order.load() != 0) {
+    throw Error(ErrorKind::Internal, "--primary raster: the primary rays are not one per pixel in pixel order");
+  }
+  if (!started) start_raster(scene, camera, width, height);
+  g.upload_ms += std::exchange(d.raster_start_ms, 0.0);
   d.raster_texels.resize(rays.count());
-  add_pass(g, backend_.run_raster(d.raster_vertices, view, width, height, d.raster_texels));
+  add_pass(g, backend_.finish_raster(d.raster_texels));
 
   TracedGeneration traced;
   traced.form = TracedGeneration::Form::PackedTexels;
@@ -873,7 +898,7 @@ TracedGeneration Renderer::trace_rasterized(const Scene& scene, const Camera& ca
   // as the shading pass shades the hits alone: a miss needs no fragment (its texel is 0, no hit and
   // no shadow bits), and the Utah wood doll's rays mostly miss. The hits in pixel order, 8 to a 4x2
   // tile (order_in_simd_tiles' layout): neighbouring pixels in one SIMD group.
-  stage = Clock::now();
+  const auto stage = Clock::now();
   constexpr uint32_t kChunk = 4096;
   const uint32_t n = rays.count();
   const uint32_t chunks = chunk_count(n, kChunk);

@@ -185,8 +185,15 @@ class Renderer {
   // pass specialised to PRIMARY_HITS casting the shadow rays from them, over the hits alone.
   // `tree`: the one uploaded, whose triangles and box the shadow pass reads. walk_edge_misses: a ray
   // whose rasterized triangle's test misses walks `tree` (a kd-tree), else keeps that triangle.
+  // started: the raster pass of these primaries was started already (start_raster, by the frame's
+  // Engine::start_frame), else it is started here.
   TracedGeneration trace_rasterized(const Scene& scene, const Camera& camera, const FlatKdTree& tree,
-                                    const RayBatch& rays, GenerationTimings& g, bool walk_edge_misses);
+                                    const RayBatch& rays, GenerationTimings& g, bool walk_edge_misses,
+                                    bool started = false);
+  // The raster pass of the primary hits through `camera` at width x height started
+  // (Backend::start_raster): the posed triangles' vertices written, the draw submitted; its time
+  // on the CPU goes to the generation's upload stage when trace_rasterized finishes it.
+  void start_raster(const Scene& scene, const Camera& camera, uint32_t width, uint32_t height);
 
   Backend& backend_;
   RenderSettings settings_;

@@ -122,6 +122,7 @@ Image render_whitted(const Scene& scene, const Camera& camera, const RenderSetti
                      WhittedEngine& engine, FrameTimings* timings) {
   FrameTimings t;
   const std::chrono::steady_clock::time_point frame_start = std::chrono::steady_clock::now();
+  engine.start_frame(scene, camera, settings);
   engine.begin_frame(scene, settings, t);
   const FlatKdTree& tree = engine.tree();
 

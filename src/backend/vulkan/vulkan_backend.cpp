@@ -73,6 +73,8 @@ class Impl {
                       std::span<uint32_t> out);
   PassTiming run_raster(std::span<const float> vertices, const RasterView& view, uint32_t width, uint32_t height,
                         std::span<uint32_t> out);
+  void start_raster(std::span<const float> vertices, const RasterView& view, uint32_t width, uint32_t height);
+  PassTiming finish_raster(std::span<uint32_t> out);
   std::vector<std::string> take_debug_messages() { return device_.take_debug_messages(); }
   void save_pipeline_cache() const { pipelines_.save_cache(); }
 
@@ -98,6 +100,8 @@ class Impl {
   void ensure_target(uint32_t width, uint32_t height);
   void begin_commands();
   void submit_and_wait(const char* what);
+  void wait_for(VkFence fence, const char* what);  // then resets it; a timeout makes the backend hung
+  void drop_raster_in_flight();                     // waits for a started raster pass, unread
   vk::Texture& texture_ref(TextureHandle handle);
   TextureHandle keep(vk::Texture texture);
   void upload_buffer(vk::Texture& texture, const void* data, size_t bytes);
@@ -116,6 +120,18 @@ class Impl {
   vk::HostBuffer readback_;
   vk::RenderTarget target_;
   std::unique_ptr<vk::RasterPass> raster_;  // made by the first run_raster
+  // start_raster's pass in flight: its own command buffer, fence, timestamps and read-back buffer,
+  // so that uploads (a staged one submits commands) run while the driver sets up its triangles.
+  VkCommandBuffer raster_commands_ = VK_NULL_HANDLE;  // freed with the pool
+  vk::Fence raster_fence_;
+  vk::QueryPool raster_queries_;
+  vk::HostBuffer raster_readback_;
+  struct RasterInFlight {
+    bool active = false;
+    uint32_t width = 0, height = 0;
+    double upload_ms = 0.0;
+    Clock::time_point wall_start;
+  } raster_flight_;
   std::unordered_map<uint32_t, vk::Texture> textures_;
   std::unordered_map<uint32_t, vk::Pass> passes_;
   uint32_t next_texture_ = 1;
@@ -253,6 +269,10 @@ void Impl::submit_and_wait(const char* what) {
   submit.pCommandBuffers = &commands_;
   VkFence fence = fence_.get();
   VK_CHECK_RESULT(device_result(vkQueueSubmit(device_.queue(), 1, &submit, fence), "vkQueueSubmit"), "vkQueueSubmit");
+  wait_for(fence, what);
+}
+
+void Impl::wait_for(VkFence fence, const char* what) {
   const uint64_t timeout_ns = uint64_t(timeout_s_ * 1e9);
   const VkResult result = device_result(vkWaitForFences(device_.handle(), 1, &fence, VK_TRUE, timeout_ns), "vkWaitForFences");
   if (result == VK_TIMEOUT) {
@@ -683,6 +703,7 @@ PassTiming Impl::run_raster(std::span<const float> vertices, const RasterView& v
     return timing;
   }
   if (!raster_) raster_ = std::make_unique<vk::RasterPass>(device_, pipelines_.cache());
+  drop_raster_in_flight();  // its vertex buffer is rewritten below
   const auto upload_start = Clock::now();
   raster_->prepare(width, height, vertices);
   timing.upload_ms += elapsed_ms(upload_start);  // the vertices written into their buffer
@@ -719,6 +740,115 @@ PassTiming Impl::run_raster(std::span<const float> vertices, const RasterView& v
   timing.bytes_read = uint64_t(out.size()) * 4;
   pending_upload_ms_ = 0.0;
   timing.wall_ms = elapsed_ms(wall_start);
+  device_.throw_validation_errors();
+  return timing;
+}
+
+void Impl::drop_raster_in_flight() {
+  if (!raster_flight_.active) return;
+  raster_flight_.active = false;
+  wait_for(raster_fence_.get(), "raster");
+}
+
+void Impl::start_raster(std::span<const float> vertices, const RasterView& view, uint32_t width, uint32_t height) {
+  const auto wall_start = Clock::now();
+  usable();
+  drop_raster_in_flight();
+  RasterInFlight flight;
+  flight.width = width;
+  flight.height = height;
+  flight.wall_start = wall_start;
+  flight.upload_ms = std::exchange(pending_upload_ms_, 0.0);  // what was uploaded before it: its own
+  if (width == 0 || height == 0) {
+    flight.active = true;
+    raster_flight_ = flight;
+    return;
+  }
+  if (!raster_) raster_ = std::make_unique<vk::RasterPass>(device_, pipelines_.cache());
+  if (raster_commands_ == VK_NULL_HANDLE) {
+    VkCommandBufferAllocateInfo alloc{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
+    alloc.commandPool = command_pool_.get();
+    alloc.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+    alloc.commandBufferCount = 1;
+    VK_CHECK(vkAllocateCommandBuffers(device_.handle(), &alloc, &raster_commands_));
+    VkFenceCreateInfo fence_info{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
+    VkFence fence = VK_NULL_HANDLE;
+    VK_CHECK(vkCreateFence(device_.handle(), &fence_info, nullptr, &fence));
+    raster_fence_ = vk::Fence(device_.handle(), fence);
+    if (device_.timestamp_bits() > 0) {
+      VkQueryPoolCreateInfo query_info{VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO};
+      query_info.queryType = VK_QUERY_TYPE_TIMESTAMP;
+      query_info.queryCount = 2;
+      VkQueryPool query_pool = VK_NULL_HANDLE;
+      VK_CHECK(vkCreateQueryPool(device_.handle(), &query_info, nullptr, &query_pool));
+      raster_queries_ = vk::QueryPool(device_.handle(), query_pool);
+    }
+  }
+  const auto upload_start = Clock::now();
+  raster_->prepare(width, height, vertices);
+  flight.upload_ms += elapsed_ms(upload_start);
+  const VkDeviceSize bytes = VkDeviceSize(width) * height * 4;
+  if (raster_readback_.size < bytes) {
+    raster_readback_.reset();
+    raster_readback_ = vk::create_host_buffer(device_, bytes, VK_BUFFER_USAGE_TRANSFER_DST_BIT, true);
+  }
+  VK_CHECK(vkResetCommandBuffer(raster_commands_, 0));
+  VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+  begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+  VK_CHECK(vkBeginCommandBuffer(raster_commands_, &begin));
+  const bool timed = bool(raster_queries_);
+  if (timed) {
+    vkCmdResetQueryPool(raster_commands_, raster_queries_.get(), 0, 2);
+    vkCmdWriteTimestamp(raster_commands_, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, raster_queries_.get(), 0);
+  }
+  raster_->record(raster_commands_, view, width, height, raster_readback_.buffer.get());
+  if (timed) vkCmdWriteTimestamp(raster_commands_, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, raster_queries_.get(), 1);
+  VK_CHECK(vkEndCommandBuffer(raster_commands_));
+  VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+  submit.commandBufferCount = 1;
+  submit.pCommandBuffers = &raster_commands_;
+  VK_CHECK_RESULT(device_result(vkQueueSubmit(device_.queue(), 1, &submit, raster_fence_.get()), "vkQueueSubmit"),
+                  "vkQueueSubmit");
+  flight.active = true;
+  raster_flight_ = flight;
+  device_.throw_validation_errors();
+}
+
+PassTiming Impl::finish_raster(std::span<uint32_t> out) {
+  usable();
+  if (!raster_flight_.active) throw Error(ErrorKind::Internal, "finish_raster without start_raster");
+  const RasterInFlight flight = std::exchange(raster_flight_, RasterInFlight{});
+  PassTiming timing;
+  timing.upload_ms = flight.upload_ms;
+  if (out.size() != size_t(flight.width) * flight.height) {
+    if (flight.width != 0 && flight.height != 0) wait_for(raster_fence_.get(), "raster");
+    throw Error(ErrorKind::Internal, "finish_raster: the output holds " + std::to_string(out.size()) + " texels, not " +
+                                         std::to_string(flight.width) + "x" + std::to_string(flight.height));
+  }
+  if (flight.width == 0 || flight.height == 0) {
+    timing.wall_ms = elapsed_ms(flight.wall_start);
+    return timing;
+  }
+  const auto wait_start = Clock::now();
+  wait_for(raster_fence_.get(), "raster");
+  const double wait_ms = elapsed_ms(wait_start);
+  const auto copy_start = Clock::now();
+  vk::invalidate_mapped(device_.handle(), raster_readback_.memory.get(), raster_readback_.coherent);
+  parallel_copy(out.data(), raster_readback_.mapped, out.size_bytes());
+  timing.readback_ms = elapsed_ms(copy_start);
+  if (raster_queries_) {
+    uint64_t stamps[2] = {};
+    VK_CHECK_RESULT(device_result(vkGetQueryPoolResults(device_.handle(), raster_queries_.get(), 0, 2, sizeof(stamps),
+                                                        stamps, sizeof(uint64_t),
+                                                        VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT),
+                                  "vkGetQueryPoolResults"),
+                    "vkGetQueryPoolResults");
+    timing.gpu_ms = timestamp_ms(stamps[0], stamps[1]);
+  } else {
+    timing.gpu_ms = wait_ms;  // what the caller still waited for: the overlapped part is not counted
+  }
+  timing.bytes_read = uint64_t(out.size()) * 4;
+  timing.wall_ms = elapsed_ms(flight.wall_start);
   device_.throw_validation_errors();
   return timing;
 }
@@ -760,6 +890,10 @@ class VulkanBackend final : public Backend {
                         std::span<uint32_t> out) override {
     return impl_->run_raster(vertices, view, width, height, out);
   }
+  void start_raster(std::span<const float> vertices, const RasterView& view, uint32_t width, uint32_t height) override {
+    impl_->start_raster(vertices, view, width, height);
+  }
+  PassTiming finish_raster(std::span<uint32_t> out) override { return impl_->finish_raster(out); }
   std::vector<std::string> take_debug_messages() override { return impl_->take_debug_messages(); }
   bool reads_target_in_place() const { return impl_->reads_target_in_place(); }
 
