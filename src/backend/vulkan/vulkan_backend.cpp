@@ -98,6 +98,7 @@ class Impl {
     return double((to - from) & mask) * double(device_.properties().limits.timestampPeriod) * 1e-6;
   }
   void ensure_target(uint32_t width, uint32_t height);
+  void make_submission(uint32_t timestamps, VkCommandBuffer& commands, vk::Fence& fence, vk::QueryPool& queries);
   void begin_commands();
   void submit_and_wait(const char* what);
   void wait_for(VkFence fence, const char* what);  // then resets it; a timeout makes the backend hung
@@ -161,24 +162,30 @@ void Impl::create_command_objects() {
   VK_CHECK(vkCreateCommandPool(device_.handle(), &pool_info, nullptr, &pool));
   command_pool_ = vk::CommandPool(device_.handle(), pool);
 
+  make_submission(kTimestampCount, commands_, fence_, queries_);
+}
+
+// A command buffer from the pool, a fence and, where the device has timestamps, a pool of
+// `timestamps` queries: what one submission in flight needs.
+void Impl::make_submission(uint32_t timestamps, VkCommandBuffer& commands, vk::Fence& fence, vk::QueryPool& queries) {
   VkCommandBufferAllocateInfo alloc{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
-  alloc.commandPool = pool;
+  alloc.commandPool = command_pool_.get();
   alloc.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
   alloc.commandBufferCount = 1;
-  VK_CHECK(vkAllocateCommandBuffers(device_.handle(), &alloc, &commands_));
+  VK_CHECK(vkAllocateCommandBuffers(device_.handle(), &alloc, &commands));
 
   VkFenceCreateInfo fence_info{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
-  VkFence fence = VK_NULL_HANDLE;
-  VK_CHECK(vkCreateFence(device_.handle(), &fence_info, nullptr, &fence));
-  fence_ = vk::Fence(device_.handle(), fence);
+  VkFence made = VK_NULL_HANDLE;
+  VK_CHECK(vkCreateFence(device_.handle(), &fence_info, nullptr, &made));
+  fence = vk::Fence(device_.handle(), made);
 
   if (device_.timestamp_bits() > 0) {
     VkQueryPoolCreateInfo query_info{VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO};
     query_info.queryType = VK_QUERY_TYPE_TIMESTAMP;
-    query_info.queryCount = kTimestampCount;
+    query_info.queryCount = timestamps;
     VkQueryPool query_pool = VK_NULL_HANDLE;
     VK_CHECK(vkCreateQueryPool(device_.handle(), &query_info, nullptr, &query_pool));
-    queries_ = vk::QueryPool(device_.handle(), query_pool);
+    queries = vk::QueryPool(device_.handle(), query_pool);
   }
 }
 
@@ -765,25 +772,7 @@ void Impl::start_raster(std::span<const float> vertices, const RasterView& view,
     return;
   }
   if (!raster_) raster_ = std::make_unique<vk::RasterPass>(device_, pipelines_.cache());
-  if (raster_commands_ == VK_NULL_HANDLE) {
-    VkCommandBufferAllocateInfo alloc{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
-    alloc.commandPool = command_pool_.get();
-    alloc.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
-    alloc.commandBufferCount = 1;
-    VK_CHECK(vkAllocateCommandBuffers(device_.handle(), &alloc, &raster_commands_));
-    VkFenceCreateInfo fence_info{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
-    VkFence fence = VK_NULL_HANDLE;
-    VK_CHECK(vkCreateFence(device_.handle(), &fence_info, nullptr, &fence));
-    raster_fence_ = vk::Fence(device_.handle(), fence);
-    if (device_.timestamp_bits() > 0) {
-      VkQueryPoolCreateInfo query_info{VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO};
-      query_info.queryType = VK_QUERY_TYPE_TIMESTAMP;
-      query_info.queryCount = 2;
-      VkQueryPool query_pool = VK_NULL_HANDLE;
-      VK_CHECK(vkCreateQueryPool(device_.handle(), &query_info, nullptr, &query_pool));
-      raster_queries_ = vk::QueryPool(device_.handle(), query_pool);
-    }
-  }
+  if (raster_commands_ == VK_NULL_HANDLE) make_submission(2, raster_commands_, raster_fence_, raster_queries_);
   const auto upload_start = Clock::now();
   raster_->prepare(width, height, vertices);
   flight.upload_ms += elapsed_ms(upload_start);
