@@ -254,6 +254,30 @@ TEST_P(RasterPrimary, AStartedRasterFinishesAsRunRasterDoes) {
   EXPECT_TRUE(messages.empty()) << test::join(messages);
 }
 
+// A frame refused before its passes (17 lights: start_frame refuses it, as begin_frame would, after
+// the frame pipeline handed in its tree) leaves nothing behind: the next frame, given no tree, is
+// its own scene's, pixel for pixel as a fresh renderer's.
+TEST_P(RasterPrimary, ARefusedFrameLeavesNoTreeBehind) {
+  RenderSettings settings;
+  settings.width = 64;
+  settings.height = 40;
+  settings.depth = 0;
+  settings.primary = PrimaryHits::Raster;
+  Scene refused = test::box_grid_scene();
+  refused.lights.resize(17, refused.lights[0]);
+  const Scene toaster = project_scene("toaster");
+  Renderer renderer(*backend, settings);
+  FlatKdTree tree = build_kdtree(refused.mesh.positions);
+  test::expect_bad_input([&] { renderer.render(refused, *refused.camera, tree, 0.0); }, {"17 lights"});
+  const Image image = renderer.render(toaster, *toaster.camera);
+  Renderer fresh(*backend, settings);
+  const Image expected = fresh.render(toaster, *toaster.camera);
+  ASSERT_EQ(image.pixels.size(), expected.pixels.size());
+  size_t differing = 0;
+  for (size_t p = 0; p < image.pixels.size(); ++p) differing += image.pixels[p] != expected.pixels[p] ? 1 : 0;
+  EXPECT_EQ(differing, 0u);
+}
+
 INSTANTIATE_TEST_SUITE_P(Backends, RasterPrimary, ::testing::Values(Api::Vulkan, Api::Gles), test::api_param_name);
 
 // ---- What the frame skips and refuses ---------------------------------------------------------

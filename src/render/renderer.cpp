@@ -458,9 +458,17 @@ class Renderer::Engine final : public WhittedEngine {
     Data& d = *r_.data_;
     d.raster_started = false;
     if (!primaries_rasterized(scene, r_.settings_)) return;
-    // A scene over a limit is refused here, as begin_frame would, before any pass starts.
-    choose_packing(scene.primitive_count(), r_.pass_lights(int(r_.shadow_lights(scene).size())), scene.source);
-    r_.start_raster(scene, camera, uint32_t(r_.settings_.width), uint32_t(r_.settings_.height));
+    try {
+      // A scene over a limit is refused here, as begin_frame would, before any pass starts.
+      choose_packing(scene.primitive_count(), r_.pass_lights(int(r_.shadow_lights(scene).size())), scene.source);
+      r_.start_raster(scene, camera, uint32_t(r_.settings_.width), uint32_t(r_.settings_.height));
+    } catch (...) {
+      // As begin_frame does first: a refused frame leaves no tree or light buffers handed in
+      // behind, for the next frame to take as its own.
+      d.tree_prebuilt = false;
+      d.light_buffers_prebuilt = false;
+      throw;
+    }
     d.raster_started = true;
   }
 
@@ -856,8 +864,8 @@ void Renderer::start_raster(const Scene& scene, const Camera& camera, uint32_t w
       }
     });
   }
+  d.raster_start_ms = elapsed_ms(stage);  // the backend counts its own copy of the vertices
   backend_.start_raster(d.raster_vertices, view, width, height);
-  d.raster_start_ms = elapsed_ms(stage);
 }
 
 TracedGeneration Renderer::trace_rasterized(const Scene& scene, const Camera& camera, const FlatKdTree& tree,

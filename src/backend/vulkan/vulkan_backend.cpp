@@ -129,6 +129,7 @@ class Impl {
   vk::HostBuffer raster_readback_;
   struct RasterInFlight {
     bool active = false;
+    bool submitted = false;  // false for an empty size: nothing to wait for
     uint32_t width = 0, height = 0;
     double upload_ms = 0.0;
     Clock::time_point wall_start;
@@ -752,9 +753,9 @@ PassTiming Impl::run_raster(std::span<const float> vertices, const RasterView& v
 }
 
 void Impl::drop_raster_in_flight() {
-  if (!raster_flight_.active) return;
-  raster_flight_.active = false;
-  wait_for(raster_fence_.get(), "raster");
+  const bool submitted = raster_flight_.active && raster_flight_.submitted;
+  raster_flight_ = RasterInFlight{};
+  if (submitted) wait_for(raster_fence_.get(), "raster");
 }
 
 void Impl::start_raster(std::span<const float> vertices, const RasterView& view, uint32_t width, uint32_t height) {
@@ -772,7 +773,7 @@ void Impl::start_raster(std::span<const float> vertices, const RasterView& view,
     return;
   }
   if (!raster_) raster_ = std::make_unique<vk::RasterPass>(device_, pipelines_.cache());
-  if (raster_commands_ == VK_NULL_HANDLE) make_submission(2, raster_commands_, raster_fence_, raster_queries_);
+  if (!raster_fence_) make_submission(2, raster_commands_, raster_fence_, raster_queries_);
   const auto upload_start = Clock::now();
   raster_->prepare(width, height, vertices);
   flight.upload_ms += elapsed_ms(upload_start);
@@ -799,6 +800,7 @@ void Impl::start_raster(std::span<const float> vertices, const RasterView& view,
   VK_CHECK_RESULT(device_result(vkQueueSubmit(device_.queue(), 1, &submit, raster_fence_.get()), "vkQueueSubmit"),
                   "vkQueueSubmit");
   flight.active = true;
+  flight.submitted = true;
   raster_flight_ = flight;
   device_.throw_validation_errors();
 }
@@ -810,11 +812,11 @@ PassTiming Impl::finish_raster(std::span<uint32_t> out) {
   PassTiming timing;
   timing.upload_ms = flight.upload_ms;
   if (out.size() != size_t(flight.width) * flight.height) {
-    if (flight.width != 0 && flight.height != 0) wait_for(raster_fence_.get(), "raster");
+    if (flight.submitted) wait_for(raster_fence_.get(), "raster");
     throw Error(ErrorKind::Internal, "finish_raster: the output holds " + std::to_string(out.size()) + " texels, not " +
                                          std::to_string(flight.width) + "x" + std::to_string(flight.height));
   }
-  if (flight.width == 0 || flight.height == 0) {
+  if (!flight.submitted) {
     timing.wall_ms = elapsed_ms(flight.wall_start);
     return timing;
   }
