@@ -130,7 +130,7 @@ void gather_in_simd_tiles(RayBatch& batch, std::span<const uint32_t> order) {
   out.weight.resize(n);
   parallel_for(n, 0, [&](uint32_t k) {
     const uint32_t from = order.empty() ? k : order[k];
-    const uint32_t to = k < tiled ? simd_tile_texel(k, batch.width) : k;
+    const uint32_t to = simd_tile_place(k, tiled, batch.width);
     out.origin[to] = batch.origin[from];
     out.direction[to] = batch.direction[from];
     out.pixel[to] = batch.pixel[from];

@@ -72,4 +72,10 @@ inline uint32_t simd_tiled_rays(const RayBatch& batch) {
   return batch.count() / (2 * w) * (2 * w);
 }
 
+// Where order_in_simd_tiles puts the k-th ray of a batch whose first `tiled` rays are tiled
+// (simd_tiled_rays): its tile texel, or k itself past them.
+inline uint32_t simd_tile_place(uint32_t k, uint32_t tiled, uint32_t width) {
+  return k < tiled ? simd_tile_texel(k, width) : k;
+}
+
 }  // namespace mobirt

@@ -933,7 +933,7 @@ TracedGeneration Renderer::trace_rasterized(const Scene& scene, const Camera& ca
     for (uint32_t i = begin; i < end; ++i) {
       const uint32_t index_plus_one = d.raster_texels[i] & 0xFFFFFFu;
       if (index_plus_one == 0) continue;
-      const uint32_t to = k < tiled ? simd_tile_texel(k, width) : k;
+      const uint32_t to = simd_tile_place(k, tiled, width);
       hit_rays.origin[to] = rays.origin[i];
       hit_rays.direction[to] = glm::vec4(glm::vec3(rays.direction[i]), float(index_plus_one));
       hit_rays.pixel[to] = i;  // the primary ray it stands for

@@ -91,7 +91,7 @@ class Impl {
   void ensure_staging(VkDeviceSize size);
   void flush(const vk::Memory& memory, bool coherent);  // host writes to non-coherent memory
   void stage(const void* data, size_t bytes);  // into the staging buffer, flushed
-  void ensure_readback(VkDeviceSize size);
+  void ensure_readback(vk::HostBuffer& buffer, VkDeviceSize size);  // readback_ or raster_readback_
   // Milliseconds between two timestamps of the query pool (the device's valid bits, its period).
   double timestamp_ms(uint64_t from, uint64_t to) const {
     const uint64_t mask = device_.timestamp_bits() >= 64 ? ~uint64_t(0) : (uint64_t(1) << device_.timestamp_bits()) - 1;
@@ -120,9 +120,10 @@ class Impl {
   vk::HostBuffer staging_;
   vk::HostBuffer readback_;
   vk::RenderTarget target_;
-  std::unique_ptr<vk::RasterPass> raster_;  // made by the first run_raster
-  // start_raster's pass in flight: its own command buffer, fence, timestamps and read-back buffer,
-  // so that uploads (a staged one submits commands) run while the driver sets up its triangles.
+  std::unique_ptr<vk::RasterPass> raster_;  // made by the first start_raster (run_raster's too)
+  // The raster pass in flight (start_raster): its own command buffer, fence, timestamps and
+  // read-back buffer, so that uploads (a staged one submits commands) run while the driver sets up
+  // its triangles.
   VkCommandBuffer raster_commands_ = VK_NULL_HANDLE;  // freed with the pool
   vk::Fence raster_fence_;
   vk::QueryPool raster_queries_;
@@ -223,10 +224,10 @@ void Impl::stage(const void* data, size_t bytes) {
   flush(staging_.memory, staging_.coherent);
 }
 
-void Impl::ensure_readback(VkDeviceSize size) {
-  if (readback_.size >= size) return;
-  readback_.reset();
-  readback_ = vk::create_host_buffer(device_, size, VK_BUFFER_USAGE_TRANSFER_DST_BIT, true);
+void Impl::ensure_readback(vk::HostBuffer& buffer, VkDeviceSize size) {
+  if (buffer.size >= size) return;
+  buffer.reset();
+  buffer = vk::create_host_buffer(device_, size, VK_BUFFER_USAGE_TRANSFER_DST_BIT, true);
 }
 
 void Impl::ensure_target(uint32_t width, uint32_t height) {
@@ -541,7 +542,7 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
   PassTiming timing;
   timing.upload_ms = pending_upload_ms_;
   ensure_target(width, height);
-  if (!target_.linear) ensure_readback(VkDeviceSize(width) * height * 4);
+  if (!target_.linear) ensure_readback(readback_, VkDeviceSize(width) * height * 4);
 
   // Uniforms and textures. Every earlier submission has finished, so the set is free to update.
   if (pass.uniforms) {
@@ -695,61 +696,17 @@ PassTiming Impl::run_pass(PassHandle handle, std::span<const TextureHandle> text
   return timing;
 }
 
+// The started raster finished at once: one pass, on the raster's own command buffer, fence,
+// timestamps and read-back buffer. A wrong output size is refused before any work.
 PassTiming Impl::run_raster(std::span<const float> vertices, const RasterView& view, uint32_t width, uint32_t height,
                             std::span<uint32_t> out) {
-  const auto wall_start = Clock::now();
   usable();
   if (out.size() != size_t(width) * height) {
     throw Error(ErrorKind::Internal, "run_raster: the output holds " + std::to_string(out.size()) + " texels, not " +
                                          std::to_string(width) + "x" + std::to_string(height));
   }
-  PassTiming timing;
-  timing.upload_ms = pending_upload_ms_;
-  if (width == 0 || height == 0) {
-    pending_upload_ms_ = 0.0;
-    timing.wall_ms = elapsed_ms(wall_start);
-    return timing;
-  }
-  if (!raster_) raster_ = std::make_unique<vk::RasterPass>(device_, pipelines_.cache());
-  drop_raster_in_flight();  // its vertex buffer is rewritten below
-  const auto upload_start = Clock::now();
-  raster_->prepare(width, height, vertices);
-  timing.upload_ms += elapsed_ms(upload_start);  // the vertices written into their buffer
-  ensure_readback(VkDeviceSize(width) * height * 4);
-
-  begin_commands();
-  const bool timed = bool(queries_);
-  if (timed) {
-    vkCmdResetQueryPool(commands_, queries_.get(), 0, kTimestampCount);
-    vkCmdWriteTimestamp(commands_, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, queries_.get(), 0);
-  }
-  raster_->record(commands_, view, width, height, readback_.buffer.get());
-  if (timed) vkCmdWriteTimestamp(commands_, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_.get(), 1);
-  const auto gpu_start = Clock::now();
-  submit_and_wait("raster");
-  const double submit_ms = elapsed_ms(gpu_start);
-
-  const auto copy_start = Clock::now();
-  vk::invalidate_mapped(device_.handle(), readback_.memory.get(), readback_.coherent);
-  parallel_copy(out.data(), readback_.mapped, out.size_bytes());
-  timing.readback_ms = elapsed_ms(copy_start);
-  // The draw and the copy to the read-back buffer are one span of timestamps: the copy of 4 bytes
-  // a pixel is a small part of it.
-  if (timed) {
-    uint64_t stamps[2] = {};
-    VK_CHECK_RESULT(device_result(vkGetQueryPoolResults(device_.handle(), queries_.get(), 0, 2, sizeof(stamps), stamps,
-                                                        sizeof(uint64_t), VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT),
-                                  "vkGetQueryPoolResults"),
-                    "vkGetQueryPoolResults");
-    timing.gpu_ms = timestamp_ms(stamps[0], stamps[1]);
-  } else {
-    timing.gpu_ms = submit_ms;
-  }
-  timing.bytes_read = uint64_t(out.size()) * 4;
-  pending_upload_ms_ = 0.0;
-  timing.wall_ms = elapsed_ms(wall_start);
-  device_.throw_validation_errors();
-  return timing;
+  start_raster(vertices, view, width, height);
+  return finish_raster(out);
 }
 
 void Impl::drop_raster_in_flight() {
@@ -777,11 +734,7 @@ void Impl::start_raster(std::span<const float> vertices, const RasterView& view,
   const auto upload_start = Clock::now();
   raster_->prepare(width, height, vertices);
   flight.upload_ms += elapsed_ms(upload_start);
-  const VkDeviceSize bytes = VkDeviceSize(width) * height * 4;
-  if (raster_readback_.size < bytes) {
-    raster_readback_.reset();
-    raster_readback_ = vk::create_host_buffer(device_, bytes, VK_BUFFER_USAGE_TRANSFER_DST_BIT, true);
-  }
+  ensure_readback(raster_readback_, VkDeviceSize(width) * height * 4);
   VK_CHECK(vkResetCommandBuffer(raster_commands_, 0));
   VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
   begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
