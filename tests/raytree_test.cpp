@@ -5,11 +5,13 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 
@@ -351,6 +353,118 @@ TEST(ParallelFor, RethrowsAnExceptionAndRunsTheNextLoop) {
     std::vector<std::atomic<int>> seen(5000);
     parallel_for(uint32_t(seen.size()), threads, [&](uint32_t i) { seen[i].fetch_add(1); }, 16);
     for (size_t i = 0; i < seen.size(); ++i) ASSERT_EQ(seen[i].load(), 1) << i << ", " << threads << " threads";
+  }
+}
+
+// A loop inside a loop's index, and loops from two threads at once on the same persistent
+// workers: every index of every loop runs exactly once, and none waits for another (a worker
+// that waited for a loop it is meant to serve would hang here).
+TEST(ParallelFor, NestedAndConcurrentLoopsVisitEveryIndexOnce) {
+  constexpr uint32_t outer = 64, inner = 500;
+  for (int round = 0; round < 20; ++round) {
+    std::vector<std::atomic<int>> nested(outer * inner);
+    std::vector<std::atomic<int>> other(100000);
+    std::thread second([&] {
+      for (int k = 0; k < 10; ++k) {
+        parallel_for(uint32_t(other.size()), 0, [&](uint32_t i) { other[i].fetch_add(1); }, 16);
+      }
+    });
+    parallel_for(outer, 0, [&](uint32_t o) {
+      parallel_for(inner, 0, [&](uint32_t i) { nested[o * inner + i].fetch_add(1); }, 8);
+    }, 1);
+    second.join();
+    for (size_t i = 0; i < nested.size(); ++i) ASSERT_EQ(nested[i].load(), 1) << "nested index " << i;
+    for (size_t i = 0; i < other.size(); ++i) ASSERT_EQ(other[i].load(), 10) << "other thread's index " << i;
+  }
+}
+
+// Many short loops back to back, as a frame's stages run them: no index of one loop runs in the
+// next (each loop's counts are checked before the next
+// starts), and an index thrown from whichever thread runs it stops only its own loop.
+TEST(ParallelFor, BackToBackLoopsKeepTheirOwnIndices) {
+  std::vector<std::atomic<int>> seen(3000);
+  for (int loop = 0; loop < 2000; ++loop) {
+    const uint32_t n = 100 + uint32_t(loop * 37 % 2900);
+    for (uint32_t i = 0; i < n; ++i) seen[i].store(0, std::memory_order_relaxed);
+    const bool throws = loop % 97 == 5;
+    bool caught = false;
+    try {
+      parallel_for(n, 0, [&](uint32_t i) {
+        seen[i].fetch_add(1, std::memory_order_relaxed);
+        if (throws && i == n / 2) throw std::runtime_error("stop");
+      }, 4);
+    } catch (const std::runtime_error&) {
+      caught = true;
+    }
+    ASSERT_EQ(caught, throws) << "loop " << loop;
+    if (throws) continue;
+    for (uint32_t i = 0; i < n; ++i) ASSERT_EQ(seen[i].load(), 1) << "loop " << loop << ", index " << i;
+  }
+}
+
+// Worker threads do join loops, also after sleeping (every other loop 2 ms after the last), never
+// more threads than a loop asks for, and the caller returns only once a worker's chunk has
+// finished: an index that only a worker runs sleeps, then writes, and the write is there on
+// return. An exception thrown on a worker reaches the caller too. The caller's chunks wait (up to
+// 2 s, so that a busy CI machine's scheduler is not what is tested) until a worker has joined.
+TEST(ParallelFor, WorkersJoinWithinTheThreadCountAndFinishBeforeTheCallerReturns) {
+  if (std::thread::hardware_concurrency() < 2) GTEST_SKIP() << "one core: every loop runs on the caller";
+  const std::thread::id caller = std::this_thread::get_id();
+  const auto wait_for = [](const std::atomic<bool>& flag) {
+    const auto start = std::chrono::steady_clock::now();
+    while (!flag.load() && std::chrono::steady_clock::now() - start < std::chrono::seconds(2)) std::this_thread::yield();
+  };
+  for (int loop = 0; loop < 20; ++loop) {
+    // Every other loop after a pause, the workers asleep.
+    if (loop % 2) std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    std::atomic<int> running{0}, most{0};
+    std::atomic<bool> helper_ran{false};
+    int late_write = 0;
+    parallel_for(64, 2, [&](uint32_t) {
+      const int now = running.fetch_add(1) + 1;
+      int seen = most.load();
+      while (now > seen && !most.compare_exchange_weak(seen, now)) {
+      }
+      if (std::this_thread::get_id() != caller) {
+        if (!helper_ran.load()) {
+          std::this_thread::sleep_for(std::chrono::milliseconds(1));
+          late_write = 1;
+          helper_ran.store(true);
+        }
+      } else {
+        wait_for(helper_ran);
+      }
+      running.fetch_sub(1);
+    }, 1);
+    EXPECT_LE(most.load(), 2) << "loop " << loop << ": more threads than asked for";
+    ASSERT_TRUE(helper_ran.load()) << "loop " << loop << ": no worker joined in 2 s";
+    EXPECT_EQ(late_write, 1) << "loop " << loop << ": returned before a worker's chunk finished";
+  }
+
+  std::atomic<bool> thrown{false};
+  std::string what;
+  try {
+    parallel_for(64, 2, [&](uint32_t) {
+      if (std::this_thread::get_id() != caller) {
+        thrown.store(true);
+        throw std::runtime_error("helper");
+      }
+      wait_for(thrown);
+    }, 1);
+  } catch (const std::runtime_error& e) {
+    what = e.what();
+  }
+  EXPECT_EQ(what, "helper") << "a worker's exception did not reach the caller";
+}
+
+// parallel_copy in pieces on all cores copies every byte, sizes at and around its piece size.
+TEST(ParallelCopy, CopiesEveryByte) {
+  for (size_t bytes : {size_t(0), size_t(1), 2 * kParallelCopyChunk - 1, 2 * kParallelCopyChunk,
+                       5 * kParallelCopyChunk + 12345}) {
+    std::vector<unsigned char> source(bytes), target(bytes, 0);
+    for (size_t i = 0; i < bytes; ++i) source[i] = static_cast<unsigned char>(i * 2654435761u >> 24);
+    parallel_copy(target.data(), source.data(), bytes);
+    ASSERT_EQ(target, source) << bytes << " bytes";
   }
 }
 

@@ -60,7 +60,7 @@ void parallel_for(uint32_t n, unsigned threads, F&& f, uint32_t chunk = 64) {
 }
 
 // How many chunks of `chunk` indices cover [0, n).
-inline uint32_t chunk_count(uint32_t n, uint32_t chunk) { return (n + chunk - 1) / chunk; }
+inline uint32_t chunk_count(uint32_t n, uint32_t chunk) { return uint32_t((uint64_t(n) + chunk - 1) / chunk); }
 
 // parallel_for over the chunks of `chunk` indices that cover [0, n), one task each: f(c, begin,
 // end) for chunk c, [begin, end) = [c chunk, min(n, (c + 1) chunk)). For loops that keep state per
@@ -70,7 +70,7 @@ template <class F>
 void parallel_for_chunks(uint32_t n, uint32_t chunk, unsigned threads, F&& f) {
   parallel_for(chunk_count(n, chunk), threads, [&](uint32_t c) {
     const uint32_t begin = c * chunk;
-    f(c, begin, std::min(n, begin + chunk));
+    f(c, begin, uint32_t(std::min<uint64_t>(n, uint64_t(begin) + chunk)));
   }, 1);
 }
 
