@@ -379,8 +379,8 @@ TEST(ParallelFor, NestedAndConcurrentLoopsVisitEveryIndexOnce) {
 }
 
 // Many short loops back to back, as a frame's stages run them: no index of one loop runs in the
-// next (each loop's counts are checked before the next
-// starts), and an index thrown from whichever thread runs it stops only its own loop.
+// next (each loop's counts are checked before the next starts), and an index thrown from
+// whichever thread runs it stops only its own loop.
 TEST(ParallelFor, BackToBackLoopsKeepTheirOwnIndices) {
   std::vector<std::atomic<int>> seen(3000);
   for (int loop = 0; loop < 2000; ++loop) {
@@ -404,9 +404,10 @@ TEST(ParallelFor, BackToBackLoopsKeepTheirOwnIndices) {
 
 // Worker threads do join loops, also after sleeping (every other loop 2 ms after the last), never
 // more threads than a loop asks for, and the caller returns only once a worker's chunk has
-// finished: an index that only a worker runs sleeps, then writes, and the write is there on
-// return. An exception thrown on a worker reaches the caller too. The caller's chunks wait (up to
-// 2 s, so that a busy CI machine's scheduler is not what is tested) until a worker has joined.
+// finished: the first index a worker runs says it joined, sleeps, then writes, and the write is
+// there on return (the caller's chunks wait only for the join, not for the write). An exception
+// thrown on a worker reaches the caller too. The caller's chunks wait (up to 2 s, so that a busy
+// CI machine's scheduler is not what is tested) until a worker has joined.
 TEST(ParallelFor, WorkersJoinWithinTheThreadCountAndFinishBeforeTheCallerReturns) {
   if (std::thread::hardware_concurrency() < 2) GTEST_SKIP() << "one core: every loop runs on the caller";
   const std::thread::id caller = std::this_thread::get_id();
@@ -418,7 +419,7 @@ TEST(ParallelFor, WorkersJoinWithinTheThreadCountAndFinishBeforeTheCallerReturns
     // Every other loop after a pause, the workers asleep.
     if (loop % 2) std::this_thread::sleep_for(std::chrono::milliseconds(2));
     std::atomic<int> running{0}, most{0};
-    std::atomic<bool> helper_ran{false};
+    std::atomic<bool> joined{false};
     int late_write = 0;
     parallel_for(64, 2, [&](uint32_t) {
       const int now = running.fetch_add(1) + 1;
@@ -426,18 +427,17 @@ TEST(ParallelFor, WorkersJoinWithinTheThreadCountAndFinishBeforeTheCallerReturns
       while (now > seen && !most.compare_exchange_weak(seen, now)) {
       }
       if (std::this_thread::get_id() != caller) {
-        if (!helper_ran.load()) {
+        if (!joined.exchange(true)) {
           std::this_thread::sleep_for(std::chrono::milliseconds(1));
           late_write = 1;
-          helper_ran.store(true);
         }
       } else {
-        wait_for(helper_ran);
+        wait_for(joined);
       }
       running.fetch_sub(1);
     }, 1);
     EXPECT_LE(most.load(), 2) << "loop " << loop << ": more threads than asked for";
-    ASSERT_TRUE(helper_ran.load()) << "loop " << loop << ": no worker joined in 2 s";
+    ASSERT_TRUE(joined.load()) << "loop " << loop << ": no worker joined in 2 s";
     EXPECT_EQ(late_write, 1) << "loop " << loop << ": returned before a worker's chunk finished";
   }
 
@@ -447,14 +447,14 @@ TEST(ParallelFor, WorkersJoinWithinTheThreadCountAndFinishBeforeTheCallerReturns
     parallel_for(64, 2, [&](uint32_t) {
       if (std::this_thread::get_id() != caller) {
         thrown.store(true);
-        throw std::runtime_error("helper");
+        throw std::runtime_error("worker");
       }
       wait_for(thrown);
     }, 1);
   } catch (const std::runtime_error& e) {
     what = e.what();
   }
-  EXPECT_EQ(what, "helper") << "a worker's exception did not reach the caller";
+  EXPECT_EQ(what, "worker") << "a worker's exception did not reach the caller";
 }
 
 // parallel_copy in pieces on all cores copies every byte, sizes at and around its piece size.
