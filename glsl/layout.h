@@ -148,10 +148,16 @@
 // and spot lights; 0: its shadow rays walk the tree), w = unused. The node texture then holds,
 // past the tree's nodes, per light buffer: 6 texels, each face's window (s0, t0, columns per unit
 // of s, rows per unit of t), then 6 N^2 leaf texels, one per cell (first entry, count,
-// MOBIRT_NODE_LEAF, 0), whose entries in the leaf-entry texture are the triangles' as a leaf's,
-// with the triangle's nearest distance to the light in the second texel's w.
+// MOBIRT_NODE_LEAF, 0), whose entries in the leaf-entry texture are MOBIRT_TEXELS_PER_TRIANGLE
+// texels each: (near, part, v0.x, v0.y), (v0.z, v1.x, v1.y, v1.z), (v2.x, v2.y, v2.z, 0), near the
+// triangle's nearest distance to the light and part the part of the cell its rectangle covers:
+// columns x0..x1 and rows y0..y1 of MOBIRT_LIGHT_BUFFER_SUBCELLS per cell edge, as x0 + S y0 +
+// S^2 (x1 + S y1) (S = MOBIRT_LIGHT_BUFFER_SUBCELLS; an exact integer in a float). A ray stops at
+// the first entry whose near is past its end, and one whose direction falls outside an entry's
+// part cannot meet that triangle: both read from the first texel alone (src/accel/light_buffer.h).
 #define MOBIRT_TP_LIGHT_BUFFERS (MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * MOBIRT_MAX_LIGHTS)
 #define MOBIRT_LIGHT_BUFFER_WINDOWS 6
+#define MOBIRT_LIGHT_BUFFER_SUBCELLS 64
 // Shading pass
 #define MOBIRT_SP_BACKGROUND 0     // rgb = background colour, a = unused
 #define MOBIRT_SP_LIGHTS 1         // MOBIRT_SP_VEC4S_PER_LIGHT vec4 per light:

@@ -462,22 +462,42 @@ float light_buffer_occluded(int l, vec3 origin, vec3 to_light) {
   float x = (f.x / f.z - w.x) * w.z;
   float y = (f.y / f.z - w.y) * w.w;
   if (!(x >= 0.0 && y >= 0.0 && x < res && y < res)) return 0.0;
-  vec4 cell = DATA_TEXEL(u_nodes, head.x + (face * res + floor(y)) * res + floor(x));
+  float cx = floor(x);
+  float cy = floor(y);
+  vec4 cell = DATA_TEXEL(u_nodes, head.x + (face * res + cy) * res + cx);
+  // The ray's column and row of the cell's MOBIRT_LIGHT_BUFFER_SUBCELLS (exact: x - floor(x) and
+  // its product with a power of two), against each entry's part of the cell (layout.h).
+  const float S = float(MOBIRT_LIGHT_BUFFER_SUBCELLS);
+  float sx = floor((x - cx) * S);
+  float sy = floor((y - cy) * S);
   float base = cell.r * float(MOBIRT_TEXELS_PER_TRIANGLE);
   float end = base + cell.g * float(MOBIRT_TEXELS_PER_TRIANGLE);
   // Past the segment's end (a little beyond, for the rounding of its length) no triangle meets it.
   float reach = length(to_light) * (1.0 + 1e-4);
   int steps = 0;
+  // An entry's first texel holds its near and its part (layout.h): a ray that stops there or skips
+  // the triangle reads nothing else. Light buffers hold triangles only (no analytic primitives:
+  // src/render/renderer.cpp).
   UNBOUNDED_LOOP(k, MAX_STEPS + 1) {
     if (base >= end) break;
     if (steps >= MAX_STEPS) return -1.0;
     steps = steps + 1;
     vec4 t0 = DATA_TEXEL(u_leaf_prims, base);
-    vec4 t1 = DATA_TEXEL(u_leaf_prims, base + 1.0);
-    if (t1.w > reach) break;
-    vec4 t2 = DATA_TEXEL(u_leaf_prims, base + 2.0);
+    if (t0.x > reach) break;
+    float entry = base;
     base = base + float(MOBIRT_TEXELS_PER_TRIANGLE);
-    if (intersect_primitive(t0, t1, t2, origin, to_light, 0.0, 1.0) >= 0.0) return 1.0;
+    // The part: lo = x0 + S y0, hi = x1 + S y1, every step exact in float.
+    float hi = floor(t0.y / (S * S));
+    float lo = t0.y - hi * (S * S);
+    float y0 = floor(lo / S);
+    float y1 = floor(hi / S);
+    bool inside = sx >= lo - y0 * S && sx <= hi - y1 * S && sy >= y0 && sy <= y1;
+    KEEP_BRANCH if (inside) {
+      vec4 t1 = DATA_TEXEL(u_leaf_prims, entry + 1.0);
+      vec4 t2 = DATA_TEXEL(u_leaf_prims, entry + 2.0);
+      vec3 v0 = vec3(t0.zw, t1.x);
+      if (intersect_triangle_texels(v0, t1.yzw, t2.xyz, origin, to_light, 0.0, 1.0).x >= 0.0) return 1.0;
+    }
   }
   return 0.0;
 }

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <memory>
 #include <random>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
@@ -69,6 +70,67 @@ std::vector<glm::vec3> random_points(int count, float extent, uint32_t seed) {
   std::vector<glm::vec3> points;
   for (int i = 0; i < count; ++i) points.push_back({u(rng), u(rng), u(rng)});
   return points;
+}
+
+// Each entry's part of its cell (LightBuffer::sub) holds every direction of its triangle that falls
+// in the cell: the vertices, edge points and inner points of every triangle, from lights outside,
+// inside and far from the soup, land in a cell whose list has the triangle, and in its part. And
+// the parts skip tests: at 64 cells the segments that end on the triangles read more entries than
+// they test.
+TEST(LightBuffer, EveryTrianglesDirectionsLieInItsPartOfTheirCell) {
+  const Scene soup = test::random_soup_scene(400, 5);
+  const std::span<const glm::vec3> p = soup.mesh.positions;
+  const FlatKdTree tree = build_kdtree(p);
+  const float weights[][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {0.5f, 0.5f, 0}, {0, 0.5f, 0.5f}, {0.5f, 0, 0.5f},
+                              {1.0f / 3, 1.0f / 3, 1.0f / 3}, {0.8f, 0.1f, 0.1f}, {0.1f, 0.8f, 0.1f}, {0.1f, 0.1f, 0.8f},
+                              {0.999f, 0.001f, 0}, {0, 0.001f, 0.999f}};
+  for (const glm::vec3 light : {glm::vec3(0, 0, 0), glm::vec3(2, 1, -1), glm::vec3(0, 40, 0), glm::vec3(30, 30, 30)}) {
+    for (int res : {1, 8, 64}) {
+      SCOPED_TRACE("light (" + std::to_string(light.x) + ", " + std::to_string(light.y) + ", " +
+                   std::to_string(light.z) + "), resolution " + std::to_string(res));
+      const LightBuffer lb = build_light_buffer(p, light, res);
+      ASSERT_EQ(lb.sub.size(), lb.prims.size());
+      size_t full = 0;
+      for (const uint32_t part : lb.sub) {
+        full += part == light_buffer_sub(0, 0, 63, 63) ? 1 : 0;
+        const uint32_t lo = part % (64 * 64), hi = part / (64 * 64);
+        ASSERT_LT(hi, 64u * 64u);
+        ASSERT_LE(lo % 64, hi % 64);
+        ASSERT_LE(lo / 64, hi / 64);
+      }
+      if (res == 64) {  // the soup's triangles span several cells: the cells at their edges hold parts
+        EXPECT_GT(lb.sub.size() - full, lb.sub.size() / 10) << "entries cover part of their cell";
+      }
+      uint64_t entries = 0, tests = 0;
+      for (uint32_t t = 0; t < p.size() / 3; ++t) {
+        for (const auto& w : weights) {
+          const glm::vec3 q = w[0] * p[3 * t] + w[1] * p[3 * t + 1] + w[2] * p[3 * t + 2];
+          if (glm::length(q - light) < 1e-3f) continue;
+          uint32_t sx = 0, sy = 0;
+          const uint32_t c = light_buffer_cell(lb, q - light, &sx, &sy);
+          ASSERT_NE(c, kLightBufferOutside) << "triangle " << t;
+          bool listed = false;
+          for (uint32_t k = lb.first[c]; k < lb.first[c + 1] && !listed; ++k) {
+            if (lb.prims[k] != t) continue;
+            listed = true;
+            ASSERT_TRUE(light_buffer_sub_contains(lb.sub[k], sx, sy))
+                << "triangle " << t << " point (" << q.x << ", " << q.y << ", " << q.z << ") at " << sx << ", " << sy
+                << " outside its part " << lb.sub[k];
+          }
+          ASSERT_TRUE(listed) << "triangle " << t << " not in the cell of its point";
+          // A shadow segment from just in front of the point (towards the light).
+          uint32_t e = 0, n = 0;
+          light_buffer_occluded(lb, tree, q + 1e-3f * (light - q), &n, &e);
+          entries += e;
+          tests += n;
+          ASSERT_LE(n, e);
+        }
+      }
+      if (res == 64) {
+        EXPECT_LT(tests, entries) << "the parts skip tests";
+      }
+    }
+  }
 }
 
 TEST(LightBuffer, EveryAnswerIsBruteForcesWhereverTheLightIs) {

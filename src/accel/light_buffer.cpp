@@ -1,6 +1,7 @@
 #include "accel/light_buffer.h"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstdint>
@@ -9,8 +10,14 @@
 
 #include "accel/kdtree.h"
 #include "core/parallel.h"
+#include "layout.h"
 
 namespace mobirt {
+
+static_assert(kLightBufferSubCells == MOBIRT_LIGHT_BUFFER_SUBCELLS);
+// A part (LightBuffer::sub) travels as a float: exact below 2^24.
+static_assert(uint64_t(kLightBufferSubCells) * kLightBufferSubCells * kLightBufferSubCells * kLightBufferSubCells <= (1u << 24));
+
 namespace {
 
 // Face f's coordinates of a direction: (u, v, w) with w along the face's axis (positive inside).
@@ -88,15 +95,35 @@ struct Rect {
 
 }  // namespace
 
-uint32_t light_buffer_cell(const LightBuffer& lb, glm::vec3 d) {
-  // In float, as the shader computes it (glsl/traverse.glsl, light_buffer_occluded).
+namespace {
+
+// Direction d's cell, and its column and row of kLightBufferSubCells within the cell.
+struct CellPosition {
+  uint32_t cell = kLightBufferOutside;
+  uint32_t sx = 0, sy = 0;
+};
+
+CellPosition cell_position(const LightBuffer& lb, glm::vec3 d) {
+  // In float, as the shader computes it (glsl/traverse.glsl, light_buffer_occluded): x - floor(x)
+  // and its product with 64 are exact.
   const int face = major_face(d);
   const glm::vec3 f = glm::vec3(face_coords(face, glm::dvec3(d)));
   const glm::vec4& w = lb.window[size_t(face)];
   const float x = (f.x / f.z - w.x) * w.z, y = (f.y / f.z - w.y) * w.w;
   const int r = lb.resolution;
-  if (!(x >= 0.0f && y >= 0.0f && x < float(r) && y < float(r))) return kLightBufferOutside;
-  return uint32_t((face * r + int(y)) * r + int(x));
+  if (!(x >= 0.0f && y >= 0.0f && x < float(r) && y < float(r))) return {};
+  const float cx = std::floor(x), cy = std::floor(y);
+  constexpr float S = float(kLightBufferSubCells);
+  return {uint32_t((face * r + int(cy)) * r + int(cx)), uint32_t((x - cx) * S), uint32_t((y - cy) * S)};
+}
+
+}  // namespace
+
+uint32_t light_buffer_cell(const LightBuffer& lb, glm::vec3 d, uint32_t* sx, uint32_t* sy) {
+  const CellPosition p = cell_position(lb, d);
+  if (sx) *sx = p.sx;
+  if (sy) *sy = p.sy;
+  return p.cell;
 }
 
 double LightBuffer::mean_list() const {
@@ -109,16 +136,20 @@ double LightBuffer::mean_list() const {
   return sum > 0.0 ? squares / sum : 0.0;
 }
 
-bool light_buffer_occluded(const LightBuffer& lb, const FlatKdTree& tree, glm::vec3 origin, uint32_t* tests) {
+bool light_buffer_occluded(const LightBuffer& lb, const FlatKdTree& tree, glm::vec3 origin, uint32_t* tests,
+                           uint32_t* entries) {
   const Ray ray{origin, lb.light - origin, 0.0f, 1.0f};
-  const uint32_t c = light_buffer_cell(lb, -ray.direction);
+  const CellPosition p = cell_position(lb, -ray.direction);
   if (tests) *tests = 0;
-  if (c == kLightBufferOutside) return false;
+  if (entries) *entries = 0;
+  if (p.cell == kLightBufferOutside) return false;
   // Past the segment's end (a little beyond, for the rounding of the length): no triangle there
   // can meet it.
   const float end = glm::length(ray.direction) * (1.0f + 1e-4f);
-  for (uint32_t k = lb.first[c]; k < lb.first[c + 1]; ++k) {
+  for (uint32_t k = lb.first[p.cell]; k < lb.first[p.cell + 1]; ++k) {
     if (lb.near[k] > end) break;
+    if (entries) ++*entries;
+    if (!light_buffer_sub_contains(lb.sub[k], p.sx, p.sy)) continue;
     if (tests) ++*tests;
     Hit h;
     if (intersect_triangle(tree, int32_t(lb.prims[k]), ray, h)) return true;
@@ -168,8 +199,20 @@ struct BuildScratch {
   std::vector<std::pair<int, Bounds>> rects;  // in the order of their triangles' near
   std::vector<uint32_t> rect_tri;
   std::vector<Rect> cell_rects;
+  std::vector<std::array<uint32_t, 4>> edge_subs;  // per rect: its first column's x0, first row's y0, last column's x1, last row's y1
   std::vector<uint32_t> fill;
 };
+
+// A rectangle's edge v (face coordinates, the window's origin and cells per unit) widened outwards
+// (sign) by kLightBufferCellMargin of a cell and the float look-up's error in cells (a few ulps of
+// v and of the origin, times the cells per unit, and of the product), in kLightBufferSubCells of a
+// cell from the window's corner, clamped to the face (as a double: far outside the window the
+// product passes an int).
+inline int widened_subcell(double v, double origin, double scale, double sign, int resolution) {
+  const double slack = 5e-7 * ((std::abs(v) + std::abs(origin)) * scale + resolution);
+  const double g = std::floor(((v - origin) * scale + sign * (kLightBufferCellMargin + slack)) * kLightBufferSubCells);
+  return g > 0.0 ? int(std::min(g, double(resolution * int(kLightBufferSubCells) - 1))) : 0;
+}
 
 // keys sorted by their upper 32 bits (a non-negative float's bits: the same order as the floats),
 // stably: LSD radix sort, 8 bits a pass, passes whose digit every key shares skipped. Keys start
@@ -287,19 +330,21 @@ void build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 light, i
   // Pass 2, on all cores: the rectangles as cell ranges, widened by kLightBufferCellMargin of a cell.
   const uint32_t rect_count = uint32_t(s.rects.size());
   s.cell_rects.resize(rect_count);
+  s.edge_subs.resize(rect_count);
   parallel_for_chunks(rect_count, 2048, threads, [&](uint32_t, uint32_t begin, uint32_t end) {
     for (uint32_t i = begin; i < end; ++i) {
       const auto& [face, b] = s.rects[i];
       const glm::vec4& w = lb.window[size_t(face)];
       // The margin: kLightBufferCellMargin of a cell, and the float look-up's error in cells (a few
       // ulps of s and of the window's origin, times the cells per unit, and of the product).
-      auto cell = [&](double v, double origin, double scale, double sign) {
-        const double slack = 5e-7 * ((std::abs(v) + std::abs(origin)) * scale + resolution);
-        return std::clamp(int(std::floor((v - origin) * scale + sign * (kLightBufferCellMargin + slack))), 0,
-                          resolution - 1);
-      };
-      s.cell_rects[i] = {face, cell(b.s0, w.x, w.z, -1.0), cell(b.t0, w.y, w.w, -1.0), cell(b.s1, w.x, w.z, 1.0),
-                         cell(b.t1, w.y, w.w, 1.0)};
+      // Each widened edge in kLightBufferSubCells of a cell, clamped to the face: its cell (the
+      // product with a power of two is exact, so g / S is floor(v) clamped) and its column or row
+      // within that cell, rounded outwards (the look-up's floor((x - floor(x)) * S) is monotonic in x).
+      const int x0 = widened_subcell(b.s0, w.x, w.z, -1.0, resolution), y0 = widened_subcell(b.t0, w.y, w.w, -1.0, resolution),
+                x1 = widened_subcell(b.s1, w.x, w.z, 1.0, resolution), y1 = widened_subcell(b.t1, w.y, w.w, 1.0, resolution);
+      constexpr int S = int(kLightBufferSubCells);
+      s.cell_rects[i] = {face, x0 / S, y0 / S, x1 / S, y1 / S};
+      s.edge_subs[i] = {uint32_t(x0 % S), uint32_t(y0 % S), uint32_t(x1 % S), uint32_t(y1 % S)};
     }
   });
   // Each cell's count, its list's start, and the lists filled in near order: each comes out sorted.
@@ -313,13 +358,28 @@ void build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 light, i
   }
   for (size_t c = 0; c < cells; ++c) lb.first[c + 1] += lb.first[c];
   lb.prims.resize(lb.first[cells]);
+  lb.sub.resize(lb.first[cells]);
   s.fill.assign(lb.first.begin(), lb.first.end() - 1);
+  constexpr uint32_t kLast = kLightBufferSubCells - 1;
+  uint32_t* const prims = lb.prims.data();
+  uint32_t* const subs = lb.sub.data();
   for (uint32_t i = 0; i < rect_count; ++i) {
-    const Rect& r = s.cell_rects[i];
+    // Copies in locals: the stores below are uint32_t, which the compiler must assume alias these.
+    const Rect r = s.cell_rects[i];
     const uint32_t t = s.rect_tri[i];
+    const std::array<uint32_t, 4> e = s.edge_subs[i];
     for (int y = r.y0; y <= r.y1; ++y) {
       uint32_t* row = s.fill.data() + (size_t(r.face) * resolution + y) * resolution;
-      for (int x = r.x0; x <= r.x1; ++x) lb.prims[row[x]++] = t;
+      const uint32_t sy0 = y == r.y0 ? e[1] : 0, sy1 = y == r.y1 ? e[3] : kLast;
+      // The row's parts: its first column's, the middle columns' and its last column's.
+      const uint32_t first = light_buffer_sub(e[0], sy0, r.x0 == r.x1 ? e[2] : kLast, sy1);
+      const uint32_t middle = light_buffer_sub(0, sy0, kLast, sy1);
+      const uint32_t last = light_buffer_sub(0, sy0, e[2], sy1);
+      for (int x = r.x0; x <= r.x1; ++x) {
+        const uint32_t k = row[x]++;
+        prims[k] = t;
+        subs[k] = x == r.x0 ? first : (x == r.x1 ? last : middle);
+      }
     }
   }
   lb.near.resize(lb.prims.size());

@@ -6,7 +6,7 @@
 // (widened by kLightBufferFaceMargin so that directions on a cube edge belong to both faces) and
 // its projection's bounding rectangle widened by kLightBufferCellMargin of a cell. Measured against
 // the kd-tree walk by tools/profile/light_buffer_probe.cpp (README, *Session 28: a light buffer*);
-// not yet in the renderer's passes.
+// the renderer's shadow rays test them by default (--shadow-cells).
 #pragma once
 
 #include <glm/glm.hpp>
@@ -21,6 +21,18 @@ namespace mobirt {
 inline constexpr float kLightBufferFaceMargin = 1e-3f;   // of the face's half-width, at z = 1
 inline constexpr float kLightBufferCellMargin = 1e-2f;   // of a cell
 inline constexpr uint32_t kLightBufferOutside = 0xFFFFFFFFu;  // a direction no triangle covers
+inline constexpr uint32_t kLightBufferSubCells = 64;  // glsl/layout.h MOBIRT_LIGHT_BUFFER_SUBCELLS
+
+// A triangle's part of a cell (LightBuffer::sub): columns x0..x1, rows y0..y1, each 0..63.
+constexpr uint32_t light_buffer_sub(uint32_t x0, uint32_t y0, uint32_t x1, uint32_t y1) {
+  return x0 + kLightBufferSubCells * y0 + kLightBufferSubCells * kLightBufferSubCells * (x1 + kLightBufferSubCells * y1);
+}
+// Whether column sx, row sy of a cell lies in the part `sub`.
+constexpr bool light_buffer_sub_contains(uint32_t sub, uint32_t sx, uint32_t sy) {
+  constexpr uint32_t S = kLightBufferSubCells;
+  const uint32_t lo = sub % (S * S), hi = sub / (S * S);
+  return sx >= lo % S && sy >= lo / S && sx <= hi % S && sy <= hi / S;
+}
 
 struct LightBuffer {
   glm::vec3 light{0.0f};
@@ -35,6 +47,13 @@ struct LightBuffer {
   std::vector<uint32_t> first;
   std::vector<uint32_t> prims;
   std::vector<float> near;            // per entry of prims
+  // Per entry of prims: the part of its cell the triangle's rectangle covers (widened as the
+  // cells are), in kLightBufferSubCells columns and rows: x0 + S y0 + S^2 (x1 + S y1), S =
+  // kLightBufferSubCells. A ray whose direction lies outside it cannot meet the triangle: its test
+  // is skipped (light_buffer_occluded, glsl/traverse.glsl). Measured at 64 cells, the default:
+  // 33-62 % of the triangle tests of the paper's scenes and the Utah models skipped (README,
+  // *Shadow rays through light buffers*).
+  std::vector<uint32_t> sub;
   size_t cells() const { return first.empty() ? 0 : first.size() - 1; }
   // The list a reference finds itself in, on average (sum of count^2 / sum of count): about what a
   // shadow ray that ends on a surface tests, where rays fall as the triangles do.
@@ -61,15 +80,19 @@ inline LightBuffer build_light_buffer(std::span<const glm::vec3> positions, glm:
   return lb;
 }
 
-// The cell of direction d (from the light; not zero), or kLightBufferOutside where no triangle is.
-uint32_t light_buffer_cell(const LightBuffer& lb, glm::vec3 d);
+// The cell of direction d (from the light; not zero), or kLightBufferOutside where no triangle is;
+// sx, sy (where given): d's column and row of kLightBufferSubCells within the cell.
+uint32_t light_buffer_cell(const LightBuffer& lb, glm::vec3 d, uint32_t* sx = nullptr, uint32_t* sy = nullptr);
 
 // Whether the segment from `origin` to the light meets one of the triangles (`tree` holds their
 // texels: intersect_triangle, the traversal pass's test), testing only origin's cell up to the
-// first triangle whose nearest distance to the light is past the segment's end. tests: how many
-// triangles it tested (may be null).
+// first triangle whose nearest distance to the light is past the segment's end, and skipping the
+// triangles whose part of the cell (LightBuffer::sub) the segment's direction misses. tests: how
+// many triangles it tested; entries: how many entries of the list it read, skipped ones included
+// (either may be null).
 struct FlatKdTree;
-bool light_buffer_occluded(const LightBuffer& lb, const FlatKdTree& tree, glm::vec3 origin, uint32_t* tests = nullptr);
+bool light_buffer_occluded(const LightBuffer& lb, const FlatKdTree& tree, glm::vec3 origin, uint32_t* tests = nullptr,
+                           uint32_t* entries = nullptr);
 
 // The nearest distance from `p` to the triangle a, b, c (Ericson, Real-Time Collision Detection,
 // 5.1.5), in double.

@@ -715,11 +715,13 @@ void Renderer::build_light_buffers(const FlatKdTree& tree, const Scene& scene, b
       d.nodes_with_cells.push_back(glm::vec4(float(entry_base + lb.first[c]), float(lb.first[c + 1] - lb.first[c]),
                                              MOBIRT_NODE_LEAF, 0.0f));
     }
+    // Each entry (glsl/layout.h): (near, part, v0.x, v0.y), (v0.z, v1), (v2, 0); the part is an
+    // exact integer below 2^24.
     for (size_t k = 0; k < lb.prims.size(); ++k) {
       const glm::vec4* tri = &tree.triangles[size_t(lb.prims[k]) * MOBIRT_TEXELS_PER_TRIANGLE];
-      d.entries_with_cells.push_back(tri[0]);
-      d.entries_with_cells.push_back(glm::vec4(glm::vec3(tri[1]), lb.near[k]));
-      d.entries_with_cells.push_back(glm::vec4(glm::vec3(tri[2]), float(lb.prims[k])));
+      d.entries_with_cells.push_back(glm::vec4(lb.near[k], float(lb.sub[k]), tri[0].x, tri[0].y));
+      d.entries_with_cells.push_back(glm::vec4(tri[0].z, glm::vec3(tri[1])));
+      d.entries_with_cells.push_back(glm::vec4(glm::vec3(tri[2]), 0.0f));
     }
     d.light_buffer_heads[l] = glm::vec4(float(head), float(res), 1.0f, 0.0f);
     d.light_buffers = true;

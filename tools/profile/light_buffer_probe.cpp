@@ -1,9 +1,11 @@
 // mobirt_light_buffer_probe: what a light buffer (src/accel/light_buffer.h) would make of the
 // primary hits' shadow rays against the kd-tree walk, on the CPU: per point light and resolution,
-// its build time and size, the candidates each shadow ray tests (the whole cell, and up to the
-// first whose nearest distance to the light is past the ray's end), against the kd-tree's node
+// its build time and size, the entries each shadow ray reads (the whole cell, and up to the first
+// whose nearest distance to the light is past the ray's end) and the triangles it tests (those
+// whose part of the cell holds the ray's direction: LightBuffer::sub), against the kd-tree's node
 // steps and triangle tests for the same rays (kdtree_traverse.cpp, the traversal pass's CPU twin);
-// every ray's answer checked against the walk's. Measurement only: not in the renderer.
+// every ray's answer checked against the walk's. Measurement only (the renderer's passes run
+// light_buffer_occluded's shader twin).
 //
 // Usage: mobirt_light_buffer_probe SCENE [profile_scene.h options] [--res N,N,...]
 #include <algorithm>
@@ -73,13 +75,13 @@ int run(int argc, char** argv) {
                 100.0 * double(std::count(walk_answer.begin(), walk_answer.end(), 1)) / nrays,
                 double(walk.steps) / nrays, double(walk.nodes_visited) / nrays, double(walk.triangles_tested) / nrays,
                 walk_ms);
-    std::printf("  res  cells  refs/tri  build ms  tests/ray (whole cell)  tests/ray (to the ray's end)  max cell  "
-                "answers differing  CPU ms  mean list\n");
+    std::printf("  res  cells  refs/tri  build ms  entries/ray (whole cell)  entries/ray (to the ray's end)  "
+                "tests/ray (in their parts)  max cell  answers differing  CPU ms  mean list\n");
     for (int res : resolutions) {
       const auto b0 = std::chrono::steady_clock::now();
       const LightBuffer lb = build_light_buffer(scene.mesh.positions, light.position, res);
       const double build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - b0).count();
-      uint64_t whole = 0, cut = 0;
+      uint64_t whole = 0, cut = 0, tested = 0;
       size_t differ = 0;
       uint32_t max_cell = 0;
       for (size_t c = 0; c < lb.cells(); ++c) max_cell = std::max(max_cell, lb.first[c + 1] - lb.first[c]);
@@ -88,15 +90,17 @@ int run(int argc, char** argv) {
         const Ray& r = shadow[i];
         const uint32_t c = light_buffer_cell(lb, -r.direction);
         whole += c == kLightBufferOutside ? 0 : lb.first[c + 1] - lb.first[c];
-        uint32_t tests = 0;
-        const bool hit = light_buffer_occluded(lb, p.tree, r.origin, &tests);
-        cut += tests;
+        uint32_t tests = 0, entries = 0;
+        const bool hit = light_buffer_occluded(lb, p.tree, r.origin, &tests, &entries);
+        cut += entries;
+        tested += tests;
         differ += hit != (walk_answer[i] != 0) ? 1 : 0;
       }
       const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-      std::printf("  %3d %6zu %9.2f %9.2f %23.2f %29.2f %9u %18zu %7.2f %10.1f\n", res, lb.cells(),
+      std::printf("  %3d %6zu %9.2f %9.2f %25.2f %31.2f %27.2f %9u %18zu %7.2f %10.1f\n", res, lb.cells(),
                   double(lb.prims.size()) / double(std::max<size_t>(1, scene.mesh.triangle_count())), build_ms,
-                  double(whole) / nrays, double(cut) / nrays, max_cell, differ, ms, lb.mean_list());
+                  double(whole) / nrays, double(cut) / nrays, double(tested) / nrays, max_cell, differ, ms,
+                  lb.mean_list());
     }
   }
   return 0;
