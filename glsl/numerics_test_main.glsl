@@ -7,8 +7,10 @@
 //   2: pack_trace(input.x, input.y), the traversal pass's output texel (PACKING).
 //   3 (Vulkan: NUMERICS_DATA_INDEX): data_index(input.x), the int a buffer is indexed with, its four
 //   bytes in the output's (under WIDE_INDICES as the pass is specialised).
+//   4: light_buffer_part_contains(input.x, input.y, input.z), 1 in the first channel where true.
 #include "offset.glsl"
 #include "packing.glsl"
+#include "light_buffer.glsl"
 
 SAMPLER(1, u_input);
 SAMPLER(2, u_operand);
@@ -19,6 +21,10 @@ void main() {
   float function = PARAM(0).x;
   if (function == 2.0) {
     OUTPUT(pack_trace(x.x, x.y));
+    return;
+  }
+  if (function == 4.0) {
+    OUTPUT(vec4(light_buffer_part_contains(x.x, x.y, x.z) ? 1.0 : 0.0, 0.0, 0.0, 0.0));
     return;
   }
 #ifdef NUMERICS_DATA_INDEX

@@ -10,6 +10,7 @@
 // PRECISION, OFFSET_MODE, PRECISE, add_float_bits, UNBOUNDED_LOOP, STACK_COUNTED, KEEP_BRANCH,
 // KEEP_BRANCH_PAD and precision.glsl (mp, mp_cross, mp_dot).
 #include "offset.glsl"
+#include "light_buffer.glsl"
 
 // Scene data: 2D textures, or texel buffers where the prelude says so (DATA_SAMPLER).
 #ifndef DATA_SAMPLER
@@ -439,8 +440,9 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
 }
 
 // Whether the segment from `origin` to `light` meets a triangle of light l's light buffer cell
-// (src/accel/light_buffer.cpp's light_buffer_occluded, the same cell, list and test): 1.0 yes,
-// 0.0 no, -1.0 the step cap ended the list first. `to_light` = light - origin as the walk gets it.
+// (src/accel/light_buffer.cpp's light_buffer_occluded, the same cell, list, parts and test): 1.0
+// yes, 0.0 no, -1.0 the step cap ended the list first. `to_light` = light - origin as the walk gets
+// it.
 float light_buffer_occluded(int l, vec3 origin, vec3 to_light) {
   vec4 head = PARAM(MOBIRT_TP_LIGHT_BUFFERS + l);
   vec3 dir = -to_light;
@@ -486,13 +488,7 @@ float light_buffer_occluded(int l, vec3 origin, vec3 to_light) {
     if (t0.x > reach) break;
     float entry = base;
     base = base + float(MOBIRT_TEXELS_PER_TRIANGLE);
-    // The part: lo = x0 + S y0, hi = x1 + S y1, every step exact in float.
-    float hi = floor(t0.y / (S * S));
-    float lo = t0.y - hi * (S * S);
-    float y0 = floor(lo / S);
-    float y1 = floor(hi / S);
-    bool inside = sx >= lo - y0 * S && sx <= hi - y1 * S && sy >= y0 && sy <= y1;
-    KEEP_BRANCH if (inside) {
+    KEEP_BRANCH if (light_buffer_part_contains(t0.y, sx, sy)) {
       vec4 t1 = DATA_TEXEL(u_leaf_prims, entry + 1.0);
       vec4 t2 = DATA_TEXEL(u_leaf_prims, entry + 2.0);
       vec3 v0 = vec3(t0.zw, t1.x);

@@ -123,7 +123,6 @@ TEST(LightBuffer, EveryTrianglesDirectionsLieInItsPartOfTheirCell) {
           light_buffer_occluded(lb, tree, q + 1e-3f * (light - q), &n, &e);
           entries += e;
           tests += n;
-          ASSERT_LE(n, e);
         }
       }
       if (res == 64) {
@@ -160,6 +159,7 @@ TEST(LightBuffer, TheSameBufferOnAnyThreadCount) {
   EXPECT_EQ(serial.first, parallel.first);
   EXPECT_EQ(serial.prims, parallel.prims);
   EXPECT_EQ(serial.near, parallel.near);
+  EXPECT_EQ(serial.sub, parallel.sub);
   size_t ties = 0;
   for (size_t c = 0; c < serial.cells(); ++c) {
     std::vector<std::pair<float, uint32_t>> list;

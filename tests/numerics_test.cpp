@@ -5,6 +5,8 @@
 // (glsl/prelude_es.glsl); these tests are what shows the emulation gives the same bits.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstdint>
@@ -14,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "accel/light_buffer.h"
 #include "backend/backend.h"
 #include "layout.h"
 #include "core/half.h"
@@ -239,6 +242,58 @@ TEST_P(NumericsOnGpu, BufferIndicesConvertExactlyBelow2To24) {
     }
     EXPECT_EQ(bad, 0u) << "of " << out.size() << " indices";
   }
+}
+
+// A light-buffer entry's part of its cell decoded in the shader (glsl/light_buffer.glsl) as the CPU
+// decodes it (light_buffer_sub_contains): parts whose edges are the first, second, middle and last
+// two columns and rows, among them 2^24 - 1 (every field 63), one ulp below a multiple of 64^2,
+// where a division that rounds up would read x1 = y1 = 0; and random parts; each against the
+// columns and rows at and beside its edges.
+TEST_P(NumericsOnGpu, LightBufferPartsDecodeAsOnTheCpu) {
+  const uint32_t edges[] = {0, 1, 31, 62, 63};
+  std::vector<std::array<uint32_t, 4>> parts;
+  for (uint32_t x0 : edges) {
+    for (uint32_t x1 : edges) {
+      for (uint32_t y0 : edges) {
+        for (uint32_t y1 : edges) {
+          if (x0 <= x1 && y0 <= y1) parts.push_back({x0, y0, x1, y1});
+        }
+      }
+    }
+  }
+  std::mt19937 rng(32);
+  std::uniform_int_distribution<uint32_t> any(0, kLightBufferSubCells - 1);
+  for (int k = 0; k < 2000; ++k) {
+    const uint32_t a = any(rng), b = any(rng), c = any(rng), d = any(rng);
+    parts.push_back({std::min(a, b), std::min(c, d), std::max(a, b), std::max(c, d)});
+  }
+  std::vector<glm::vec4> input;
+  std::vector<bool> want;
+  size_t inside = 0;
+  for (const auto& p : parts) {
+    const uint32_t part = light_buffer_sub(p[0], p[1], p[2], p[3]);
+    ASSERT_LT(part, 1u << 24);
+    for (uint32_t sx : {p[0] > 0 ? p[0] - 1 : p[0], p[0], p[2], std::min(p[2] + 1, kLightBufferSubCells - 1)}) {
+      for (uint32_t sy : {p[1] > 0 ? p[1] - 1 : p[1], p[1], p[3], std::min(p[3] + 1, kLightBufferSubCells - 1)}) {
+        input.emplace_back(float(part), float(sx), float(sy), 0.0f);
+        want.push_back(light_buffer_sub_contains(part, sx, sy));
+        inside += want.back() ? 1 : 0;
+      }
+    }
+  }
+  ASSERT_GT(inside, input.size() / 4);  // both answers well represented
+  ASSERT_LT(inside, input.size());
+  const std::vector<uint32_t> out = run(4.0f, input, input, input);
+  size_t bad = 0;
+  for (size_t i = 0; i < out.size(); ++i) {
+    const bool got = (out[i] & 0xFFu) == 255u;
+    if (got == want[i]) continue;
+    if (++bad <= 10) {
+      ADD_FAILURE() << "part " << uint32_t(input[i].x) << " column " << input[i].y << " row " << input[i].z << ": "
+                    << (got ? "inside" : "outside") << " on the GPU";
+    }
+  }
+  EXPECT_EQ(bad, 0u) << "of " << out.size() << " cases";
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, NumericsOnGpu, ::testing::Values(Api::Vulkan, Api::Gles), test::api_param_name);
