@@ -90,13 +90,14 @@ TEST(LightBuffer, EveryTrianglesDirectionsLieInItsPartOfTheirCell) {
                    std::to_string(light.z) + "), resolution " + std::to_string(res));
       const LightBuffer lb = build_light_buffer(p, light, res);
       ASSERT_EQ(lb.sub.size(), lb.prims.size());
+      constexpr uint32_t S = kLightBufferSubCells;
       size_t full = 0;
       for (const uint32_t part : lb.sub) {
-        full += part == light_buffer_sub(0, 0, 63, 63) ? 1 : 0;
-        const uint32_t lo = part % (64 * 64), hi = part / (64 * 64);
-        ASSERT_LT(hi, 64u * 64u);
-        ASSERT_LE(lo % 64, hi % 64);
-        ASSERT_LE(lo / 64, hi / 64);
+        full += part == light_buffer_sub(0, 0, S - 1, S - 1) ? 1 : 0;
+        const uint32_t lo = part % (S * S), hi = part / (S * S);
+        ASSERT_LT(hi, S * S);
+        ASSERT_LE(lo % S, hi % S);
+        ASSERT_LE(lo / S, hi / S);
       }
       if (res == 64) {  // the soup's triangles span several cells: the cells at their edges hold parts
         EXPECT_GT(lb.sub.size() - full, lb.sub.size() / 10) << "entries cover part of their cell";

@@ -93,10 +93,6 @@ struct Rect {
   int face, x0, y0, x1, y1;
 };
 
-}  // namespace
-
-namespace {
-
 // Direction d's cell, and its column and row of kLightBufferSubCells within the cell.
 struct CellPosition {
   uint32_t cell = kLightBufferOutside;
@@ -335,11 +331,9 @@ void build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 light, i
     for (uint32_t i = begin; i < end; ++i) {
       const auto& [face, b] = s.rects[i];
       const glm::vec4& w = lb.window[size_t(face)];
-      // The margin: kLightBufferCellMargin of a cell, and the float look-up's error in cells (a few
-      // ulps of s and of the window's origin, times the cells per unit, and of the product).
-      // Each widened edge in kLightBufferSubCells of a cell, clamped to the face: its cell (the
-      // product with a power of two is exact, so g / S is floor(v) clamped) and its column or row
-      // within that cell, rounded outwards (the look-up's floor((x - floor(x)) * S) is monotonic in x).
+      // Each widened edge (widened_subcell) gives its cell (the product with a power of two is
+      // exact, so g / S is floor(v) clamped) and its column or row within that cell, rounded
+      // outwards (the look-up's floor((x - floor(x)) * S) is monotonic in x).
       const int x0 = widened_subcell(b.s0, w.x, w.z, -1.0, resolution), y0 = widened_subcell(b.t0, w.y, w.w, -1.0, resolution),
                 x1 = widened_subcell(b.s1, w.x, w.z, 1.0, resolution), y1 = widened_subcell(b.t1, w.y, w.w, 1.0, resolution);
       constexpr int S = int(kLightBufferSubCells);
