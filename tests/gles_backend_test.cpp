@@ -92,6 +92,13 @@ TEST_F(GlesBackendTest, HasNoTexelBuffers) {
   }
 }
 
+// OpenGL ES textures are never written in place: the renderer's texels go through upload().
+TEST_F(GlesBackendTest, TexturesAreUploadedNotWrittenInPlace) {
+  const TextureHandle texture = backend->create_texture(4, 2, TexelFormat::RGBA32F);
+  EXPECT_EQ(backend->begin_write(texture, 8 * 16), nullptr);
+  backend->destroy(texture);
+}
+
 TEST_F(GlesBackendTest, SpinShaderIsVulkanOnly) {
   PassDesc desc;
   desc.shader = test_shader(TestShader::Spin);

@@ -258,6 +258,58 @@ TEST_F(VulkanBackendTest, UploadsAfterAPassReachTheNextPass) {
   EXPECT_TRUE(messages.empty()) << "validation layer messages:\n" << join(messages);
 }
 
+// Texels written in place (Backend::begin_write) where the texture is mapped: a linear image on
+// lavapipe, a texel buffer; the next pass reads what was written, round after round. An image the
+// backend stages (optimal tiling) says nullptr, so the caller uploads instead; so may one whose
+// rows are padded, and either way the pass reads the texels in row-major order.
+TEST_F(VulkanBackendTest, TexelsWrittenInPlaceReachTheNextPass) {
+  VulkanOptions options{test::validated_options()};
+  options.staged_images = true;
+  const std::unique_ptr<Backend> staged = create_vulkan_backend(options);
+  const TextureHandle optimal = staged->create_texture(64, 3, TexelFormat::RGBA32F);
+  EXPECT_EQ(staged->begin_write(optimal, 150 * 16), nullptr);
+  staged->destroy(optimal);
+
+  // Rows of 1 KiB (unpadded), and rows of 6 texels (lavapipe pads them).
+  for (const uint32_t width : {64u, 6u}) {
+    SCOPED_TRACE("width " + std::to_string(width));
+    const uint32_t count = width * 2 + width / 2;
+    const TextureHandle image = backend->create_texture(width, 3, TexelFormat::RGBA32F);
+    std::vector<uint32_t> out(count);
+    std::vector<float> staging(size_t(count) * 4);
+    for (uint32_t round = 1; round <= 3; ++round) {
+      float* in_place = static_cast<float*>(backend->begin_write(image, size_t(count) * 16));
+      if (width == 64) {
+        ASSERT_NE(in_place, nullptr) << "lavapipe's images are linear and mapped";
+      }
+      float* texels = in_place ? in_place : staging.data();
+      for (size_t i = 0; i < size_t(count) * 4; ++i) texels[i] = float((i * round * 13) % 256) / 255.0f;
+      if (in_place) {
+        backend->end_write(image);
+      } else {
+        backend->upload(image, texels, staging.size() * sizeof(float));
+      }
+      test::run_copy_pass(*backend, image, width, count, out);
+      for (uint32_t i = 0; i < count; ++i) {
+        const auto k = [&](uint32_t c) { return uint32_t((size_t(i * 4 + c) * round * 13) % 256); };
+        EXPECT_EQ(out[i], pack_rgba8(k(0), k(1), k(2), k(3))) << "round " << round << ", texel " << i;
+      }
+    }
+    // Too many bytes, or a partial texel: refused, as upload() refuses them.
+    EXPECT_THROW(backend->begin_write(image, size_t(width) * 3 * 16 + 16), Error);
+    EXPECT_THROW(backend->begin_write(image, 6), Error);
+    backend->destroy(image);
+  }
+
+  const TextureHandle buffer = backend->create_texel_buffer(16, TexelFormat::RGBA32F);
+  EXPECT_NE(backend->begin_write(buffer, 16 * 16), nullptr);
+  backend->end_write(buffer);
+  EXPECT_THROW(backend->begin_write(buffer, 17 * 16), Error);
+  backend->destroy(buffer);
+  const std::vector<std::string> messages = staged->take_debug_messages();
+  EXPECT_TRUE(messages.empty()) << "validation layer messages:\n" << join(messages);
+}
+
 TEST_F(VulkanBackendTest, UniformsReachTheShader) {
   test::expect_uniforms_reach_the_shader(*backend, 16, 40, ErrorKind::Internal);
 }

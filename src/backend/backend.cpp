@@ -78,6 +78,10 @@ TextureHandle Backend::create_storage_buffer(uint32_t, TexelFormat) {
   throw Error(ErrorKind::Unsupported, "this backend has no storage buffers (OpenGL ES 2.0): use --data images");
 }
 
+void* Backend::begin_write(TextureHandle, size_t) { return nullptr; }
+
+void Backend::end_write(TextureHandle) {}
+
 PassTiming Backend::run_raster(std::span<const float>, const RasterView&, uint32_t, uint32_t, std::span<uint32_t>) {
   throw Error(ErrorKind::Unsupported, "this backend cannot rasterize the primary hits: use --primary trace");
 }

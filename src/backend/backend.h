@@ -155,6 +155,17 @@ class Backend {
   // pass whose binding is TextureKind::StorageBuffer; otherwise as create_texel_buffer().
   virtual TextureHandle create_storage_buffer(uint32_t texels, TexelFormat format);
   virtual void upload(TextureHandle texture, const void* data, size_t bytes) = 0;
+  // The first `bytes` of a texture's texels (row-major, as upload() takes them) for the caller to
+  // write in place of an upload, where the backend keeps them in memory the host writes (Vulkan's
+  // texel and storage buffers, linear images whose rows are not padded); nullptr where it does not
+  // (OpenGL ES textures, optimal images): then write them elsewhere and upload(). What the texels
+  // held before is unspecified. Valid until end_write(), which must come before the next pass or
+  // upload that touches the texture. No pass reads it meanwhile: run_pass waits for its pass, and
+  // a raster in flight reads no texture. Spares the copy an upload makes of arrays that exist only
+  // to be uploaded. By default nullptr.
+  virtual void* begin_write(TextureHandle texture, size_t bytes);
+  // Makes the writes since begin_write() visible to the device's passes.
+  virtual void end_write(TextureHandle texture);
   virtual void destroy(TextureHandle texture) = 0;
 
   // Creating a pass checks the OpenGL ES 2.0 constraints (one RGBA8 output, no storage writes, at

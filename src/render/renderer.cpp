@@ -9,6 +9,7 @@
 #include <iterator>
 #include <map>
 #include <memory>
+#include <optional>
 #include <tuple>
 #include <type_traits>
 #include <utility>
@@ -33,6 +34,44 @@ constexpr uint32_t kDataWidth = MOBIRT_DATA_WIDTH;
 uint32_t data_rows(size_t elements) {
   return std::max<uint32_t>(1, uint32_t((elements + kDataWidth - 1) / kDataWidth));
 }
+
+// Texels written where a pass reads them: in place where the backend maps the texture
+// (Backend::begin_write), else into `scratch` (its memory kept from frame to frame) and uploaded by
+// done(). Spares the copy an upload makes of arrays that exist only to be uploaded.
+template <class T>
+class TexelWriter {
+  static_assert(sizeof(T) % sizeof(glm::vec4) == 0 && std::is_trivially_copyable_v<T>);
+
+ public:
+  TexelWriter(Backend& backend, TextureHandle texture, size_t count, TexelArray& scratch)
+      : backend_(backend), texture_(texture), bytes_(count * sizeof(T)) {
+    data_ = static_cast<T*>(backend.begin_write(texture, bytes_));
+    if (!data_) {
+      scratch.resize(bytes_ / sizeof(glm::vec4));
+      data_ = reinterpret_cast<T*>(scratch.data());
+      in_place_ = false;
+    }
+  }
+  TexelWriter(const TexelWriter&) = delete;
+  TexelWriter& operator=(const TexelWriter&) = delete;
+
+  T* data() const { return data_; }
+  T& operator[](size_t i) const { return data_[i]; }
+  void done() {
+    if (in_place_) {
+      backend_.end_write(texture_);
+    } else if (bytes_ > 0) {
+      backend_.upload(texture_, data_, bytes_);
+    }
+  }
+
+ private:
+  Backend& backend_;
+  TextureHandle texture_;
+  size_t bytes_;
+  T* data_ = nullptr;
+  bool in_place_ = true;
+};
 
 // Writes `v` (a vec4 or a uniform struct of texels.h) from vec4 number `index` on.
 template <class T>
@@ -351,7 +390,21 @@ struct Renderer::Data {
   std::vector<LightBuffer> prebuilt_light_buffers;
   bool light_buffers_prebuilt = false;
   size_t light_buffers_built = 0;  // by this renderer itself, since it was made
-  TexelArray nodes_with_cells, entries_with_cells;
+  // Where each light's buffer goes in the uploaded arrays (texels): its windows and cells after the
+  // tree's nodes, its entries after the tree's leaf entries; and the arrays' lengths with them.
+  struct LightBufferPlace {
+    size_t light, node_texel, entry_texel;
+  };
+  std::vector<LightBufferPlace> light_buffer_places;
+  size_t light_buffer_node_texels = 0, light_buffer_entry_texels = 0;
+  // Where the backend cannot write a texture in place, the texels are put here and uploaded
+  // (TexelWriter; memory kept): the nodes and leaf entries (with the light buffers), the triangles,
+  // the shading inputs.
+  TexelArray nodes_with_cells, entries_with_cells, triangles_scratch;
+  std::array<TexelArray, 4> shade_scratch;
+  // The CPU time of writes in place since the last pass: that pass's upload (as the backend counts
+  // an upload's copy).
+  double written_ms = 0.0;
   // (lights, packing, analytic, wide, primary hits, light buffers)
   std::map<std::tuple<int, int, int, bool, int, bool>, PassHandle> trace_passes;
   std::map<std::tuple<int, int, int, int, bool>, PassHandle> shade_passes;  // (lights, textures, pages, colour, wide)
@@ -697,34 +750,62 @@ void Renderer::build_light_buffers(const FlatKdTree& tree, const Scene& scene, b
     d.light_buffers_built += size_t(std::count_if(buffers.begin(), buffers.end(),
                                                   [](const LightBuffer& lb) { return lb.resolution > 0; }));
   }
+  // Where each buffer goes: its windows and cells after the tree's nodes (and the buffers before
+  // it), its entries after the tree's leaf entries; written by upload_tree.
+  d.light_buffer_places.clear();
+  size_t nodes = tree.nodes.size(), entries = tree.leaf_prims.size();
   for (size_t l = 0; l < lights.size(); ++l) {
     const LightBuffer& lb = buffers[l];
     if (!light_buffer_pays(lb)) continue;  // a directional light, or long lists: the walk is faster
-    if (!d.light_buffers) {  // the first buffer: the tree's arrays, the buffers after them
-      d.nodes_with_cells = tree.nodes;
-      d.entries_with_cells = tree.leaf_prims;
-    }
-    const size_t entry_base = d.entries_with_cells.size() / MOBIRT_TEXELS_PER_TRIANGLE;
-    const size_t head = d.nodes_with_cells.size() + MOBIRT_LIGHT_BUFFER_WINDOWS;
+    const size_t entry_base = entries / MOBIRT_TEXELS_PER_TRIANGLE;
+    const size_t head = nodes + MOBIRT_LIGHT_BUFFER_WINDOWS;
     if (head + lb.cells() >= size_t(MOBIRT_MAX_INDEX_TEXELS) ||
         (entry_base + lb.prims.size()) * MOBIRT_TEXELS_PER_TRIANGLE >= size_t(MOBIRT_MAX_INDEX_TEXELS)) {
       continue;  // past what a texture index reaches: this light's rays walk the tree
     }
-    d.nodes_with_cells.insert(d.nodes_with_cells.end(), lb.window.begin(), lb.window.end());
-    for (size_t c = 0; c < lb.cells(); ++c) {
-      d.nodes_with_cells.push_back(glm::vec4(float(entry_base + lb.first[c]), float(lb.first[c + 1] - lb.first[c]),
-                                             MOBIRT_NODE_LEAF, 0.0f));
-    }
-    // Each entry (glsl/layout.h): (near, part, v0.x, v0.y), (v0.z, v1), (v2, 0); the part is an
-    // exact integer below 2^24.
-    for (size_t k = 0; k < lb.prims.size(); ++k) {
-      const glm::vec4* tri = &tree.triangles[size_t(lb.prims[k]) * MOBIRT_TEXELS_PER_TRIANGLE];
-      d.entries_with_cells.push_back(glm::vec4(lb.near[k], float(lb.sub[k]), tri[0].x, tri[0].y));
-      d.entries_with_cells.push_back(glm::vec4(tri[0].z, glm::vec3(tri[1])));
-      d.entries_with_cells.push_back(glm::vec4(glm::vec3(tri[2]), 0.0f));
-    }
+    d.light_buffer_places.push_back({l, nodes, entries});
+    nodes = head + lb.cells();
+    entries += lb.prims.size() * MOBIRT_TEXELS_PER_TRIANGLE;
     d.light_buffer_heads[l] = glm::vec4(float(head), float(res), 1.0f, 0.0f);
     d.light_buffers = true;
+  }
+  d.light_buffer_node_texels = nodes;
+  d.light_buffer_entry_texels = entries;
+}
+
+void Renderer::write_light_buffer_nodes(glm::vec4* nodes) const {
+  const Data& d = *data_;
+  for (const Data::LightBufferPlace& place : d.light_buffer_places) {
+    const LightBuffer& lb = d.prebuilt_light_buffers[place.light];
+    const size_t entry_base = place.entry_texel / MOBIRT_TEXELS_PER_TRIANGLE;
+    glm::vec4* windows = nodes + place.node_texel;
+    std::copy(lb.window.begin(), lb.window.end(), windows);
+    glm::vec4* cells = windows + MOBIRT_LIGHT_BUFFER_WINDOWS;
+    parallel_for_chunks(uint32_t(lb.cells()), 16384, 0, [&](uint32_t, uint32_t begin, uint32_t end) {
+      for (uint32_t c = begin; c < end; ++c) {
+        cells[c] = glm::vec4(float(entry_base + lb.first[c]), float(lb.first[c + 1] - lb.first[c]), MOBIRT_NODE_LEAF,
+                             0.0f);
+      }
+    });
+  }
+}
+
+void Renderer::write_light_buffer_entries(glm::vec4* entries, const FlatKdTree& tree) const {
+  const Data& d = *data_;
+  for (const Data::LightBufferPlace& place : d.light_buffer_places) {
+    const LightBuffer& lb = d.prebuilt_light_buffers[place.light];
+    // Each entry (glsl/layout.h): (near, part, v0.x, v0.y), (v0.z, v1), (v2, 0); the part is an
+    // exact integer below 2^24.
+    glm::vec4* out = entries + place.entry_texel;
+    parallel_for_chunks(uint32_t(lb.prims.size()), 8192, 0, [&](uint32_t, uint32_t begin, uint32_t end) {
+      for (uint32_t k = begin; k < end; ++k) {
+        const glm::vec4* tri = &tree.triangles[size_t(lb.prims[k]) * MOBIRT_TEXELS_PER_TRIANGLE];
+        glm::vec4* e = out + size_t(k) * MOBIRT_TEXELS_PER_TRIANGLE;
+        e[0] = glm::vec4(lb.near[k], float(lb.sub[k]), tri[0].x, tri[0].y);
+        e[1] = glm::vec4(tri[0].z, glm::vec3(tri[1]));
+        e[2] = glm::vec4(glm::vec3(tri[2]), 0.0f);
+      }
+    });
   }
 }
 
@@ -741,28 +822,34 @@ size_t Renderer::light_buffers_built() const { return data_->light_buffers_built
 
 double Renderer::upload_tree(const FlatKdTree& tree, const Scene& scene, bool buffers_prebuilt) {
   Data& d = *data_;
-  const auto start = Clock::now();
+  auto start = Clock::now();
   build_light_buffers(tree, scene, buffers_prebuilt);
-  const double buffers_ms = elapsed_ms(start);
-  const TexelArray& nodes = d.light_buffers ? d.nodes_with_cells : tree.nodes;
-  const TexelArray& entries = d.light_buffers ? d.entries_with_cells : tree.leaf_prims;
-  // Texture rows are uploaded whole: pad each array to full rows.
-  auto upload_padded = [&](Data::Texture& t, const void* src, size_t elements, size_t element_bytes,
-                           TexelFormat format) {
-    const uint32_t rows = data_rows(elements);
-    ensure_texture(t.handle, t.rows, kDataWidth, rows, format, data_kind_);
-    const size_t bytes = elements * element_bytes;
-    if (elements == 0) {
-      const std::vector<float> zero(4, 0.0f);
-      backend_.upload(t.handle, zero.data(), element_bytes);
-    } else {
-      backend_.upload(t.handle, src, bytes);
+  double buffers_ms = elapsed_ms(start);
+  // Written in place where the backend maps its textures (TexelWriter): the tree's arrays in one
+  // copy each (the upload's), the light buffers packed straight after them (their packing counts
+  // as their build, the copy as the upload). Texture rows are uploaded whole: each array padded to
+  // full rows; an empty one is one zero texel.
+  auto write = [&](Data::Texture& t, std::span<const glm::vec4> texels, size_t total, TexelArray& scratch,
+                   auto&& pack) {
+    ensure_texture(t.handle, t.rows, kDataWidth, data_rows(total), TexelFormat::RGBA32F, data_kind_);
+    start = Clock::now();
+    TexelWriter<glm::vec4> out(backend_, t.handle, std::max<size_t>(total, 1), scratch);
+    if (total == 0) out.data()[0] = glm::vec4(0.0f);
+    parallel_copy(out.data(), texels.data(), texels.size_bytes());
+    d.written_ms += elapsed_ms(start);
+    if (total > texels.size()) {
+      start = Clock::now();
+      pack(out.data());
+      buffers_ms += elapsed_ms(start);
     }
+    out.done();  // an upload where not written in place: the backend counts it
   };
-  upload_padded(d.nodes, nodes.data(), nodes.size(), sizeof(glm::vec4), TexelFormat::RGBA32F);
-  upload_padded(d.leaf_prims, entries.data(), entries.size(), sizeof(glm::vec4), TexelFormat::RGBA32F);
-  upload_padded(d.triangles, tree.triangles.data(), tree.triangles.size(), sizeof(glm::vec4),
-                TexelFormat::RGBA32F);
+  const bool lb = d.light_buffers;
+  write(d.nodes, tree.nodes, lb ? d.light_buffer_node_texels : tree.nodes.size(), d.nodes_with_cells,
+        [&](glm::vec4* out) { write_light_buffer_nodes(out); });
+  write(d.leaf_prims, tree.leaf_prims, lb ? d.light_buffer_entry_texels : tree.leaf_prims.size(),
+        d.entries_with_cells, [&](glm::vec4* out) { write_light_buffer_entries(out, tree); });
+  write(d.triangles, tree.triangles, tree.triangles.size(), d.triangles_scratch, [](glm::vec4*) {});
   return buffers_ms;
 }
 
@@ -838,6 +925,7 @@ TraceResult Renderer::trace_uploaded(const Scene& scene, const FlatKdTree& tree,
                                     d.ray_origin.handle, d.ray_direction.handle};
   result.texels.resize(rays.count());
   result.timing = backend_.run_pass(pass, textures, uniforms, rays.width, rays.count(), result.texels);
+  result.timing.upload_ms += std::exchange(data_->written_ms, 0.0);
   return result;
 }
 
@@ -888,7 +976,7 @@ TracedGeneration Renderer::trace_rasterized(const Scene& scene, const Camera& ca
     throw Error(ErrorKind::Internal, "--primary raster: the primary rays are not one per pixel in pixel order");
   }
   if (!started) start_raster(scene, camera, width, height);
-  g.upload_ms += std::exchange(d.raster_start_ms, 0.0);
+  g.upload_ms += std::exchange(d.raster_start_ms, 0.0) + std::exchange(d.written_ms, 0.0);
   d.raster_texels.resize(rays.count());
   add_pass(g, backend_.finish_raster(d.raster_texels));
 
@@ -1012,11 +1100,21 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   const uint32_t hit_count = first[chunks];
   const bool any_miss = hit_count < n;
   const uint32_t shaded = hit_count + (any_miss ? 1u : 0u);  // the miss last
-  const std::unique_ptr<HitPositionTexel[]> position = std::make_unique_for_overwrite<HitPositionTexel[]>(shaded);
-  const std::unique_ptr<HitNormalTexel[]> normal = std::make_unique_for_overwrite<HitNormalTexel[]>(shaded);
-  const std::unique_ptr<glm::vec4[]> direction = std::make_unique_for_overwrite<glm::vec4[]>(shaded);
-  const std::unique_ptr<HitTexcoordTexel[]> uv =
-      d.has_atlas ? std::make_unique_for_overwrite<HitTexcoordTexel[]>(shaded) : nullptr;
+  // Written where the pass reads them (TexelWriter: in place on Vulkan's buffers).
+  const uint32_t rows = (shaded + rays.width - 1) / rays.width;
+  ensure_texture(d.hit_position.handle, d.hit_position.rows, rays.width, rows, TexelFormat::RGBA32F, data_kind_);
+  ensure_texture(d.hit_normal.handle, d.hit_normal.rows, rays.width, rows, TexelFormat::RGBA32F, data_kind_);
+  ensure_texture(d.shade_direction.handle, d.shade_direction.rows, rays.width, rows, TexelFormat::RGBA32F,
+                 data_kind_);
+  if (d.has_atlas) {
+    ensure_texture(d.hit_texcoord.handle, d.hit_texcoord.rows, rays.width, rows, TexelFormat::RGBA32F, data_kind_);
+  }
+  TexelWriter<HitPositionTexel> position(backend_, d.hit_position.handle, shaded, d.shade_scratch[0]);
+  TexelWriter<HitNormalTexel> normal(backend_, d.hit_normal.handle, shaded, d.shade_scratch[1]);
+  TexelWriter<glm::vec4> direction(backend_, d.shade_direction.handle, shaded, d.shade_scratch[2]);
+  std::optional<TexelWriter<HitTexcoordTexel>> texcoords_out;
+  if (d.has_atlas) texcoords_out.emplace(backend_, d.hit_texcoord.handle, shaded, d.shade_scratch[3]);
+  HitTexcoordTexel* const uv = texcoords_out ? texcoords_out->data() : nullptr;
   parallel_for_chunks(n, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
     if (first[c + 1] == first[c]) return;
     uint32_t k = first[c];
@@ -1037,21 +1135,11 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
     if (uv) uv[hit_count] = HitTexcoordTexel{glm::vec2(0.0f), glm::vec2(0.0f)};
   }
   timings.decode_ms += elapsed_ms(stage);
-
-  const uint32_t rows = (shaded + rays.width - 1) / rays.width;
-  ensure_texture(d.hit_position.handle, d.hit_position.rows, rays.width, rows, TexelFormat::RGBA32F, data_kind_);
-  ensure_texture(d.hit_normal.handle, d.hit_normal.rows, rays.width, rows, TexelFormat::RGBA32F, data_kind_);
-  ensure_texture(d.shade_direction.handle, d.shade_direction.rows, rays.width, rows, TexelFormat::RGBA32F,
-                 data_kind_);
-  backend_.upload(d.hit_position.handle, position.get(), size_t(shaded) * sizeof(HitPositionTexel));
-  backend_.upload(d.hit_normal.handle, normal.get(), size_t(shaded) * sizeof(HitNormalTexel));
-  backend_.upload(d.shade_direction.handle, direction.get(), size_t(shaded) * sizeof(glm::vec4));
-  TextureHandle texcoords = d.hit_position.handle;
-  if (uv) {
-    ensure_texture(d.hit_texcoord.handle, d.hit_texcoord.rows, rays.width, rows, TexelFormat::RGBA32F, data_kind_);
-    backend_.upload(d.hit_texcoord.handle, uv.get(), size_t(shaded) * sizeof(HitTexcoordTexel));
-    texcoords = d.hit_texcoord.handle;
-  }
+  position.done();  // an upload where not written in place: the backend counts it in the pass's upload
+  normal.done();
+  direction.done();
+  if (texcoords_out) texcoords_out->done();
+  const TextureHandle texcoords = uv ? d.hit_texcoord.handle : d.hit_position.handle;
 
   // A general pass is sized for the most lights, textures and pages, not for this scene.
   const int texture_count = settings_.specialize ? int(d.atlas_data.tiles.size()) : MOBIRT_ATLAS_MAX_TEXTURES;

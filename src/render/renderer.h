@@ -157,7 +157,11 @@ class Renderer {
   // buffers held (built with the tree, or by the last upload of these triangles) serve where they
   // are these lights' at this resolution. Returns the milliseconds spent building and packing them.
   double upload_tree(const FlatKdTree& tree, const Scene& scene, bool buffers_prebuilt);
+  // Builds (or takes) the buffers and places them (Data::light_buffer_places); upload_tree writes
+  // their nodes (windows and cells) and entries with these.
   void build_light_buffers(const FlatKdTree& tree, const Scene& scene, bool prebuilt);
+  void write_light_buffer_nodes(glm::vec4* nodes) const;
+  void write_light_buffer_entries(glm::vec4* entries, const FlatKdTree& tree) const;
 
  public:
   // The lights whose shadow rays test a light buffer in the passes now (--shadow-cells), of the

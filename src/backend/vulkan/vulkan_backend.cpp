@@ -65,6 +65,8 @@ class Impl {
   // A uniform texel buffer or a read-only storage buffer (kind).
   TextureHandle create_buffer(uint32_t texels, TexelFormat format, TextureKind kind);
   void upload(TextureHandle texture, const void* data, size_t bytes);
+  void* begin_write(TextureHandle texture, size_t bytes);
+  void end_write(TextureHandle texture);
   void destroy(TextureHandle texture);
   PassHandle create_pass(const PassDesc& desc);
   void destroy(PassHandle pass);
@@ -396,21 +398,26 @@ void Impl::upload_mapped_image(vk::Texture& texture, const void* data, size_t by
   flush(texture.image.memory, texture.image.coherent);
 }
 
+// Throws where `bytes` is not a whole number of the texture's texels or more than it holds.
+void check_upload_size(const vk::Texture& texture, size_t bytes, const char* what) {
+  const size_t texel = texel_bytes(texture.format);
+  const size_t total = size_t(texture.width) * texel * texture.height;
+  if (bytes > total) {
+    throw Error(ErrorKind::Internal, std::string(what) + " of " + std::to_string(bytes) + " bytes into a " +
+                                         std::to_string(texture.width) + "x" + std::to_string(texture.height) + " " +
+                                         vk::format_name(texture.format) + " texture of " + std::to_string(total) +
+                                         " bytes");
+  }
+  if (bytes % texel != 0) {
+    throw Error(ErrorKind::Internal, std::string(what) + " of " + std::to_string(bytes) +
+                                         " bytes: not a whole number of " + vk::format_name(texture.format) + " texels");
+  }
+}
+
 void Impl::upload(TextureHandle handle, const void* data, size_t bytes) {
   usable();
   vk::Texture& texture = texture_ref(handle);
-  const size_t texel = texel_bytes(texture.format);
-  const size_t row_bytes = size_t(texture.width) * texel;
-  const size_t total = row_bytes * texture.height;
-  if (bytes > total) {
-    throw Error(ErrorKind::Internal, "upload of " + std::to_string(bytes) + " bytes into a " + std::to_string(texture.width) +
-                                         "x" + std::to_string(texture.height) + " " + vk::format_name(texture.format) +
-                                         " texture of " + std::to_string(total) + " bytes");
-  }
-  if (bytes % texel != 0) {
-    throw Error(ErrorKind::Internal, "upload of " + std::to_string(bytes) + " bytes: not a whole number of " +
-                                         vk::format_name(texture.format) + " texels");
-  }
+  check_upload_size(texture, bytes, "upload");
   if (bytes == 0) return;
   if (!data) throw Error(ErrorKind::Internal, "upload: no data");
   const auto start = Clock::now();
@@ -423,6 +430,28 @@ void Impl::upload(TextureHandle handle, const void* data, size_t bytes) {
   }
   pending_upload_ms_ += elapsed_ms(start);
   device_.throw_validation_errors();
+}
+
+// In place where the texels are mapped and unpadded: a buffer's, or a linear image whose rows are
+// contiguous (an image with padded rows or in optimal tiling is uploaded).
+void* Impl::begin_write(TextureHandle handle, size_t bytes) {
+  usable();
+  vk::Texture& texture = texture_ref(handle);
+  check_upload_size(texture, bytes, "write");
+  if (texture.kind != TextureKind::Image2D) return texture.buffer.mapped;
+  const size_t row_bytes = size_t(texture.width) * texel_bytes(texture.format);
+  return texture.image.mapped && (texture.height == 1 || texture.image.row_pitch == row_bytes) ? texture.image.mapped
+                                                                                                : nullptr;
+}
+
+void Impl::end_write(TextureHandle handle) {
+  usable();
+  vk::Texture& texture = texture_ref(handle);
+  if (texture.kind != TextureKind::Image2D) {
+    flush(texture.buffer.memory, texture.buffer.coherent);
+  } else if (texture.image.mapped) {
+    flush(texture.image.memory, texture.image.coherent);
+  }
 }
 
 // An optimal image's upload: staged copies of at most kStagingChunkBytes, each one submission.
@@ -823,6 +852,8 @@ class VulkanBackend final : public Backend {
     return impl_->create_buffer(texels, format, TextureKind::StorageBuffer);
   }
   void upload(TextureHandle texture, const void* data, size_t bytes) override { impl_->upload(texture, data, bytes); }
+  void* begin_write(TextureHandle texture, size_t bytes) override { return impl_->begin_write(texture, bytes); }
+  void end_write(TextureHandle texture) override { impl_->end_write(texture); }
   void destroy(TextureHandle texture) override { impl_->destroy(texture); }
   PassHandle create_pass(const PassDesc& desc) override { return impl_->create_pass(desc); }
   void destroy(PassHandle pass) override { impl_->destroy(pass); }
