@@ -36,20 +36,20 @@ uint32_t data_rows(size_t elements) {
 }
 
 // Texels written where a pass reads them: in place where the backend maps the texture
-// (Backend::begin_write), else into `scratch` (its memory kept from frame to frame) and uploaded by
-// done(). Spares the copy an upload makes of arrays that exist only to be uploaded.
+// (Backend::begin_write: Vulkan's buffers), else into an array of its own, uploaded by done(). For
+// arrays that exist only to be uploaded (the shading inputs): in place they are written once, with
+// no copy after.
 template <class T>
 class TexelWriter {
   static_assert(sizeof(T) % sizeof(glm::vec4) == 0 && std::is_trivially_copyable_v<T>);
 
  public:
-  TexelWriter(Backend& backend, TextureHandle texture, size_t count, TexelArray& scratch)
+  TexelWriter(Backend& backend, TextureHandle texture, size_t count)
       : backend_(backend), texture_(texture), bytes_(count * sizeof(T)) {
     data_ = static_cast<T*>(backend.begin_write(texture, bytes_));
     if (!data_) {
-      scratch.resize(bytes_ / sizeof(glm::vec4));
-      data_ = reinterpret_cast<T*>(scratch.data());
-      in_place_ = false;
+      own_ = std::make_unique_for_overwrite<T[]>(count);
+      data_ = own_.get();
     }
   }
   TexelWriter(const TexelWriter&) = delete;
@@ -58,7 +58,7 @@ class TexelWriter {
   T* data() const { return data_; }
   T& operator[](size_t i) const { return data_[i]; }
   void done() {
-    if (in_place_) {
+    if (!own_) {
       backend_.end_write(texture_);
     } else if (bytes_ > 0) {
       backend_.upload(texture_, data_, bytes_);
@@ -69,8 +69,8 @@ class TexelWriter {
   Backend& backend_;
   TextureHandle texture_;
   size_t bytes_;
+  std::unique_ptr<T[]> own_;  // where the backend has no memory to write in place
   T* data_ = nullptr;
-  bool in_place_ = true;
 };
 
 // Writes `v` (a vec4 or a uniform struct of texels.h) from vec4 number `index` on.
@@ -379,8 +379,7 @@ struct Renderer::Data {
   double raster_start_ms = 0.0;  // start_raster's CPU time, for the generation's upload stage
   RayBatch hit_rays;
   // --shadow-cells: per shadow light the head of its light buffer (MOBIRT_TP_LIGHT_BUFFERS; z = 0
-  // where it has none), the lights' positions they were built for, and the arrays uploaded (the
-  // tree's nodes and leaf entries with the light buffers after them; memory kept).
+  // where it has none) and the lights' positions they were built for.
   std::vector<glm::vec4> light_buffer_heads;
   std::vector<glm::vec3> light_buffer_positions;  // the shadow lights of the last upload
   std::vector<LightType> light_buffer_types;
@@ -397,13 +396,11 @@ struct Renderer::Data {
   };
   std::vector<LightBufferPlace> light_buffer_places;
   size_t light_buffer_node_texels = 0, light_buffer_entry_texels = 0;
-  // Where the backend cannot write a texture in place, the texels are put here and uploaded
-  // (TexelWriter; memory kept): the nodes and leaf entries (with the light buffers), the triangles,
-  // the shading inputs.
-  TexelArray nodes_with_cells, entries_with_cells, triangles_scratch;
-  std::array<TexelArray, 4> shade_scratch;
-  // The CPU time of writes in place since the last pass: that pass's upload (as the backend counts
-  // an upload's copy).
+  // Where the backend cannot write a texture in place (OpenGL ES), the tree's nodes and leaf
+  // entries with the light buffers after them are put together here and uploaded (memory kept).
+  TexelArray nodes_with_cells, entries_with_cells;
+  // upload_tree's copies of the tree's arrays since the last pass (into the textures in place, or
+  // into the arrays above): that pass's upload, as the backend counts an upload's own copy.
   double written_ms = 0.0;
   // (lights, packing, analytic, wide, primary hits, light buffers)
   std::map<std::tuple<int, int, int, bool, int, bool>, PassHandle> trace_passes;
@@ -825,31 +822,48 @@ double Renderer::upload_tree(const FlatKdTree& tree, const Scene& scene, bool bu
   auto start = Clock::now();
   build_light_buffers(tree, scene, buffers_prebuilt);
   double buffers_ms = elapsed_ms(start);
-  // Written in place where the backend maps its textures (TexelWriter): the tree's arrays in one
-  // copy each (the upload's), the light buffers packed straight after them (their packing counts
-  // as their build, the copy as the upload). Texture rows are uploaded whole: each array padded to
-  // full rows; an empty one is one zero texel.
-  auto write = [&](Data::Texture& t, std::span<const glm::vec4> texels, size_t total, TexelArray& scratch,
+  // Written in place where the backend maps its textures (Backend::begin_write): the tree's arrays
+  // in one copy each (the upload's), the light buffers packed straight after them (their packing
+  // counts as their build, the copy as the upload). Elsewhere an array with nothing after it is
+  // uploaded as it is, one with light buffers put together first. Texture rows are uploaded whole:
+  // each array padded to full rows; an empty one is one zero texel.
+  auto write = [&](Data::Texture& t, std::span<const glm::vec4> texels, size_t total, TexelArray& together,
                    auto&& pack) {
     ensure_texture(t.handle, t.rows, kDataWidth, data_rows(total), TexelFormat::RGBA32F, data_kind_);
+    const size_t count = std::max<size_t>(total, 1);
+    glm::vec4* out = static_cast<glm::vec4*>(backend_.begin_write(t.handle, count * sizeof(glm::vec4)));
+    const bool in_place = out != nullptr;
+    if (!in_place && total == texels.size() && total > 0) {
+      backend_.upload(t.handle, texels.data(), texels.size_bytes());  // the backend counts its copy
+      return;
+    }
     start = Clock::now();
-    TexelWriter<glm::vec4> out(backend_, t.handle, std::max<size_t>(total, 1), scratch);
-    if (total == 0) out.data()[0] = glm::vec4(0.0f);
-    parallel_copy(out.data(), texels.data(), texels.size_bytes());
+    if (!in_place) {
+      together.clear();  // nothing of the last frame's to copy when it grows
+      together.resize(count);
+      out = together.data();
+    }
+    if (total == 0) out[0] = glm::vec4(0.0f);
+    parallel_copy(out, texels.data(), texels.size_bytes());
     d.written_ms += elapsed_ms(start);
     if (total > texels.size()) {
       start = Clock::now();
-      pack(out.data());
+      pack(out);
       buffers_ms += elapsed_ms(start);
     }
-    out.done();  // an upload where not written in place: the backend counts it
+    if (in_place) {
+      backend_.end_write(t.handle);
+    } else {
+      backend_.upload(t.handle, out, count * sizeof(glm::vec4));  // the backend counts its copy
+    }
   };
   const bool lb = d.light_buffers;
   write(d.nodes, tree.nodes, lb ? d.light_buffer_node_texels : tree.nodes.size(), d.nodes_with_cells,
         [&](glm::vec4* out) { write_light_buffer_nodes(out); });
   write(d.leaf_prims, tree.leaf_prims, lb ? d.light_buffer_entry_texels : tree.leaf_prims.size(),
         d.entries_with_cells, [&](glm::vec4* out) { write_light_buffer_entries(out, tree); });
-  write(d.triangles, tree.triangles, tree.triangles.size(), d.triangles_scratch, [](glm::vec4*) {});
+  TexelArray unused;  // the triangles have nothing after them: never put together
+  write(d.triangles, tree.triangles, tree.triangles.size(), unused, [](glm::vec4*) {});
   return buffers_ms;
 }
 
@@ -1100,7 +1114,9 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   const uint32_t hit_count = first[chunks];
   const bool any_miss = hit_count < n;
   const uint32_t shaded = hit_count + (any_miss ? 1u : 0u);  // the miss last
-  // Written where the pass reads them (TexelWriter: in place on Vulkan's buffers).
+  // Written where the pass reads them (TexelWriter: in place on Vulkan's buffers); the textures
+  // made or grown outside the stage's time.
+  timings.decode_ms += elapsed_ms(stage);
   const uint32_t rows = (shaded + rays.width - 1) / rays.width;
   ensure_texture(d.hit_position.handle, d.hit_position.rows, rays.width, rows, TexelFormat::RGBA32F, data_kind_);
   ensure_texture(d.hit_normal.handle, d.hit_normal.rows, rays.width, rows, TexelFormat::RGBA32F, data_kind_);
@@ -1109,11 +1125,12 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   if (d.has_atlas) {
     ensure_texture(d.hit_texcoord.handle, d.hit_texcoord.rows, rays.width, rows, TexelFormat::RGBA32F, data_kind_);
   }
-  TexelWriter<HitPositionTexel> position(backend_, d.hit_position.handle, shaded, d.shade_scratch[0]);
-  TexelWriter<HitNormalTexel> normal(backend_, d.hit_normal.handle, shaded, d.shade_scratch[1]);
-  TexelWriter<glm::vec4> direction(backend_, d.shade_direction.handle, shaded, d.shade_scratch[2]);
+  stage = Clock::now();
+  TexelWriter<HitPositionTexel> position(backend_, d.hit_position.handle, shaded);
+  TexelWriter<HitNormalTexel> normal(backend_, d.hit_normal.handle, shaded);
+  TexelWriter<glm::vec4> direction(backend_, d.shade_direction.handle, shaded);
   std::optional<TexelWriter<HitTexcoordTexel>> texcoords_out;
-  if (d.has_atlas) texcoords_out.emplace(backend_, d.hit_texcoord.handle, shaded, d.shade_scratch[3]);
+  if (d.has_atlas) texcoords_out.emplace(backend_, d.hit_texcoord.handle, shaded);
   HitTexcoordTexel* const uv = texcoords_out ? texcoords_out->data() : nullptr;
   parallel_for_chunks(n, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
     if (first[c + 1] == first[c]) return;
