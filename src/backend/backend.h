@@ -164,7 +164,8 @@ class Backend {
   // a raster in flight reads no texture. Spares the copy an upload makes of arrays that exist only
   // to be uploaded. By default nullptr.
   virtual void* begin_write(TextureHandle texture, size_t bytes);
-  // Makes the writes since begin_write() visible to the device's passes.
+  // Makes the writes since a begin_write() that returned memory visible to the device's passes
+  // (nothing to end where it returned nullptr).
   virtual void end_write(TextureHandle texture);
   virtual void destroy(TextureHandle texture) = 0;
 
