@@ -5,6 +5,8 @@
 #include <OpenImageIO/imageio.h>
 
 #include <cmath>
+#include <map>
+#include <vector>
 
 #include "backend/backend.h"
 #include "raytree/packing.h"
@@ -12,6 +14,7 @@
 #include "render/renderer.h"
 #include "scene/animation.h"
 #include "scene/atlas.h"
+#include "scene/loader.h"
 #include "scene/texture_images.h"
 #include "test_scenes.h"
 #include "test_support.h"
@@ -105,6 +108,40 @@ TEST_F(WhittedFrame, AnimationRebuildsTheTreeAndChangesTheImage) {
   const ImageDiff e = compare_images(b, render_on_cpu(scene, *scene.camera, settings));
   EXPECT_GE(e.psnr, 40.0);
   EXPECT_LE(e.share_over, 0.005);
+}
+
+// One renderer through scenes of other sizes, back and forth: its textures grow and shrink and are
+// written in place again (the tree's arrays with the light buffers after them, the shading inputs:
+// Backend::begin_write). A scene drawn again after others gives its first image bit for bit, and
+// the first frame after another scene equals a fresh renderer's. Rasterized primaries with light
+// buffers (depth 0: no kd-tree) and traced bounces with a tree (depth 2).
+TEST_F(WhittedFrame, ARendererReusedAcrossScenesDrawsWhatAFreshOneDraws) {
+  const Scene fish = load_scene(MOBIRT_SOURCE_DIR "/scenes/fish.gltf");
+  const Scene toaster = load_scene(MOBIRT_SOURCE_DIR "/scenes/toaster.gltf");
+  const Scene marbles = load_scene(MOBIRT_SOURCE_DIR "/scenes/marbles.gltf");
+  for (const int depth : {0, 2}) {
+    RenderSettings settings;
+    settings.width = 80;
+    settings.height = 48;
+    settings.depth = depth;
+    Renderer reused(*backend, settings);
+    std::map<const Scene*, Image> first;
+    const std::vector<const Scene*> scenes = depth == 0 ? std::vector<const Scene*>{&fish, &toaster, &marbles, &fish, &toaster}
+                                                        : std::vector<const Scene*>{&toaster, &fish, &toaster};
+    for (size_t frame = 0; frame < scenes.size(); ++frame) {
+      const Scene& scene = *scenes[frame];
+      SCOPED_TRACE("depth " + std::to_string(depth) + ", frame " + std::to_string(frame) + ": " + scene.source);
+      Image image = reused.render(scene, *scene.camera);
+      EXPECT_GE(reused.light_buffers_used(), 1) << "the light buffers were written, not only the tree";
+      if (frame == 1) {
+        EXPECT_EQ(compare_images(image, Renderer(*backend, settings).render(scene, *scene.camera)).max_error, 0.0f);
+      }
+      const auto [it, new_scene] = first.emplace(&scene, image);
+      if (!new_scene) {
+        EXPECT_EQ(compare_images(image, it->second).max_error, 0.0f) << "drawn again";
+      }
+    }
+  }
 }
 
 // The shading pass shades the hits and one miss, whose texel colours every miss: a quad over the
