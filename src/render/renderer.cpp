@@ -37,8 +37,8 @@ uint32_t data_rows(size_t elements) {
 
 // Texels written where a pass reads them: in place where the backend maps the texture
 // (Backend::begin_write: Vulkan's buffers), else into an array of its own, uploaded by done(). For
-// arrays that exist only to be uploaded (the shading inputs): in place they are written once, with
-// no copy after.
+// arrays that exist only to be uploaded (the shading inputs, the tree's arrays with the light
+// buffers after them): in place they are written once, with no copy after.
 template <class T>
 class TexelWriter {
   static_assert(sizeof(T) % sizeof(glm::vec4) == 0 && std::is_trivially_copyable_v<T>);
@@ -396,11 +396,9 @@ struct Renderer::Data {
   };
   std::vector<LightBufferPlace> light_buffer_places;
   size_t light_buffer_node_texels = 0, light_buffer_entry_texels = 0;
-  // Where the backend cannot write a texture in place (OpenGL ES), the tree's nodes and leaf
-  // entries with the light buffers after them are put together here and uploaded (memory kept).
-  TexelArray nodes_with_cells, entries_with_cells;
-  // upload_tree's copies of the tree's arrays since the last pass (into the textures in place, or
-  // into the arrays above): that pass's upload, as the backend counts an upload's own copy.
+  // upload_tree's copies of the tree's arrays with light buffers after them since the last pass
+  // (TexelWriter: in place, or where the backend has no such memory into an array it uploads): that
+  // pass's upload, as the backend counts an upload's own copy.
   double written_ms = 0.0;
   // (lights, packing, analytic, wide, primary hits, light buffers)
   std::map<std::tuple<int, int, int, bool, int, bool>, PassHandle> trace_passes;
@@ -822,48 +820,33 @@ double Renderer::upload_tree(const FlatKdTree& tree, const Scene& scene, bool bu
   auto start = Clock::now();
   build_light_buffers(tree, scene, buffers_prebuilt);
   double buffers_ms = elapsed_ms(start);
-  // Written in place where the backend maps its textures (Backend::begin_write): the tree's arrays
-  // in one copy each (the upload's), the light buffers packed straight after them (their packing
-  // counts as their build, the copy as the upload). Elsewhere an array with nothing after it is
-  // uploaded as it is, one with light buffers put together first. Texture rows are uploaded whole:
-  // each array padded to full rows; an empty one is one zero texel.
-  auto write = [&](Data::Texture& t, std::span<const glm::vec4> texels, size_t total, TexelArray& together,
-                   auto&& pack) {
+  // An array with nothing after it is uploaded as it is (Vulkan's upload is itself one copy into
+  // the mapped buffer). One with light buffers after it is written where the pass reads it
+  // (TexelWriter): the tree's array copied in, counted as the upload (as the backend counts its
+  // own copy), the light buffers packed after it on all cores, counted as their build. Texture
+  // rows are uploaded whole: each array padded to full rows; an empty one is one zero texel.
+  auto write = [&](Data::Texture& t, std::span<const glm::vec4> texels, size_t total, auto&& pack) {
     ensure_texture(t.handle, t.rows, kDataWidth, data_rows(total), TexelFormat::RGBA32F, data_kind_);
-    const size_t count = std::max<size_t>(total, 1);
-    glm::vec4* out = static_cast<glm::vec4*>(backend_.begin_write(t.handle, count * sizeof(glm::vec4)));
-    const bool in_place = out != nullptr;
-    if (!in_place && total == texels.size() && total > 0) {
-      backend_.upload(t.handle, texels.data(), texels.size_bytes());  // the backend counts its copy
+    if (total == texels.size()) {
+      const glm::vec4 zero(0.0f);
+      backend_.upload(t.handle, total > 0 ? texels.data() : &zero, std::max<size_t>(total, 1) * sizeof(glm::vec4));
       return;
     }
     start = Clock::now();
-    if (!in_place) {
-      together.clear();  // nothing of the last frame's to copy when it grows
-      together.resize(count);
-      out = together.data();
-    }
-    if (total == 0) out[0] = glm::vec4(0.0f);
-    parallel_copy(out, texels.data(), texels.size_bytes());
+    TexelWriter<glm::vec4> out(backend_, t.handle, total);
+    parallel_copy(out.data(), texels.data(), texels.size_bytes());
     d.written_ms += elapsed_ms(start);
-    if (total > texels.size()) {
-      start = Clock::now();
-      pack(out);
-      buffers_ms += elapsed_ms(start);
-    }
-    if (in_place) {
-      backend_.end_write(t.handle);
-    } else {
-      backend_.upload(t.handle, out, count * sizeof(glm::vec4));  // the backend counts its copy
-    }
+    start = Clock::now();
+    pack(out.data());
+    buffers_ms += elapsed_ms(start);
+    out.done();  // an upload where not written in place: the backend counts it
   };
   const bool lb = d.light_buffers;
-  write(d.nodes, tree.nodes, lb ? d.light_buffer_node_texels : tree.nodes.size(), d.nodes_with_cells,
+  write(d.nodes, tree.nodes, lb ? d.light_buffer_node_texels : tree.nodes.size(),
         [&](glm::vec4* out) { write_light_buffer_nodes(out); });
   write(d.leaf_prims, tree.leaf_prims, lb ? d.light_buffer_entry_texels : tree.leaf_prims.size(),
-        d.entries_with_cells, [&](glm::vec4* out) { write_light_buffer_entries(out, tree); });
-  TexelArray unused;  // the triangles have nothing after them: never put together
-  write(d.triangles, tree.triangles, tree.triangles.size(), unused, [](glm::vec4*) {});
+        [&](glm::vec4* out) { write_light_buffer_entries(out, tree); });
+  write(d.triangles, tree.triangles, tree.triangles.size(), [](glm::vec4*) {});
   return buffers_ms;
 }
 
