@@ -176,7 +176,8 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, std::span<const Sh
 // they are first written, wherever glibc maps them anew: on a thread other than the main one (the
 // frame pipeline's worker), arrays above its arena's 64 MiB heaps, in every build, whatever
 // retain_freed_memory() asks. A 1M-triangle tree's leaf entries are 104 MB: built on a worker
-// thread, 31,000-35,000 page faults a build against 3,800-4,300 (README, *Session 13*).
+// thread, 31,000-35,000 page faults a build against 3,800-4,300 (docs/performance-history.md,
+// *Session 13*).
 // On an error the tree is left empty.
 void rebuild_kdtree(FlatKdTree& tree, std::span<const glm::vec3> positions, std::span<const Shape> shapes,
                     const KdBuildOptions& options = {});

@@ -127,7 +127,7 @@ constexpr size_t kSubtreeRefs = 1024;  // a node with fewer references: one task
 // ... or with fewer than a quarter of the scene's primitives, down to this many: a scene of a few
 // thousand triangles otherwise made two or three subtree tasks of uneven size, and the second
 // thread spun in TBB for a third of the build (fish, 1,392 triangles, 2 threads: 0.98 -> 0.75 ms,
-// the tree the same; README, *Smaller tasks for small scenes*).
+// the tree the same; docs/performance-history.md, *Smaller tasks for small scenes*).
 constexpr size_t kMinSubtreeRefs = 256;
 constexpr size_t kBlockRefs = 8192;    // top nodes of 2 blocks or more partition blocks in parallel
 // Nodes of up to this many references sweep only the planes next to occupied bins; larger ones

@@ -5,9 +5,9 @@
 // Exact where the cells are conservative: each triangle is clipped to each face's view pyramid
 // (widened by kLightBufferFaceMargin so that directions on a cube edge belong to both faces) and
 // its projection's bounding rectangle widened by kLightBufferCellMargin of a cell. Measured against
-// the kd-tree walk by tools/profile/light_buffer_probe.cpp (README, *Session 28: a light buffer*);
-// the renderer's shadow rays test them under --shadow-cells (auto, the default: under highp, up to
-// 32,768 triangles, without analytic shapes).
+// the kd-tree walk by tools/profile/light_buffer_probe.cpp (docs/performance-history.md,
+// *Session 28: a light buffer*); the renderer's shadow rays test them under --shadow-cells (auto,
+// the default: under highp, up to 32,768 triangles, without analytic shapes).
 #pragma once
 
 #include <glm/glm.hpp>

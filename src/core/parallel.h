@@ -76,8 +76,8 @@ void parallel_for_chunks(uint32_t n, uint32_t chunk, unsigned threads, F&& f) {
 
 // memcpy on all cores for large copies (a frame's rays and shading inputs into the driver's mapped
 // buffers, its read-backs): on one thread a 3 MB copy kept the other core idle for about half a
-// millisecond (README, *Session 30*). Pieces of kParallelCopyChunk bytes; below two of them, one
-// memcpy.
+// millisecond (docs/performance-history.md, *Session 30*). Pieces of kParallelCopyChunk bytes;
+// below two of them, one memcpy.
 inline constexpr size_t kParallelCopyChunk = size_t(256) << 10;
 inline void parallel_copy(void* dst, const void* src, size_t bytes) {
   if (bytes < 2 * kParallelCopyChunk) {

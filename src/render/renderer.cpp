@@ -318,8 +318,9 @@ bool raster_view(const Camera& camera, int width, int height, std::span<const gl
   if (!(farthest > 0.0f) || !std::isfinite(farthest) || !(nearest < kInfinity)) return false;
   // The depth buffer's resolution spent where the triangles are (a near plane at the camera's
   // znear left 24-bit depth too coarse for the Utah toasters' and the wood doll's neighbouring
-  // surfaces: mobirt_raster_probe, README *Session 26*). Never nearer than rays start: a ray
-  // leaves the eye at znear along itself, which is at least znear cos(corner) along the view axis.
+  // surfaces: mobirt_raster_probe, docs/performance-history.md *Session 26*). Never nearer than
+  // rays start: a ray leaves the eye at znear along itself, which is at least znear cos(corner)
+  // along the view axis.
   // A scene that reaches the eye itself gets a near plane at far / 10^6: every hit kept, the
   // depth resolution of 24-bit GLES much coarser (Vulkan's reversed 32-bit float depth keeps it).
   const float far_distance = farthest * 1.01f;
@@ -501,7 +502,7 @@ class Renderer::Engine final : public WhittedEngine {
 
   // The raster pass starts before begin_frame's uploads and the primary rays: the driver sets up
   // its triangles on a thread of its own while this thread works (alone, that setup left a core
-  // idle: README, *Session 30*).
+  // idle: docs/performance-history.md, *Session 30*).
   void start_frame(const Scene& scene, const Camera& camera, const RenderSettings&) override {
     Data& d = *r_.data_;
     d.raster_started = false;

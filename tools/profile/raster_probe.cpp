@@ -9,7 +9,7 @@
 // scene's own camera and size, and checks it against the CPU traversal of the same primary rays
 // (src/accel/kdtree_traverse.cpp, the traversal pass's oracle), pixel by pixel. The renderer's
 // --primary raster (Backend::run_raster, session 27) grew out of it; the probe stays as its
-// standalone measure on GLES (README *Session 26*).
+// standalone measure on GLES (docs/performance-history.md *Session 26*).
 //
 // Per repeat: the posed triangles written into a vertex buffer (position + index, no sharing),
 // the draw (glFinish: the rasterizer's time), the read-back (glReadPixels). Medians are printed,
