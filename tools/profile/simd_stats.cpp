@@ -29,11 +29,17 @@
 //   entry nodes       (primary rays) the leading steps from the root that every ray of a 4x2
 //                     tile takes to one child, its interval unchanged: what a pass that started
 //                     each tile's rays below the root could skip at most; see entry_chain() below
+//   ropes             (secondary generations) the closest-hit walks along ropes instead of the
+//                     short stack, from the root and from the leaf that holds the ray's origin
+//                     (found on the CPU, its cost per ray given), with one or two node-loop
+//                     iterations charged for leaving a leaf; see rope_walk() below
 //
 // Usage: mobirt_simd_stats SCENE [--mtl F] [--camera SPEC] [--light SPEC]... [--size WxH]
 //        [--stack N] [--bins N] [--leaf-size N] [--isect-cost C] [--depth N]
 //        [--ray-order coherent|sorted|tiles] [--csv FILE]
 #include <algorithm>
+#include <array>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <optional>
@@ -403,6 +409,207 @@ EntryEstimate estimate_entry_nodes(const FlatKdTree& tree, const RayBatch& rays,
   return e;
 }
 
+// Ropes (Havran 1998; Popov, Günther, Seidel and Slusallek 2007, "Stackless KD-Tree Traversal
+// for High Performance GPU Ray Tracing"), estimated, not built. Each leaf keeps its box and, per
+// face, a rope: the node on the other side of that face (optimised: the deepest node whose box
+// still covers the whole face), -1 past the scene's box. A walk enters a leaf at its entry point,
+// tests the leaf's triangles up to its exit, and follows the exit face's rope, walking down from
+// the rope's node to the leaf that holds the exit point. No stack and no restart; a secondary ray
+// could start at the leaf that holds its origin, found on the CPU, instead of walking down from
+// the root (session 32 counted that first descent at 15-20 of the secondary walks' 30-43
+// node-loop iterations).
+struct Ropes {
+  std::vector<std::array<int32_t, 6>> rope;  // per node (leaves only): face 2a (lo), 2a + 1 (hi)
+  std::vector<Aabb> box;                     // per node
+};
+
+Ropes make_ropes(const FlatKdTree& tree) {
+  Ropes r;
+  r.rope.assign(tree.nodes.size(), {-1, -1, -1, -1, -1, -1});
+  r.box.assign(tree.nodes.size(), Aabb{});
+  if (tree.nodes.empty()) return r;
+  // Popov et al.'s optimisation: down from the rope's node while one child covers the whole face.
+  const auto optimise = [&](int32_t node, int face, const Aabb& b) {
+    const int fa = face / 2;
+    const bool hi = (face & 1) != 0;
+    while (node >= 0) {
+      const glm::vec4 n = tree.nodes[size_t(node)];
+      if (node_texel::is_leaf(n)) break;
+      const int a = int(node_texel::axis(n));
+      const float s = node_texel::split(n);
+      const int32_t below = node + 1, above = int32_t(node_texel::above_child(n));
+      if (a == fa) {
+        node = hi ? below : above;  // the child that touches the face
+      } else if (s >= b.hi[a]) {
+        node = below;
+      } else if (s <= b.lo[a]) {
+        node = above;
+      } else {
+        break;
+      }
+    }
+    return node;
+  };
+  struct Item {
+    int32_t node;
+    Aabb box;
+    std::array<int32_t, 6> rope;
+  };
+  std::vector<Item> stack{{0, tree.bounds, {-1, -1, -1, -1, -1, -1}}};
+  while (!stack.empty()) {
+    Item it = stack.back();
+    stack.pop_back();
+    for (int f = 0; f < 6; ++f) it.rope[size_t(f)] = optimise(it.rope[size_t(f)], f, it.box);
+    r.box[size_t(it.node)] = it.box;
+    r.rope[size_t(it.node)] = it.rope;
+    const glm::vec4 n = tree.nodes[size_t(it.node)];
+    if (node_texel::is_leaf(n)) continue;
+    const int a = int(node_texel::axis(n));
+    const float s = node_texel::split(n);
+    const int32_t below = it.node + 1, above = int32_t(node_texel::above_child(n));
+    Item b{below, it.box, it.rope}, c{above, it.box, it.rope};
+    b.box.hi[a] = s;
+    b.rope[size_t(2 * a + 1)] = above;
+    c.box.lo[a] = s;
+    c.rope[size_t(2 * a)] = below;
+    stack.push_back(c);
+    stack.push_back(b);
+  }
+  return r;
+}
+
+// Down from `node` to the leaf that holds p (a point on the plane of a split goes the way the
+// direction leaves it, as the walk's below_first does). steps: the nodes fetched, the leaf's included.
+int32_t locate(const FlatKdTree& tree, int32_t node, const glm::vec3& p, const glm::vec3& d, uint32_t& steps) {
+  for (;;) {
+    ++steps;
+    const glm::vec4 n = tree.nodes[size_t(node)];
+    if (node_texel::is_leaf(n)) return node;
+    const int a = int(node_texel::axis(n));
+    const float s = node_texel::split(n);
+    const bool below = p[a] < s || (p[a] == s && d[a] <= 0.0f);
+    node = below ? node + 1 : int32_t(node_texel::above_child(n));
+  }
+}
+
+// A closest-hit walk along the ropes, from the leaf that holds the ray's entry point (start_leaf
+// >= 0: that leaf, found elsewhere; -1: walked down from the root). The trace as TraversalTrace's
+// segments: node-loop iterations (nodes fetched on the way down from a rope, plus exit_cost per
+// leaf left: its box and ropes read and the exit face chosen) up to a leaf with primitives, then
+// its triangle tests.
+Hit rope_walk(const FlatKdTree& tree, const Ropes& ropes, const Ray& ray, int32_t start_leaf, uint32_t exit_cost,
+              TraversalTrace& trace) {
+  trace = TraversalTrace{};
+  Hit best;
+  float t0 = 0.0f, t1 = 0.0f;
+  if (tree.nodes.empty() || tree.bounds.empty() || !intersect_aabb(tree.bounds, ray, t0, t1)) return best;
+  const glm::vec3 inv = 1.0f / ray.direction;
+  uint32_t iterations = 0;
+  int32_t node = start_leaf >= 0 ? start_leaf : 0;
+  float t = t0;
+  for (;;) {
+    node = locate(tree, node, ray.origin + t * ray.direction, ray.direction, iterations);
+    const Aabb& b = ropes.box[size_t(node)];
+    float exit = kInfinity;
+    int face = -1;
+    for (int a = 0; a < 3; ++a) {
+      if (ray.direction[a] == 0.0f) continue;
+      const bool up = ray.direction[a] > 0.0f;
+      const float te = ((up ? b.hi[a] : b.lo[a]) - ray.origin[a]) * inv[a];
+      if (te < exit) {
+        exit = te;
+        face = 2 * a + (up ? 1 : 0);
+      }
+    }
+    const glm::vec4 n = tree.nodes[size_t(node)];
+    const uint32_t count = uint32_t(node_texel::leaf_count(n));
+    if (count > 0) {
+      Ray segment = ray;
+      segment.tmax = std::min(exit, t1);
+      const size_t first = size_t(node_texel::leaf_first(n));
+      for (size_t e = first; e < first + count; ++e) intersect_primitive(tree, tree.leaf_prim(e), segment, best);
+      trace.segments.push_back({iterations, count});
+      iterations = 0;
+      if (best.valid()) {
+        trace.ended_at_hit = true;
+        return best;
+      }
+    }
+    iterations += exit_cost;
+    if (face < 0 || !(exit < t1)) break;
+    node = ropes.rope[size_t(node)][size_t(face)];
+    if (node < 0) break;
+    t = std::max(t, exit);
+  }
+  trace.segments.push_back({iterations, 0});
+  return best;
+}
+
+// Per secondary generation: the closest-hit walks (the light loop aside) in the 4x2 tiles, as the
+// pass walks them now and along ropes, from the root and from the origin's leaf; the hits compared.
+struct RopeEstimate {
+  LoopCounts as_is, from_root, from_leaf, from_leaf_exit2;
+  uint64_t rays = 0, differ = 0, locate_steps = 0;
+  double locate_ns = 0.0;  // the CPU's point location per ray
+};
+
+RopeEstimate estimate_ropes(const FlatKdTree& tree, const RayBatch& rays, int stack) {
+  RopeEstimate e;
+  const Ropes ropes = make_ropes(tree);
+  const uint32_t n = rays.count();
+  std::vector<TraversalTrace> as_is(n), root(n), leaf(n), leaf2(n);
+  std::vector<int32_t> start(n, -1);
+  // The start leaves as the CPU would find them: the origin located from the root.
+  const auto t_begin = std::chrono::steady_clock::now();
+  uint64_t steps = 0;
+  for (uint32_t i = 0; i < n; ++i) {
+    const Ray ray = rays.ray(i);
+    const glm::vec3 o = ray.origin;
+    const Aabb& sb = tree.bounds;
+    if (!(o.x >= sb.lo.x && o.y >= sb.lo.y && o.z >= sb.lo.z && o.x <= sb.hi.x && o.y <= sb.hi.y && o.z <= sb.hi.z)) {
+      continue;  // outside the scene's box: the walk enters at the box, from the root
+    }
+    uint32_t s = 0;
+    start[i] = locate(tree, 0, ray.origin, ray.direction, s);
+    steps += s;
+  }
+  e.locate_ns = 1e9 * std::chrono::duration<double>(std::chrono::steady_clock::now() - t_begin).count() /
+                double(std::max<uint32_t>(n, 1));
+  e.locate_steps = steps;
+  for (uint32_t i = 0; i < n; ++i) {
+    const Ray ray = rays.ray(i);
+    TraversalStats ts;
+    const Hit h = traverse(tree, ray, stack, ts, -1, RayTest{}, &as_is[i]);
+    rope_walk(tree, ropes, ray, -1, 1, root[i]);
+    const Hit r = rope_walk(tree, ropes, ray, start[i], 1, leaf[i]);
+    rope_walk(tree, ropes, ray, start[i], 2, leaf2[i]);
+    ++e.rays;
+    if (h.prim != r.prim || (h.valid() && h.t != r.t)) ++e.differ;
+  }
+  const TraversalTrace idle;
+  const uint32_t w = rays.width, rows = rays.rows();
+  for (uint32_t y0 = 0; y0 < rows; y0 += 2) {
+    for (uint32_t x0 = 0; x0 < w; x0 += 4) {
+      std::vector<const TraversalTrace*> g[4];
+      for (uint32_t y = y0; y < std::min(y0 + 2, rows); ++y) {
+        for (uint32_t x = x0; x < std::min(x0 + 4, w); ++x) {
+          const uint64_t i = uint64_t(y) * w + x;
+          const bool in = i < n;
+          g[0].push_back(in ? &as_is[i] : &idle);
+          g[1].push_back(in ? &root[i] : &idle);
+          g[2].push_back(in ? &leaf[i] : &idle);
+          g[3].push_back(in ? &leaf2[i] : &idle);
+        }
+      }
+      e.as_is += simulate_walk(g[0]);
+      e.from_root += simulate_walk(g[1]);
+      e.from_leaf += simulate_walk(g[2]);
+      e.from_leaf_exit2 += simulate_walk(g[3]);
+    }
+  }
+  return e;
+}
+
 double occupancy(uint64_t lane, uint64_t group) { return group ? double(lane) / (8.0 * double(group)) : 0.0; }
 
 int run(int argc, char** argv) {
@@ -469,6 +676,24 @@ int run(int argc, char** argv) {
     std::printf("    leaf steps in their parents: node iter. %12llu (x%.3f), lanes' node iter. x%.3f\n",
                 (unsigned long long)s.folded.node, double(s.folded.node) / double(s.tiled.node),
                 double(s.folded.lane_node) / double(std::max<uint64_t>(s.tiled.lane_node, 1)));
+    if (g > 0) {
+      // Weighted 1 to 2 as above: a node iteration against a leaf iteration.
+      const RopeEstimate r = estimate_ropes(tree, rays, stack);
+      const auto line = [&](const char* label, const LoopCounts& c) {
+        std::printf("      %-34s node iter. %10llu (x%.3f)  leaf iter. %10llu (x%.3f)  1:2 weighted x%.3f\n", label,
+                    (unsigned long long)c.node, double(c.node) / double(std::max<uint64_t>(r.as_is.node, 1)),
+                    (unsigned long long)c.leaf, double(c.leaf) / double(std::max<uint64_t>(r.as_is.leaf, 1)),
+                    double(c.node + 2 * c.leaf) / double(std::max<uint64_t>(r.as_is.node + 2 * r.as_is.leaf, 1)));
+      };
+      std::printf("    ropes (closest-hit walks alone, 4x2 tiles): hits differing from the walk's %llu of %llu; the CPU's "
+                  "start leaves %.1f nodes and %.0f ns a ray (one thread)\n",
+                  (unsigned long long)r.differ, (unsigned long long)r.rays,
+                  double(r.locate_steps) / double(std::max<uint64_t>(r.rays, 1)), r.locate_ns);
+      line("as the pass walks now", r.as_is);
+      line("ropes from the root, exit 1 iter.", r.from_root);
+      line("ropes from the start leaf, exit 1", r.from_leaf);
+      line("ropes from the start leaf, exit 2", r.from_leaf_exit2);
+    }
     if (out) {
       std::fprintf(out, "%d,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%.4f,%.4f,%llu,%llu,%.4f\n", g,
                    (unsigned long long)s.rays, (unsigned long long)s.shadow_rays,
