@@ -177,7 +177,7 @@ FlatKdTree build_kdtree(std::span<const glm::vec3> positions, std::span<const Sh
 // frame pipeline's worker), arrays above its arena's 64 MiB heaps, in every build, whatever
 // retain_freed_memory() asks. A 1M-triangle tree's leaf entries are 104 MB: built on a worker
 // thread, 31,000-35,000 page faults a build against 3,800-4,300 (docs/performance-history.md,
-// *Session 13*).
+// *Session 13: each build into the last tree's memory*).
 // On an error the tree is left empty.
 void rebuild_kdtree(FlatKdTree& tree, std::span<const glm::vec3> positions, std::span<const Shape> shapes,
                     const KdBuildOptions& options = {});

@@ -31,7 +31,7 @@
 //                     each tile's rays below the root could skip at most; see entry_chain() below
 //   ropes             (secondary generations) the closest-hit walks along ropes instead of the
 //                     short stack, from the root and from the leaf that holds the ray's origin
-//                     (found on the CPU, its cost per ray given), with one or two node-loop
+//                     (found on the CPU, its cost per ray given), with one to three node-loop
 //                     iterations charged for leaving a leaf; see rope_walk() below
 //
 // Usage: mobirt_simd_stats SCENE [--mtl F] [--camera SPEC] [--light SPEC]... [--size WxH]
@@ -416,7 +416,7 @@ EntryEstimate estimate_entry_nodes(const FlatKdTree& tree, const RayBatch& rays,
 // tests the leaf's triangles up to its exit, and follows the exit face's rope, walking down from
 // the rope's node to the leaf that holds the exit point. No stack and no restart; a secondary ray
 // could start at the leaf that holds its origin, found on the CPU, instead of walking down from
-// the root (session 32 counted that first descent at 15-20 of the secondary walks' 30-43
+// the root (session 32 counted that first descent at 14-20 of the secondary walks' 21-43
 // node-loop iterations).
 struct Ropes {
   std::vector<std::array<int32_t, 6>> rope;  // per node (leaves only): face 2a (lo), 2a + 1 (hi)
@@ -496,7 +496,11 @@ int32_t locate(const FlatKdTree& tree, int32_t node, const glm::vec3& p, const g
 // >= 0: that leaf, found elsewhere; -1: walked down from the root). The trace as TraversalTrace's
 // segments: node-loop iterations (nodes fetched on the way down from a rope, plus exit_cost per
 // leaf left: its box and ropes read and the exit face chosen) up to a leaf with primitives, then
-// its triangle tests.
+// its triangle tests. A leaf's triangles are tested over the whole ray, the hit kept as the pass
+// keeps it, and a hit at or before the leaf's exit ends the walk. Stops after kMaxRopeSteps
+// leaves (a guard for the tool; the walk moves forward by a leaf each time).
+constexpr uint32_t kMaxRopeSteps = 1u << 20;
+
 Hit rope_walk(const FlatKdTree& tree, const Ropes& ropes, const Ray& ray, int32_t start_leaf, uint32_t exit_cost,
               TraversalTrace& trace) {
   trace = TraversalTrace{};
@@ -507,7 +511,7 @@ Hit rope_walk(const FlatKdTree& tree, const Ropes& ropes, const Ray& ray, int32_
   uint32_t iterations = 0;
   int32_t node = start_leaf >= 0 ? start_leaf : 0;
   float t = t0;
-  for (;;) {
+  for (uint32_t leaves = 0; leaves < kMaxRopeSteps; ++leaves) {
     node = locate(tree, node, ray.origin + t * ray.direction, ray.direction, iterations);
     const Aabb& b = ropes.box[size_t(node)];
     float exit = kInfinity;
@@ -524,13 +528,13 @@ Hit rope_walk(const FlatKdTree& tree, const Ropes& ropes, const Ray& ray, int32_
     const glm::vec4 n = tree.nodes[size_t(node)];
     const uint32_t count = uint32_t(node_texel::leaf_count(n));
     if (count > 0) {
-      Ray segment = ray;
-      segment.tmax = std::min(exit, t1);
+      // Hits anywhere on the ray are kept, as the pass keeps them (a triangle on the scene box's
+      // face can be hit a rounding past the last leaf's exit); one within this leaf ends the walk.
       const size_t first = size_t(node_texel::leaf_first(n));
-      for (size_t e = first; e < first + count; ++e) intersect_primitive(tree, tree.leaf_prim(e), segment, best);
+      for (size_t e = first; e < first + count; ++e) intersect_primitive(tree, tree.leaf_prim(e), ray, best);
       trace.segments.push_back({iterations, count});
       iterations = 0;
-      if (best.valid()) {
+      if (best.valid() && best.t <= exit) {
         trace.ended_at_hit = true;
         return best;
       }
@@ -546,65 +550,73 @@ Hit rope_walk(const FlatKdTree& tree, const Ropes& ropes, const Ray& ray, int32_
 }
 
 // Per secondary generation: the closest-hit walks (the light loop aside) in the 4x2 tiles, as the
-// pass walks them now and along ropes, from the root and from the origin's leaf; the hits compared.
+// pass walks them now and along ropes, from the root and from the origin's leaf, with 1 to 3
+// node-loop iterations charged for leaving a leaf; the hits compared with the pass's walk.
+constexpr int kRopeExitCosts = 3;
+
 struct RopeEstimate {
-  LoopCounts as_is, from_root, from_leaf, from_leaf_exit2;
-  uint64_t rays = 0, differ = 0, locate_steps = 0;
-  double locate_ns = 0.0;  // the CPU's point location per ray
+  LoopCounts as_is, from_root;
+  LoopCounts from_leaf[kRopeExitCosts];  // exit cost 1, 2, 3
+  uint64_t rays = 0;
+  uint64_t differ_root = 0, differ_leaf = 0;  // rays whose hit (primitive or t) is not the walk's
+  uint64_t located = 0, locate_steps = 0;
+  double locate_ns = 0.0;  // the CPU's point location per located ray
 };
 
 RopeEstimate estimate_ropes(const FlatKdTree& tree, const RayBatch& rays, int stack) {
   RopeEstimate e;
   const Ropes ropes = make_ropes(tree);
   const uint32_t n = rays.count();
-  std::vector<TraversalTrace> as_is(n), root(n), leaf(n), leaf2(n);
+  std::vector<TraversalTrace> as_is(n), root(n);
+  std::vector<std::vector<TraversalTrace>> leaf(kRopeExitCosts, std::vector<TraversalTrace>(n));
   std::vector<int32_t> start(n, -1);
-  // The start leaves as the CPU would find them: the origin located from the root.
+  std::vector<Ray> ray_of(n);
+  for (uint32_t i = 0; i < n; ++i) ray_of[i] = rays.ray(i);
+  // The start leaves as the CPU would find them: the origin located from the root, for the rays
+  // that start inside the scene's box (the others enter it from the root).
+  const Aabb& sb = tree.bounds;
+  const auto inside = [&](const glm::vec3& o) {
+    return o.x >= sb.lo.x && o.y >= sb.lo.y && o.z >= sb.lo.z && o.x <= sb.hi.x && o.y <= sb.hi.y && o.z <= sb.hi.z;
+  };
   const auto t_begin = std::chrono::steady_clock::now();
-  uint64_t steps = 0;
   for (uint32_t i = 0; i < n; ++i) {
-    const Ray ray = rays.ray(i);
-    const glm::vec3 o = ray.origin;
-    const Aabb& sb = tree.bounds;
-    if (!(o.x >= sb.lo.x && o.y >= sb.lo.y && o.z >= sb.lo.z && o.x <= sb.hi.x && o.y <= sb.hi.y && o.z <= sb.hi.z)) {
-      continue;  // outside the scene's box: the walk enters at the box, from the root
-    }
-    uint32_t s = 0;
-    start[i] = locate(tree, 0, ray.origin, ray.direction, s);
-    steps += s;
+    if (!inside(ray_of[i].origin)) continue;
+    uint32_t steps = 0;
+    start[i] = locate(tree, 0, ray_of[i].origin, ray_of[i].direction, steps);
+    e.locate_steps += steps;
+    ++e.located;
   }
   e.locate_ns = 1e9 * std::chrono::duration<double>(std::chrono::steady_clock::now() - t_begin).count() /
-                double(std::max<uint32_t>(n, 1));
-  e.locate_steps = steps;
+                double(std::max<uint64_t>(e.located, 1));
+  const auto differs = [](const Hit& a, const Hit& b) { return a.prim != b.prim || (a.valid() && a.t != b.t); };
   for (uint32_t i = 0; i < n; ++i) {
-    const Ray ray = rays.ray(i);
+    const Ray& ray = ray_of[i];
     TraversalStats ts;
     const Hit h = traverse(tree, ray, stack, ts, -1, RayTest{}, &as_is[i]);
-    rope_walk(tree, ropes, ray, -1, 1, root[i]);
-    const Hit r = rope_walk(tree, ropes, ray, start[i], 1, leaf[i]);
-    rope_walk(tree, ropes, ray, start[i], 2, leaf2[i]);
+    if (differs(h, rope_walk(tree, ropes, ray, -1, 1, root[i]))) ++e.differ_root;
+    for (int c = 0; c < kRopeExitCosts; ++c) {
+      const Hit r = rope_walk(tree, ropes, ray, start[i], uint32_t(c + 1), leaf[size_t(c)][i]);
+      if (c == 0 && differs(h, r)) ++e.differ_leaf;
+    }
     ++e.rays;
-    if (h.prim != r.prim || (h.valid() && h.t != r.t)) ++e.differ;
   }
   const TraversalTrace idle;
   const uint32_t w = rays.width, rows = rays.rows();
   for (uint32_t y0 = 0; y0 < rows; y0 += 2) {
     for (uint32_t x0 = 0; x0 < w; x0 += 4) {
-      std::vector<const TraversalTrace*> g[4];
+      std::vector<const TraversalTrace*> g[2 + kRopeExitCosts];
       for (uint32_t y = y0; y < std::min(y0 + 2, rows); ++y) {
         for (uint32_t x = x0; x < std::min(x0 + 4, w); ++x) {
           const uint64_t i = uint64_t(y) * w + x;
           const bool in = i < n;
           g[0].push_back(in ? &as_is[i] : &idle);
           g[1].push_back(in ? &root[i] : &idle);
-          g[2].push_back(in ? &leaf[i] : &idle);
-          g[3].push_back(in ? &leaf2[i] : &idle);
+          for (int c = 0; c < kRopeExitCosts; ++c) g[2 + c].push_back(in ? &leaf[size_t(c)][i] : &idle);
         }
       }
       e.as_is += simulate_walk(g[0]);
       e.from_root += simulate_walk(g[1]);
-      e.from_leaf += simulate_walk(g[2]);
-      e.from_leaf_exit2 += simulate_walk(g[3]);
+      for (int c = 0; c < kRopeExitCosts; ++c) e.from_leaf[c] += simulate_walk(g[2 + c]);
     }
   }
   return e;
@@ -685,14 +697,17 @@ int run(int argc, char** argv) {
                     (unsigned long long)c.leaf, double(c.leaf) / double(std::max<uint64_t>(r.as_is.leaf, 1)),
                     double(c.node + 2 * c.leaf) / double(std::max<uint64_t>(r.as_is.node + 2 * r.as_is.leaf, 1)));
       };
-      std::printf("    ropes (closest-hit walks alone, 4x2 tiles): hits differing from the walk's %llu of %llu; the CPU's "
-                  "start leaves %.1f nodes and %.0f ns a ray (one thread)\n",
-                  (unsigned long long)r.differ, (unsigned long long)r.rays,
-                  double(r.locate_steps) / double(std::max<uint64_t>(r.rays, 1)), r.locate_ns);
+      std::printf("    ropes (closest-hit walks alone, 4x2 tiles): rays whose hit differs from the walk's %llu (from "
+                  "the root) and %llu (from the start leaf) of %llu; the CPU's start leaves %.1f nodes and %.0f ns a "
+                  "ray (one thread, %llu rays located)\n",
+                  (unsigned long long)r.differ_root, (unsigned long long)r.differ_leaf, (unsigned long long)r.rays,
+                  double(r.locate_steps) / double(std::max<uint64_t>(r.located, 1)), r.locate_ns,
+                  (unsigned long long)r.located);
       line("as the pass walks now", r.as_is);
       line("ropes from the root, exit 1 iter.", r.from_root);
-      line("ropes from the start leaf, exit 1", r.from_leaf);
-      line("ropes from the start leaf, exit 2", r.from_leaf_exit2);
+      line("ropes from the start leaf, exit 1", r.from_leaf[0]);
+      line("ropes from the start leaf, exit 2", r.from_leaf[1]);
+      line("ropes from the start leaf, exit 3", r.from_leaf[2]);
     }
     if (out) {
       std::fprintf(out, "%d,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%.4f,%.4f,%llu,%llu,%.4f\n", g,
