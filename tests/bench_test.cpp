@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -169,6 +170,45 @@ TEST(Bench, OneSmallCellWithEveryColumn) {
               bounce["mobirt"]["stages_ms"]["traced_rays"].get<double>(),
               0.01 * bounce["mobirt"]["stages_ms"]["traced_rays"].get<double>());
   EXPECT_TRUE(bounce["paper_fps"].is_null());  // a scene given on the command line: no paper figure
+
+  // The targets (issues 16 and 15): each counted again from the cells' ratios, with its range and
+  // its one scene's range, and printed with the same count.
+  EXPECT_NE(r.output.find("Targets (issues 15 and 16)"), std::string::npos) << r.output;
+  ASSERT_TRUE(j["targets"].is_array());
+  std::set<std::string> seen;
+  for (const nlohmann::json& t : j["targets"]) {
+    const std::string label = t["target"].get<std::string>();
+    SCOPED_TRACE(label);
+    const std::string column = t["column"].get<std::string>();
+    const std::string ratio = t["ratio"].get<std::string>();
+    const double at_least = t["at_least"].get<double>();
+    size_t cells = 0, met = 0;
+    double lo = 1e300, hi = -1e300;
+    for (const nlohmann::json& c : j["cells"]) {
+      if (!c["ratios"].contains(column) || !c["ratios"][column].contains(ratio)) continue;
+      const double v = c["ratios"][column][ratio].get<double>();
+      ++cells;
+      met += v >= at_least ? 1 : 0;
+      lo = std::min(lo, v);
+      hi = std::max(hi, v);
+    }
+    EXPECT_EQ(t["cells"].get<size_t>(), cells);
+    EXPECT_EQ(t["met"].get<size_t>(), met);
+    EXPECT_DOUBLE_EQ(t["min"].get<double>(), lo);
+    EXPECT_DOUBLE_EQ(t["max"].get<double>(), hi);
+    ASSERT_EQ(t["scenes"].size(), 1u);
+    EXPECT_EQ(t["scenes"][0]["scene"], "fish");
+    EXPECT_DOUBLE_EQ(t["scenes"][0]["min"].get<double>(), lo);
+    EXPECT_DOUBLE_EQ(t["scenes"][0]["max"].get<double>(), hi);
+    const std::string printed = label + ": " + std::to_string(met) + " of " + std::to_string(cells) + " cells (";
+    EXPECT_NE(r.output.find(printed), std::string::npos) << printed << "\n" << r.output;
+    seen.insert(column + "." + ratio);
+  }
+  for (const char* key : {"mobirt.fps_over_embree", "mobirt_gles.fps_over_embree", "mobirt.traversal_over_embree",
+                          "mobirt.serial_traversal_over_embree"}) {
+    EXPECT_EQ(seen.count(key), 1u) << key;
+  }
+  EXPECT_EQ(seen.count("mobirt.fps_over_ray_query") == 1, ray_query);
 }
 
 // A cell whose primaries are rasterized and whose shadow rays test light buffers (what --primary
@@ -223,6 +263,9 @@ TEST(Bench, NoBaselineSkipsEveryPeer) {
   const nlohmann::json& c = j["cells"][0];
   EXPECT_GT(c["mobirt"]["fps"]["median"].get<double>(), 0.0);
   for (const char* peer : {"embree", "cpu_kd", "ray_query", "compute", "ratios"}) EXPECT_FALSE(c.contains(peer)) << peer;
+  // No peer, no ratio: no target is counted or printed.
+  EXPECT_TRUE(j["targets"].empty()) << j["targets"];
+  EXPECT_EQ(r.output.find("Targets (issues"), std::string::npos) << r.output;
   EXPECT_EQ(j["machine"]["compute"]["skipped"], "--no-baseline");
   EXPECT_EQ(j["settings"]["compute_data"], "storage-buffers");
   // The tree's settings, so that a run with the build's knobs says which (the defaults here).

@@ -52,7 +52,8 @@ storage buffers with a wide hit record (the paper's future work; the same kd-tre
 and shading pass). Prints the table, the stages, every column's CPU time per frame (all threads,
 and the share of the cores it kept busy), and the ratios mobirt / Embree, mobirt / ray query and
 mobirt / compute per cell, for the traversal alone (Mrays/s over the same rays), for the build
-alone (kd-tree vs Embree BVH) and for the CPU time per frame. mobirt's frames are pipelined
+alone (kd-tree vs Embree BVH) and for the CPU time per frame, then how many cells meet each of
+the frame's and the peers' targets (issues 16 and 15). mobirt's frames are pipelined
 (frame N+1 posed and its kd-tree built on a worker while frame N renders; the frame time is the
 loop's period) unless --serial; pipelined, each GPU column also renders every frame a second time
 serially, so that its traversal passes are timed with the cores to themselves, as the peers' are,
@@ -542,6 +543,73 @@ void print_serial_twins(const nlohmann::json& cells, const std::vector<std::stri
   }
 }
 
+// The targets of the frame issue and the peers issue (issues 16 and 15), over the run's cells: how
+// many cells meet each (the exact ratio, not its rounding), its smallest and largest ratio, and
+// the same per scene in the order the scenes ran. A target whose ratio no cell has (a peer left
+// out) is left out. The README's targets tables are this, from one run.
+struct BenchTarget {
+  const char* column;  // "mobirt" (Vulkan) or "mobirt_gles"
+  const char* ratio;   // a key of cell.ratios.<column>
+  double at_least;
+  const char* label;
+};
+constexpr BenchTarget kBenchTargets[] = {
+    {"mobirt", "fps_over_embree", 1.0, "Vulkan frame >= 1.0x Embree's"},
+    {"mobirt_gles", "fps_over_embree", 0.8, "GLES frame >= 0.8x Embree's"},
+    {"mobirt", "traversal_over_embree", 1.0, "traversal >= 1.0x Embree's, same rays, pipelined"},
+    {"mobirt", "serial_traversal_over_embree", 1.0, "the same, the passes alone (serial twin)"},
+    {"mobirt", "fps_over_ray_query", 1.0, "Vulkan frame >= 1.0x the ray queries'"},
+    {"mobirt", "traversal_over_ray_query", 2.0, "traversal >= 2.0x the ray queries', pipelined"},
+};
+
+nlohmann::json target_summary(const nlohmann::json& cells) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const BenchTarget& t : kBenchTargets) {
+    size_t counted = 0, met = 0;
+    double lo = 0.0, hi = 0.0;
+    nlohmann::json scenes = nlohmann::json::array();  // {scene, min, max} in the order the scenes ran
+    for (const nlohmann::json& c : cells) {
+      if (!c.contains("ratios") || !c["ratios"].contains(t.column)) continue;
+      const nlohmann::json& r = c["ratios"][t.column];
+      if (!r.contains(t.ratio) || !r[t.ratio].is_number()) continue;
+      const double v = r[t.ratio].get<double>();
+      lo = counted == 0 ? v : std::min(lo, v);
+      hi = counted == 0 ? v : std::max(hi, v);
+      ++counted;
+      if (v >= t.at_least) ++met;
+      const std::string scene = c["scene"].get<std::string>();
+      auto it = std::find_if(scenes.begin(), scenes.end(), [&](const nlohmann::json& e) { return e["scene"] == scene; });
+      if (it == scenes.end()) {
+        scenes.push_back({{"scene", scene}, {"min", v}, {"max", v}});
+      } else {
+        (*it)["min"] = std::min((*it)["min"].get<double>(), v);
+        (*it)["max"] = std::max((*it)["max"].get<double>(), v);
+      }
+    }
+    if (counted == 0) continue;
+    out.push_back({{"target", t.label}, {"column", t.column}, {"ratio", t.ratio}, {"at_least", t.at_least},
+                   {"cells", counted}, {"met", met}, {"min", lo}, {"max", hi}, {"scenes", scenes}});
+  }
+  return out;
+}
+
+void print_targets(const nlohmann::json& targets) {
+  if (targets.empty()) return;
+  std::printf("\nTargets (issues 15 and 16) over this run's cells: how many meet each (the exact ratio), its range,\n"
+              "and per scene the range over its levels\n");
+  for (const nlohmann::json& t : targets) {
+    std::printf("%s: %zu of %zu cells (%.2f-%.2fx;", t["target"].get<std::string>().c_str(), t["met"].get<size_t>(),
+                t["cells"].get<size_t>(), t["min"].get<double>(), t["max"].get<double>());
+    const char* sep = " ";
+    for (const nlohmann::json& e : t["scenes"]) {
+      std::printf("%s%s %.2f-%.2fx", sep, e["scene"].get<std::string>().c_str(), e["min"].get<double>(),
+                  e["max"].get<double>());
+      sep = ", ";
+    }
+    std::printf(")\n");
+  }
+}
+
 void print_tables(const nlohmann::json& result) {
   const nlohmann::json& cells = result["cells"];
   if (cells.empty()) return;
@@ -930,7 +998,9 @@ int cmd_bench(const std::vector<std::string>& args) {
     }
   }
   result["cells"] = cells;
+  result["targets"] = target_summary(cells);
   print_tables(result);
+  print_targets(result["targets"]);
 
   if (!json_path.empty()) {
     const std::string text = result.dump(2) + "\n";
