@@ -242,9 +242,18 @@ struct PassStats {
   uint64_t shadow_idle_groups = 0;
 };
 
-// primary_stats, when given: each ray's own closest-hit walk statistics, in ray order.
+// Each ray's closest-hit walk as the pass runs it, and its hit, in ray order (the rope estimate
+// compares its walks with these).
+struct ClosestWalks {
+  std::vector<TraversalTrace> traces;
+  std::vector<Hit> hits;
+};
+
+// primary_stats, when given: each ray's own closest-hit walk statistics, in ray order; closest,
+// when given: the closest-hit walks and hits.
 PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& rays, int stack,
-                   std::vector<SurfaceHit>& hits, std::vector<TraversalStats>* primary_stats = nullptr) {
+                   std::vector<SurfaceHit>& hits, std::vector<TraversalStats>* primary_stats = nullptr,
+                   ClosestWalks* closest = nullptr) {
   PassStats s;
   const size_t lights = scene.lights.size();
   std::vector<RayWalks> walks(rays.count());
@@ -256,6 +265,7 @@ PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& r
     const Ray ray = rays.ray(i);
     TraversalStats ts;
     const Hit h = traverse(tree, ray, stack, ts, -1, RayTest{}, &r.walks[0]);
+    if (closest) closest->hits.push_back(h);
     if (primary_stats) primary_stats->push_back(ts);
     s.steps += ts;
     ++s.rays;
@@ -317,6 +327,10 @@ PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& r
                                                walks_of_light.begin() + long(std::min(walks_of_light.size(), i0 + 8)));
       s.shadow_dense += simulate_walk(group);
     }
+  }
+  if (closest) {
+    closest->traces.reserve(walks.size());
+    for (RayWalks& r : walks) closest->traces.push_back(std::move(r.walks[0]));
   }
   return s;
 }
@@ -413,8 +427,8 @@ EntryEstimate estimate_entry_nodes(const FlatKdTree& tree, const RayBatch& rays,
 // for High Performance GPU Ray Tracing"), estimated, not built. Each leaf keeps its box and, per
 // face, a rope: the node on the other side of that face (optimised: the deepest node whose box
 // still covers the whole face), -1 past the scene's box. A walk enters a leaf at its entry point,
-// tests the leaf's triangles up to its exit, and follows the exit face's rope, walking down from
-// the rope's node to the leaf that holds the exit point. No stack and no restart; a secondary ray
+// tests the leaf's triangles, ends at a hit before the leaf's exit or else follows the exit face's
+// rope, walking down from the rope's node to the leaf that holds the exit point. No stack and no restart; a secondary ray
 // could start at the leaf that holds its origin, found on the CPU, instead of walking down from
 // the root (session 32 counted that first descent at 14-20 of the secondary walks' 21-43
 // node-loop iterations).
@@ -550,8 +564,9 @@ Hit rope_walk(const FlatKdTree& tree, const Ropes& ropes, const Ray& ray, int32_
 }
 
 // Per secondary generation: the closest-hit walks (the light loop aside) in the 4x2 tiles, as the
-// pass walks them now and along ropes, from the root and from the origin's leaf, with 1 to 3
-// node-loop iterations charged for leaving a leaf; the hits compared with the pass's walk.
+// pass walks them now (`walks`, simulate()'s) and along ropes, from the root and from the origin's
+// leaf, with 1 to 3 node-loop iterations charged for leaving a leaf; the hits compared with the
+// pass's walk.
 constexpr int kRopeExitCosts = 3;
 
 struct RopeEstimate {
@@ -563,11 +578,12 @@ struct RopeEstimate {
   double locate_ns = 0.0;  // the CPU's point location per located ray
 };
 
-RopeEstimate estimate_ropes(const FlatKdTree& tree, const RayBatch& rays, int stack) {
+RopeEstimate estimate_ropes(const FlatKdTree& tree, const RayBatch& rays, const ClosestWalks& walks) {
   RopeEstimate e;
   const Ropes ropes = make_ropes(tree);
   const uint32_t n = rays.count();
-  std::vector<TraversalTrace> as_is(n), root(n);
+  const std::vector<TraversalTrace>& as_is = walks.traces;
+  std::vector<TraversalTrace> root(n);
   std::vector<std::vector<TraversalTrace>> leaf(kRopeExitCosts, std::vector<TraversalTrace>(n));
   std::vector<int32_t> start(n, -1);
   std::vector<Ray> ray_of(n);
@@ -591,8 +607,7 @@ RopeEstimate estimate_ropes(const FlatKdTree& tree, const RayBatch& rays, int st
   const auto differs = [](const Hit& a, const Hit& b) { return a.prim != b.prim || (a.valid() && a.t != b.t); };
   for (uint32_t i = 0; i < n; ++i) {
     const Ray& ray = ray_of[i];
-    TraversalStats ts;
-    const Hit h = traverse(tree, ray, stack, ts, -1, RayTest{}, &as_is[i]);
+    const Hit& h = walks.hits[i];
     if (differs(h, rope_walk(tree, ropes, ray, -1, 1, root[i]))) ++e.differ_root;
     for (int c = 0; c < kRopeExitCosts; ++c) {
       const Hit r = rope_walk(tree, ropes, ray, start[i], uint32_t(c + 1), leaf[size_t(c)][i]);
@@ -649,7 +664,9 @@ int run(int argc, char** argv) {
   for (int g = 0; g <= depth && rays.count() > 0; ++g) {
     std::vector<SurfaceHit> hits;
     std::vector<TraversalStats> walk_stats;  // generation 0's, for the entry-node estimate
-    const PassStats s = simulate(tree, scene, rays, stack, hits, g == 0 ? &walk_stats : nullptr);
+    ClosestWalks closest;                     // the secondary generations', for the rope estimate
+    const PassStats s = simulate(tree, scene, rays, stack, hits, g == 0 ? &walk_stats : nullptr,
+                                 g > 0 ? &closest : nullptr);
     const double n = double(s.rays + s.shadow_rays);
     const uint64_t interior = s.steps.nodes_visited - s.steps.leaves_visited;
     const uint64_t empty = s.steps.steps - interior - s.steps.triangles_tested;
@@ -690,7 +707,7 @@ int run(int argc, char** argv) {
                 double(s.folded.lane_node) / double(std::max<uint64_t>(s.tiled.lane_node, 1)));
     if (g > 0) {
       // Weighted 1 to 2 as above: a node iteration against a leaf iteration.
-      const RopeEstimate r = estimate_ropes(tree, rays, stack);
+      const RopeEstimate r = estimate_ropes(tree, rays, closest);
       const auto line = [&](const char* label, const LoopCounts& c) {
         std::printf("      %-34s node iter. %10llu (x%.3f)  leaf iter. %10llu (x%.3f)  1:2 weighted x%.3f\n", label,
                     (unsigned long long)c.node, double(c.node) / double(std::max<uint64_t>(r.as_is.node, 1)),
