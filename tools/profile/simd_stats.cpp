@@ -33,6 +33,9 @@
 //                     short stack, from the root and from the leaf that holds the ray's origin
 //                     (found on the CPU, its cost per ray given), with one to three node-loop
 //                     iterations charged for leaving a leaf; see rope_walk() below
+//   packets           (secondary generations) the closest-hit walks with each 4x2 tile walking one
+//                     node sequence together (a packet traversal): node-loop and triangle-loop
+//                     iterations against the pass's own walk; see packet_walk() below
 //
 // Usage: mobirt_simd_stats SCENE [--mtl F] [--camera SPEC] [--light SPEC]... [--size WxH]
 //        [--stack N] [--bins N] [--leaf-size N] [--isect-cost C] [--depth N]
@@ -637,6 +640,148 @@ RopeEstimate estimate_ropes(const FlatKdTree& tree, const RayBatch& rays, const 
   return e;
 }
 
+// Packet walks (an estimate, not built): the 8 lanes of a 4x2 tile walk one node sequence
+// together (Wald 2004's packet kd-tree traversal), each lane with its own interval and its own hit,
+// so that the node and the triangle a group reads are the same for every lane (one load instead
+// of eight). A node's child is taken if any live lane needs it; when lanes need both, the group
+// goes first to the child that most of them see as near and keeps the other on a full stack with
+// every lane's interval (a lane whose direction sees the other order walks back to front, still
+// exact: a lane drops a node whose interval starts past its best hit). Empty children are never
+// visited (the parent's flags). Counted: nodes fetched (the node loop), triangles tested by the
+// group (the triangle loop: one iteration a primitive of a leaf that a live lane reaches), pops
+// that find no live lane (no fetch), the deepest stack, and rays whose hit differs from the pass's.
+struct PacketCounts {
+  uint64_t node = 0, leaf = 0, empty_pops = 0, differ = 0, groups = 0;
+  uint32_t max_stack = 0;
+};
+
+void packet_walk(const FlatKdTree& tree, const std::vector<Ray>& lanes, std::vector<Hit>& best, PacketCounts& c) {
+  const size_t n = lanes.size();
+  best.assign(n, Hit{});
+  struct Entry {
+    int32_t node;
+    std::array<float, 8> lo, hi;
+    uint32_t live;
+  };
+  Entry cur{0, {}, {}, 0};
+  std::array<glm::vec3, 8> inv{};
+  for (size_t i = 0; i < n; ++i) {
+    float t0 = 0.0f, t1 = 0.0f;
+    if (tree.nodes.empty() || tree.bounds.empty() || !intersect_aabb(tree.bounds, lanes[i], t0, t1)) continue;
+    cur.lo[i] = t0;
+    cur.hi[i] = t1;
+    cur.live |= 1u << i;
+    inv[i] = 1.0f / lanes[i].direction;
+  }
+  if (!cur.live) return;
+  ++c.groups;
+  std::vector<Entry> stack;
+  const auto cull = [&](Entry& e) {
+    for (size_t i = 0; i < n; ++i) {
+      if ((e.live >> i & 1u) && e.lo[i] > best[i].t) e.live &= ~(1u << i);
+    }
+  };
+  for (;;) {
+    if (!cur.live) {
+      if (stack.empty()) return;
+      cur = stack.back();
+      stack.pop_back();
+      cull(cur);
+      if (!cur.live) ++c.empty_pops;
+      continue;
+    }
+    const glm::vec4 nd = tree.nodes[size_t(cur.node)];
+    ++c.node;
+    if (node_texel::is_leaf(nd)) {
+      const uint32_t count = uint32_t(node_texel::leaf_count(nd));
+      const size_t first = size_t(node_texel::leaf_first(nd));
+      for (size_t e = first; e < first + count; ++e) {
+        ++c.leaf;
+        for (size_t i = 0; i < n; ++i) {
+          if (cur.live >> i & 1u) intersect_primitive(tree, tree.leaf_prim(e), lanes[i], best[i]);
+        }
+      }
+      cur.live = 0;
+      continue;
+    }
+    const int a = int(node_texel::axis(nd));
+    const float s = node_texel::split(nd);
+    const int32_t below = cur.node + 1, above = int32_t(node_texel::above_child(nd));
+    const bool empty[2] = {node_texel::below_empty(nd), node_texel::above_empty(nd)};
+    Entry child[2] = {{below, cur.lo, cur.hi, 0}, {above, cur.lo, cur.hi, 0}};
+    int votes = 0;  // lanes that want both children and see "below" first, minus those that see "above" first
+    for (size_t i = 0; i < n; ++i) {
+      if (!(cur.live >> i & 1u)) continue;
+      const glm::vec3& o = lanes[i].origin;
+      const glm::vec3& d = lanes[i].direction;
+      const float tsplit = (s - o[a]) * inv[i][a];
+      const bool below_first = o[a] < s || (o[a] == s && d[a] <= 0.0f);
+      const int near = below_first ? 0 : 1, far = 1 - near;
+      if (tsplit > cur.hi[i] || tsplit <= 0.0f || std::isnan(tsplit)) {
+        if (!empty[near]) child[near].live |= 1u << i;
+      } else if (tsplit < cur.lo[i]) {
+        if (!empty[far]) child[far].live |= 1u << i;
+      } else {
+        if (!empty[near]) {
+          child[near].live |= 1u << i;
+          child[near].hi[i] = tsplit;
+        }
+        if (!empty[far]) {
+          child[far].live |= 1u << i;
+          child[far].lo[i] = tsplit;
+        }
+        if (!empty[near] && !empty[far]) votes += below_first ? 1 : -1;
+      }
+    }
+    if (child[0].live && child[1].live) {
+      const int first = votes >= 0 ? 0 : 1;
+      stack.push_back(child[1 - first]);
+      c.max_stack = std::max(c.max_stack, uint32_t(stack.size()));
+      cur = child[first];
+    } else {
+      cur = child[0].live ? child[0] : child[1];
+    }
+  }
+}
+
+// The closest-hit walks of a generation as packets of the pass's 4x2 tiles, against the pass's
+// own walks on the same tiles (`walks`, simulate()'s).
+struct PacketEstimate {
+  LoopCounts as_is;
+  PacketCounts packet;
+};
+
+PacketEstimate estimate_packets(const FlatKdTree& tree, const RayBatch& rays, const ClosestWalks& walks) {
+  PacketEstimate e;
+  const uint32_t n = rays.count(), w = rays.width, rows = rays.rows();
+  const TraversalTrace idle;
+  for (uint32_t y0 = 0; y0 < rows; y0 += 2) {
+    for (uint32_t x0 = 0; x0 < w; x0 += 4) {
+      std::vector<const TraversalTrace*> g;
+      std::vector<Ray> lanes;
+      std::vector<uint64_t> index;
+      for (uint32_t y = y0; y < std::min(y0 + 2, rows); ++y) {
+        for (uint32_t x = x0; x < std::min(x0 + 4, w); ++x) {
+          const uint64_t i = uint64_t(y) * w + x;
+          g.push_back(i < n ? &walks.traces[i] : &idle);
+          if (i < n) {
+            lanes.push_back(rays.ray(uint32_t(i)));
+            index.push_back(i);
+          }
+        }
+      }
+      e.as_is += simulate_walk(g);
+      std::vector<Hit> best;
+      packet_walk(tree, lanes, best, e.packet);
+      for (size_t k = 0; k < lanes.size(); ++k) {
+        const Hit& h = walks.hits[index[k]];
+        if (h.prim != best[k].prim || (h.valid() && h.t != best[k].t)) ++e.packet.differ;
+      }
+    }
+  }
+  return e;
+}
+
 double occupancy(uint64_t lane, uint64_t group) { return group ? double(lane) / (8.0 * double(group)) : 0.0; }
 
 int run(int argc, char** argv) {
@@ -725,6 +870,14 @@ int run(int argc, char** argv) {
       line("ropes from the start leaf, exit 1", r.from_leaf[0]);
       line("ropes from the start leaf, exit 2", r.from_leaf[1]);
       line("ropes from the start leaf, exit 3", r.from_leaf[2]);
+      const PacketEstimate pk = estimate_packets(tree, rays, closest);
+      std::printf("    packets (closest-hit walks, 4x2 tiles walking one node sequence): node iter. %llu (x%.3f of "
+                  "the pass's %llu), triangle iter. %llu (x%.3f of %llu), pops with no live lane %llu, deepest stack "
+                  "%u, rays whose hit differs %llu\n",
+                  (unsigned long long)pk.packet.node, double(pk.packet.node) / double(std::max<uint64_t>(pk.as_is.node, 1)),
+                  (unsigned long long)pk.as_is.node, (unsigned long long)pk.packet.leaf,
+                  double(pk.packet.leaf) / double(std::max<uint64_t>(pk.as_is.leaf, 1)), (unsigned long long)pk.as_is.leaf,
+                  (unsigned long long)pk.packet.empty_pops, pk.packet.max_stack, (unsigned long long)pk.packet.differ);
     }
     if (out) {
       std::fprintf(out, "%d,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%.4f,%.4f,%llu,%llu,%.4f\n", g,
