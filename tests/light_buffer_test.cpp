@@ -26,18 +26,6 @@
 namespace mobirt {
 namespace {
 
-// Any triangle of `tree` that the segment origin -> light meets (the light buffer's predicate,
-// intersect_triangle, on every triangle).
-bool occluded_by_any(const FlatKdTree& tree, glm::vec3 origin, glm::vec3 light) {
-  const Ray ray{origin, light - origin, 0.0f, 1.0f};
-  const int32_t n = int32_t(tree.triangles.size() / MOBIRT_TEXELS_PER_TRIANGLE);
-  for (int32_t t = 0; t < n; ++t) {
-    Hit h;
-    if (intersect_triangle(tree, t, ray, h)) return true;
-  }
-  return false;
-}
-
 // some_lit: some segments must miss every triangle (not so with the light inside one: each segment
 // ends on it, and intersect_triangle takes t = 1).
 void expect_exact(const Scene& scene, glm::vec3 light, const std::vector<glm::vec3>& origins, int resolution,
@@ -53,7 +41,7 @@ void expect_exact(const Scene& scene, glm::vec3 light, const std::vector<glm::ve
   }
   size_t occluded = 0;
   for (const glm::vec3& o : origins) {
-    const bool expected = occluded_by_any(tree, o, light);
+    const bool expected = test::occluded_by_any(tree, o, light);
     occluded += expected ? 1 : 0;
     ASSERT_EQ(light_buffer_occluded(lb, tree, o), expected)
         << "origin (" << o.x << ", " << o.y << ", " << o.z << ")";

@@ -66,4 +66,14 @@ RayBatch random_rays(const Scene& scene, const Camera& camera, uint32_t count, u
   return rays;
 }
 
+bool occluded_by_any(const FlatKdTree& tree, glm::vec3 origin, glm::vec3 light) {
+  const Ray ray{origin, light - origin, 0.0f, 1.0f};
+  const int32_t n = int32_t(tree.triangles.size() / MOBIRT_TEXELS_PER_TRIANGLE);
+  for (int32_t t = 0; t < n; ++t) {
+    Hit h;
+    if (intersect_triangle(tree, t, ray, h)) return true;
+  }
+  return false;
+}
+
 }  // namespace mobirt::test

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "accel/kdtree.h"
 #include "core/camera.h"
 #include "core/error.h"
 #include "raytree/rays.h"
@@ -72,6 +73,10 @@ inline glm::vec3 random_direction(std::mt19937& rng) {
 // Camera rays through random points of a 400x240 image, and rays from random points in and around
 // the scene box in random directions, alternately; `width` rays a row.
 RayBatch random_rays(const Scene& scene, const Camera& camera, uint32_t count, uint32_t width, uint32_t seed);
+
+// Whether any triangle of `tree` meets the segment origin -> light (a light buffer's predicate,
+// intersect_triangle, on every triangle): the light buffers' brute force.
+bool occluded_by_any(const FlatKdTree& tree, glm::vec3 origin, glm::vec3 light);
 
 }  // namespace mobirt::test
 

@@ -5,10 +5,13 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <string>
 #include <utility>
 #include <vector>
 
+#include "accel/closed_parts.h"
 #include "accel/kdtree.h"
+#include "core/error.h"
 #include "core/parallel.h"
 #include "layout.h"
 
@@ -185,11 +188,12 @@ namespace {
 // face's pyramid), kClipped (it straddles faces: clipped to each), or kEverywhere (through the light).
 constexpr uint8_t kClipped = 6;
 constexpr uint8_t kEverywhere = 7;
+constexpr uint8_t kLeftOut = 8;  // in no list (build_light_buffer's keep)
 
 // A build's working arrays.
 struct BuildScratch {
   std::vector<float> near;        // per triangle
-  std::vector<uint8_t> kind;      // per triangle: its face, kClipped or kEverywhere
+  std::vector<uint8_t> kind;      // per triangle: its face, kClipped, kEverywhere or kLeftOut
   std::vector<Bounds> bounds;     // per triangle: its rectangle where kind is a face
   std::vector<uint64_t> keys[2];  // (near's bits, triangle) for the radix sort
   std::vector<std::pair<int, Bounds>> rects;  // in the order of their triangles' near
@@ -228,13 +232,17 @@ void radix_sort_upper(std::vector<uint64_t>& keys, std::vector<uint64_t>& tmp) {
 }  // namespace
 
 void build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 light, int resolution, LightBuffer& lb,
-                        unsigned threads) {
+                        unsigned threads, std::span<const int8_t> winding) {
   // Made per build, not kept per thread: the frame pipeline's worker is a new thread each frame
   // (std::async), and a thread's copy would keep a large mesh's arrays for the process's life.
   BuildScratch s;
   lb.light = light;
   lb.resolution = resolution;
   const uint32_t triangles = uint32_t(positions.size() / 3);
+  if (!winding.empty() && winding.size() != triangles) {
+    throw Error(ErrorKind::Internal, "build_light_buffer: " + std::to_string(winding.size()) + " windings for " +
+                                         std::to_string(triangles) + " triangles");
+  }
   const size_t cells = size_t(6) * resolution * resolution;
   const glm::dvec3 l(light);
   const double inner = 1.0 - kLightBufferFaceMargin;
@@ -249,6 +257,11 @@ void build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 light, i
     for (uint32_t t = begin; t < end; ++t) {
       const glm::dvec3 c[3] = {glm::dvec3(positions[3 * t]) - l, glm::dvec3(positions[3 * t + 1]) - l,
                                glm::dvec3(positions[3 * t + 2]) - l};
+      if (!winding.empty() && winding[t] != 0 && faces_away(c, winding[t])) {
+        s.kind[t] = kLeftOut;
+        s.keys[0][t] = ~uint64_t(0);  // sorted last, then skipped
+        continue;
+      }
       const double d = point_triangle_distance(glm::dvec3(0.0), c[0], c[1], c[2]);
       float df = float(d);  // rounded down: a lower bound stays one
       if (double(df) > d) df = std::nextafter(df, 0.0f);
@@ -279,6 +292,7 @@ void build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 light, i
       s.bounds[t] = b;
     }
   });
+  lb.left_out = size_t(std::count(s.kind.begin(), s.kind.end(), kLeftOut));
   // Triangles in the order of their nearest distance: each cell's list is filled in that order.
   radix_sort_upper(s.keys[0], s.keys[1]);
   // Their rectangles in that order, and each face's window (the union of its rectangles: the cells
@@ -288,6 +302,7 @@ void build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 light, i
   s.rect_tri.clear();
   Bounds window[6];
   for (const uint64_t key : s.keys[0]) {
+    if (key == ~uint64_t(0)) break;  // the triangles left out, sorted last (no real key is all ones)
     const uint32_t t = uint32_t(key);
     auto add = [&](int face, const Bounds& b) {
       s.rects.emplace_back(face, b);

@@ -55,6 +55,9 @@ struct LightBuffer {
   // 33-62 % of the triangle tests of the paper's scenes and the Utah models skipped (README,
   // *Shadow rays through light buffers*).
   std::vector<uint32_t> sub;
+  // Triangles left out of every list (faces of closed parts turned away from the light:
+  // build_light_buffer's winding, src/accel/closed_parts.h).
+  size_t left_out = 0;
   size_t cells() const { return first.empty() ? 0 : first.size() - 1; }
   // The list a reference finds itself in, on average (sum of count^2 / sum of count): about what a
   // shadow ray that ends on a surface tests, where rays fall as the triangles do.
@@ -72,9 +75,11 @@ inline bool light_buffer_pays(const LightBuffer& lb) {
 
 // The light buffer of the triangles `positions` (three vertices each) around `light`, into `out`
 // (its arrays' memory reused), on `threads` threads (0 = all cores). The same buffer for any
-// thread count.
+// thread count. winding (one per triangle, or empty: all 0): where not 0, the triangle is a face of
+// a closed part with the light outside (light_windings() in src/accel/closed_parts.h) and goes into
+// no list if it faces away from the light (faces_away): a shadow ray does not need it.
 void build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 light, int resolution, LightBuffer& out,
-                        unsigned threads = 0);
+                        unsigned threads = 0, std::span<const int8_t> winding = {});
 inline LightBuffer build_light_buffer(std::span<const glm::vec3> positions, glm::vec3 light, int resolution) {
   LightBuffer lb;
   build_light_buffer(positions, light, resolution, lb);

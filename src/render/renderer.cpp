@@ -14,6 +14,7 @@
 #include <type_traits>
 #include <utility>
 
+#include "accel/closed_parts.h"
 #include "accel/light_buffer.h"
 #include "core/error.h"
 #include "core/parallel.h"
@@ -203,17 +204,28 @@ bool shadow_rays_buffered(const Scene& scene, const RenderSettings& settings) {
 
 namespace {
 
+// The scene's closed parts, whose faces turned away from a light its buffer leaves out: under
+// highp only (the argument needs the front face's test to hold at t up to 1 - 1e-5; fp16 rounds
+// coarser), null elsewhere.
+const ClosedParts* closed_parts_for(const Scene& scene, const RenderSettings& settings) {
+  return settings.shadow_rays.ray_test.precision == Precision::High ? scene.closed_parts.get() : nullptr;
+}
+
 // One light buffer per light of `lights` at `res` cells a face edge (none where res <= 0) over the
-// triangles `positions`; resolution 0 where a light gets none (a directional light).
+// triangles `positions`; resolution 0 where a light gets none (a directional light). parts (may be
+// null): the closed parts of `positions`, whose faces turned away from a light stay out of its lists.
 void light_buffers_for(std::span<const glm::vec3> positions, std::span<const Light> lights, int res,
-                       std::vector<LightBuffer>& out) {
+                       const ClosedParts* parts, std::vector<LightBuffer>& out) {
   out.resize(lights.size());  // each buffer built into its arrays' memory, when it has some
+  std::vector<int8_t> winding;
   for (size_t l = 0; l < lights.size(); ++l) {
     if (res <= 0 || lights[l].type == LightType::Directional) {
       out[l].resolution = 0;
-    } else {
-      build_light_buffer(positions, lights[l].position, res, out[l]);
+      out[l].left_out = 0;
+      continue;
     }
+    if (parts) light_windings(*parts, positions, lights[l].position, winding);
+    build_light_buffer(positions, lights[l].position, res, out[l], 0, winding);
   }
 }
 
@@ -224,7 +236,8 @@ void frame_light_buffers(const Scene& scene, const RenderSettings& settings, std
     out.clear();
     return;
   }
-  light_buffers_for(scene.mesh.positions, scene.lights, scene_shadow_cells(scene, settings), out);
+  light_buffers_for(scene.mesh.positions, scene.lights, scene_shadow_cells(scene, settings),
+                    closed_parts_for(scene, settings), out);
 }
 
 bool primaries_rasterized(const Scene& scene, const RenderSettings& settings) {
@@ -742,7 +755,9 @@ void Renderer::build_light_buffers(const FlatKdTree& tree, const Scene& scene, b
     for (size_t i = 0; i < positions.size(); ++i) {
       positions[i] = glm::vec3(tree.triangles[(i / 3) * MOBIRT_TEXELS_PER_TRIANGLE + i % 3]);
     }
-    light_buffers_for(positions, lights, res, buffers);
+    // The scene's closed parts where the tree's triangles are the scene's mesh as posed.
+    const bool same = scene.closed_parts && positions == scene.mesh.positions;
+    light_buffers_for(positions, lights, res, same ? closed_parts_for(scene, settings_) : nullptr, buffers);
     d.light_buffers_built += size_t(std::count_if(buffers.begin(), buffers.end(),
                                                   [](const LightBuffer& lb) { return lb.resolution > 0; }));
   }
@@ -810,6 +825,14 @@ int Renderer::light_buffers_used() const {
   if (!d.light_buffers) return 0;
   return int(std::count_if(d.light_buffer_heads.begin(), d.light_buffer_heads.end(),
                            [](const glm::vec4& h) { return h.z > 0.5f; }));
+}
+
+size_t Renderer::light_buffer_faces_left_out() const {
+  const Data& d = *data_;
+  size_t n = 0;
+  if (!d.light_buffers) return 0;
+  for (const Data::LightBufferPlace& place : d.light_buffer_places) n += d.prebuilt_light_buffers[place.light].left_out;
+  return n;
 }
 
 bool Renderer::frame_had_kd_tree() const { return data_->tree_walkable; }

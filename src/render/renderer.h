@@ -167,6 +167,9 @@ class Renderer {
   // The lights whose shadow rays test a light buffer in the passes now (--shadow-cells), of the
   // tree uploaded last.
   int light_buffers_used() const;
+  // Of those buffers, the triangles they leave out (faces of closed parts turned away from their
+  // light: src/accel/closed_parts.h), summed over the lights.
+  size_t light_buffer_faces_left_out() const;
   // Whether the last frame had a kd-tree (false: only the primitives' texels, frame_walks_tree).
   bool frame_had_kd_tree() const;
   // The light buffers this renderer built itself since it was made, on the rendering thread: none

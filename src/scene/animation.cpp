@@ -7,6 +7,7 @@
 #include <system_error>
 #include <utility>
 
+#include "accel/closed_parts.h"
 #include "core/error.h"
 #include "scene/validate.h"
 
@@ -94,7 +95,12 @@ AnimatedScene::AnimatedScene(Scene rest, std::shared_ptr<const detail::Animator>
       animator_(std::move(animator)),
       duration_(duration),
       fps_(fps),
-      frames_(frames) {}
+      frames_(frames) {
+  rest_.closed_parts = nullptr;  // found here, for this mesh, whatever the scene carried
+  if (rest_.mesh.triangle_count() <= kClosedPartsMaxTriangles) {
+    rest_.closed_parts = std::make_shared<const ClosedParts>(find_closed_parts(rest_.mesh.positions));
+  }
+}
 
 void AnimatedScene::evaluate(double t, Scene& out) const {
   const TriangleMesh& rm = rest_.mesh;
@@ -112,6 +118,7 @@ void AnimatedScene::evaluate(double t, Scene& out) const {
     om.texcoords = rm.texcoords;
     om.material_ids = rm.material_ids;
   }
+  out.closed_parts = rest_.closed_parts;
   if (std::isnan(t)) t = 0.0;  // infinities clamp like any time outside the animation
   if (!animator_) {
     om.positions.assign(rm.positions.begin(), rm.positions.end());

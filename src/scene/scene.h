@@ -5,6 +5,7 @@
 #include <glm/glm.hpp>
 
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -14,6 +15,8 @@
 #include "core/shapes.h"
 
 namespace mobirt {
+
+struct ClosedParts;
 
 // Whitted/Phong material. How glTF and OBJ materials map onto it is written down in README.md.
 struct Material {
@@ -102,6 +105,10 @@ struct Scene {
   // PLY: +Y).
   glm::vec3 up{0.0f, 1.0f, 0.0f};
   size_t degenerate_triangles = 0;    // zero-area triangles, kept (the tracer skips them), counted
+  // The mesh's closed parts (src/accel/closed_parts.h), found once per scene by AnimatedScene (for
+  // meshes of up to kClosedPartsMaxTriangles) and shared by its poses: the shadow rays' light
+  // buffers leave out their faces turned away from the light. Null: none known, every face listed.
+  std::shared_ptr<const ClosedParts> closed_parts;
 
   size_t primitive_count() const { return mesh.triangle_count() + shapes.size(); }
   Aabb bounds() const;

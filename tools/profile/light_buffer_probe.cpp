@@ -5,7 +5,9 @@
 // whose part of the cell holds the ray's direction: LightBuffer::sub), against the kd-tree's node
 // steps and triangle tests for the same rays (kdtree_traverse.cpp, the traversal pass's CPU twin);
 // every ray's answer checked against the walk's. Measurement only (the renderer's passes run
-// light_buffer_occluded's shader twin).
+// light_buffer_occluded's shader twin). Each resolution is built twice: every face listed, and the
+// faces of the mesh's closed parts turned away from the light left out (the renderer's default,
+// src/accel/closed_parts.h); every answer is checked against the walk both times.
 //
 // Usage: mobirt_light_buffer_probe SCENE [profile_scene.h options] [--res N,N,...]
 #include <algorithm>
@@ -13,7 +15,11 @@
 #include <cstdio>
 #include <cstdlib>
 #include <sstream>
+#include <string>
+#include <utility>
+#include <vector>
 
+#include "accel/closed_parts.h"
 #include "accel/light_buffer.h"
 #include "profile_scene.h"
 #include "raytree/rays.h"
@@ -75,11 +81,21 @@ int run(int argc, char** argv) {
                 100.0 * double(std::count(walk_answer.begin(), walk_answer.end(), 1)) / nrays,
                 double(walk.steps) / nrays, double(walk.nodes_visited) / nrays, double(walk.triangles_tested) / nrays,
                 walk_ms);
-    std::printf("  res  cells  refs/tri  build ms  entries/ray (whole cell)  entries/ray (to the ray's end)  "
+    std::printf("  res  back faces  cells  refs/tri  build ms  entries/ray (whole cell)  entries/ray (to the ray's end)  "
                 "tests/ray (in their parts)  max cell  answers differing  CPU ms  mean list\n");
+    std::vector<std::pair<int, bool>> cases;
     for (int res : resolutions) {
+      cases.emplace_back(res, false);
+      cases.emplace_back(res, true);
+    }
+    // Each resolution twice: every face listed, and the faces of closed parts turned away from the
+    // light left out (src/accel/closed_parts.h; light_windings' time counted in the build).
+    for (const auto& [res, cull] : cases) {
       const auto b0 = std::chrono::steady_clock::now();
-      const LightBuffer lb = build_light_buffer(scene.mesh.positions, light.position, res);
+      std::vector<int8_t> winding;
+      if (cull && scene.closed_parts) light_windings(*scene.closed_parts, scene.mesh.positions, light.position, winding);
+      LightBuffer lb;
+      build_light_buffer(scene.mesh.positions, light.position, res, lb, 0, winding);
       const double build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - b0).count();
       uint64_t whole = 0, cut = 0, tested = 0;
       size_t differ = 0;
@@ -97,7 +113,8 @@ int run(int argc, char** argv) {
         differ += hit != (walk_answer[i] != 0) ? 1 : 0;
       }
       const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-      std::printf("  %3d %6zu %9.2f %9.2f %25.2f %31.2f %27.2f %9u %18zu %7.2f %10.1f\n", res, lb.cells(),
+      std::printf("  %3d %11s %6zu %9.2f %9.2f %25.2f %31.2f %27.2f %9u %18zu %7.2f %10.1f\n", res,
+                  cull ? (std::to_string(lb.left_out) + " out").c_str() : "listed", lb.cells(),
                   double(lb.prims.size()) / double(std::max<size_t>(1, scene.mesh.triangle_count())), build_ms,
                   double(whole) / nrays, double(cut) / nrays, double(tested) / nrays, max_cell, differ, ms,
                   lb.mean_list());
