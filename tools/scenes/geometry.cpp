@@ -34,9 +34,14 @@ Mesh sphere(float radius, int segments, int rings) {
   Mesh m;
   for (int r = 0; r <= rings; ++r) {
     const float theta = kPi * float(r) / float(rings);
+    // The poles exactly on the axis and the seam's last column exactly the first (float sin(pi)
+    // and sin(2 pi) are about 1e-7, not 0): a closed surface, which rounded_box's powers would
+    // otherwise open into a crack along the seam and a hole at the bottom pole.
+    const float st = r == rings ? 0.0f : std::sin(theta), ct = r == rings ? -1.0f : std::cos(theta);
     for (int s = 0; s <= segments; ++s) {
       const float phi = 2.0f * kPi * float(s) / float(segments);
-      const glm::vec3 n(std::sin(theta) * std::cos(phi), std::cos(theta), -std::sin(theta) * std::sin(phi));
+      const float sp = s == segments ? 0.0f : std::sin(phi), cp = s == segments ? 1.0f : std::cos(phi);
+      const glm::vec3 n(st * cp, ct, -st * sp);
       m.vertex(radius * n, n, glm::vec2(float(s) / float(segments), float(r) / float(rings)));
     }
   }
