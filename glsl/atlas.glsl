@@ -14,6 +14,9 @@
 // Where the prelude offers ATLAS_FILTERED (Vulkan: an R8G8B8A8_SRGB page behind a LINEAR sampler),
 // ONE hardware fetch filters, decoding sRGB per texel first. GLSL ES 1.00 has no sRGB textures
 // (no GL_EXT_sRGB on Mesa's ES 2.0 context): 4 NEAREST fetches, each decoded, blended exactly.
+// Under --colour 16 (COLOUR not MOBIRT_COLOUR_8: the image is the product) Vulkan does the same
+// from RGBA8 pages (atlas_page_format's exact pages): llvmpipe's decode of sRGB texels alone held
+// the 16-bit images at 64-66 dB against the reference, where the shader's decode reaches 85-90.
 
 // Every page is declared (SPIR-V cannot drop a binding by a specialization constant); ATLAS_PAGES
 // folds the reads of pages the scene does not have away.
@@ -65,6 +68,19 @@ vec4 atlas_page_read(float page, vec2 xy) {
 vec3 atlas_filtered(float page, vec2 xy) {
   return atlas_page_read(page, xy).rgb;
 }
+// Under --colour 16: one texel of an RGBA8 page at integer coordinates, decoded here.
+vec3 atlas_texel_linear(float page, float x, float y) {
+  vec2 xy = vec2(x, y);
+  vec4 texel;
+  if (ATLAS_PAGES > 2 && page == 2.0) {
+    texel = ATLAS_TEXEL(u_atlas_page2, xy);
+  } else if (ATLAS_PAGES > 1 && page == 1.0) {
+    texel = ATLAS_TEXEL(u_atlas_page1, xy);
+  } else {
+    texel = ATLAS_TEXEL(u_atlas_page0, xy);
+  }
+  return atlas_srgb_to_linear(texel.rgb);
+}
 #else
 vec3 atlas_texel_linear(float page, float x, float y) {
   return atlas_srgb_to_linear(atlas_page_read(page, vec2(x, y)).rgb);
@@ -84,8 +100,8 @@ vec3 sample_atlas(float texture_index, vec2 uv) {
   }
   vec2 w = vec2(atlas_wrap_coord(uv.x, wrap.x), atlas_wrap_coord(uv.y, wrap.y));
 #ifdef ATLAS_FILTERED
-  return atlas_filtered(wrap.z, (tile.xy + w * tile.zw) * (1.0 / float(MOBIRT_ATLAS_SIZE)));
-#else
+  if (COLOUR == MOBIRT_COLOUR_8) return atlas_filtered(wrap.z, (tile.xy + w * tile.zw) * (1.0 / float(MOBIRT_ATLAS_SIZE)));
+#endif
   // Texels floor(p) and floor(p) + 1 lie in [-1, size]: the tile or its gutter.
   vec2 p = w * tile.zw - 0.5;
   vec2 p0 = floor(p);
@@ -95,5 +111,4 @@ vec3 sample_atlas(float texture_index, vec2 uv) {
   vec3 top = mix(atlas_texel_linear(wrap.z, xy0.x, xy0.y), atlas_texel_linear(wrap.z, xy1.x, xy0.y), f.x);
   vec3 bottom = mix(atlas_texel_linear(wrap.z, xy0.x, xy1.y), atlas_texel_linear(wrap.z, xy1.x, xy1.y), f.x);
   return mix(top, bottom, f.y);
-#endif
 }

@@ -19,8 +19,8 @@ size_t texel_bytes(TexelFormat format) {
   throw Error(ErrorKind::Internal, "texel_bytes: unknown texel format " + std::to_string(int(format)));
 }
 
-TexelFormat atlas_page_format(const DeviceInfo& info) {
-  return info.srgb_textures ? TexelFormat::SRGBA8 : TexelFormat::RGBA8;
+TexelFormat atlas_page_format(const DeviceInfo& info, bool exact) {
+  return info.srgb_textures && !exact ? TexelFormat::SRGBA8 : TexelFormat::RGBA8;
 }
 
 std::vector<uint32_t> atlas_linear_bindings(const DeviceInfo& info) {

@@ -216,7 +216,9 @@ class Backend {
 // The atlas pages' format on this device, and the page bindings its shading pass reads through a
 // bilinear sampler: SRGBA8 and all pages with DeviceInfo::srgb_textures (glsl/atlas.glsl's one
 // filtered fetch), else RGBA8 and none (4 NEAREST fetches).
-TexelFormat atlas_page_format(const DeviceInfo& info);
+// exact (--colour 16): RGBA8 pages whatever the device, read texel by texel and decoded in the
+// shader (glsl/atlas.glsl: llvmpipe's sRGB decode is coarser than a 16-bit image).
+TexelFormat atlas_page_format(const DeviceInfo& info, bool exact = false);
 std::vector<uint32_t> atlas_linear_bindings(const DeviceInfo& info);
 
 // A pass description checked the same way by every backend before it builds anything: at most

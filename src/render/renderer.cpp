@@ -699,14 +699,16 @@ PassHandle Renderer::shade_pass(int lights, int textures, int pages, int colour,
 void Renderer::prepare_atlas(const Scene& scene) {
   Data& d = *data_;
   // Textures never change during an animation: rebuild only for another set of textures.
-  std::string key = atlas_key(scene);
+  // 16-bit colour reads exact pages (atlas_page_format).
+  const bool exact = settings_.colour != ColourDepth::Bits8;
+  std::string key = atlas_key(scene) + (exact ? "/exact" : "");
   if (!d.atlas_pages.empty() && key == d.atlas_scene) return;
   for (TextureHandle page : d.atlas_pages) backend_.destroy(page);
   d.atlas_pages.clear();
   d.atlas_data = build_atlas(scene);
   d.has_atlas = !d.atlas_data.empty();
   const uint32_t size = uint32_t(d.atlas_data.size);
-  const TexelFormat format = atlas_page_format(backend_.device_info());
+  const TexelFormat format = atlas_page_format(backend_.device_info(), exact);
   for (const std::vector<uint32_t>& pixels : d.atlas_data.pages) {
     d.atlas_pages.push_back(backend_.create_texture(size, size, format));
     backend_.upload(d.atlas_pages.back(), pixels.data(), pixels.size() * sizeof(uint32_t));
