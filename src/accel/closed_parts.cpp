@@ -27,6 +27,36 @@ float max_component(const glm::vec3& v) { return std::max({v.x, v.y, v.z}); }
 constexpr float kWeld = 1.0f / float(1 << 19);
 constexpr int kWeldCells = 1 << 20;
 
+// A part measured triangle by triangle: its box, and six times the signed volume its triangles
+// enclose (tetrahedra from the part's first corner, in double). find_closed_parts and
+// light_windings (the part as posed) both take its winding from it.
+struct PartMeasure {
+  glm::dvec3 anchor{0.0};
+  bool anchored = false;
+  double volume = 0.0;
+  glm::vec3 lo{INFINITY}, hi{-INFINITY};
+  void add(const glm::vec3* v) {
+    if (!anchored) {
+      anchor = glm::dvec3(v[0]);
+      anchored = true;
+    }
+    const glm::dvec3 a = glm::dvec3(v[0]) - anchor, b = glm::dvec3(v[1]) - anchor, c = glm::dvec3(v[2]) - anchor;
+    volume += glm::dot(a, glm::cross(b, c));
+    for (int k = 0; k < 3; ++k) {
+      lo = glm::min(lo, v[k]);
+      hi = glm::max(hi, v[k]);
+    }
+  }
+  // +1 wound outwards, -1 inwards; 0 where the volume is within a rounding of zero (a double-sided
+  // sheet, every face met by its reverse, encloses nothing).
+  int winding() const {
+    const glm::dvec3 e = glm::dvec3(hi) - glm::dvec3(lo);
+    const double scale = std::max({e.x, e.y, e.z});
+    if (!(std::abs(volume) > 1e-9 * scale * scale * scale)) return 0;
+    return volume > 0.0 ? 1 : -1;
+  }
+};
+
 }  // namespace
 
 ClosedParts find_closed_parts(std::span<const glm::vec3> positions) {
@@ -163,40 +193,23 @@ ClosedParts find_closed_parts(std::span<const glm::vec3> positions) {
   for (uint32_t t = 0; t < triangles; ++t) {
     if (open[t]) root_open[find_root(parent, t)] = 1;
   }
-  std::vector<double> volume(triangles, 0.0);
-  std::vector<glm::dvec3> lo(triangles, glm::dvec3(1e300)), hi(triangles, glm::dvec3(-1e300)), anchor(triangles);
-  std::vector<uint8_t> anchored(triangles, 0);
+  std::vector<PartMeasure> measure(triangles);
   for (uint32_t t = 0; t < triangles; ++t) {
     const uint32_t root = find_root(parent, t);
-    if (root_open[root]) continue;
-    if (!anchored[root]) {
-      anchor[root] = glm::dvec3(positions[3 * t]);
-      anchored[root] = 1;
-    }
-    // Six times the signed volume of the tetrahedron (anchor, triangle), summed over the part.
-    const glm::dvec3 a = glm::dvec3(positions[3 * t]) - anchor[root], b = glm::dvec3(positions[3 * t + 1]) - anchor[root],
-                     c = glm::dvec3(positions[3 * t + 2]) - anchor[root];
-    volume[root] += glm::dot(a, glm::cross(b, c));
-    for (int k = 0; k < 3; ++k) {
-      lo[root] = glm::min(lo[root], glm::dvec3(positions[3 * t + k]));
-      hi[root] = glm::max(hi[root], glm::dvec3(positions[3 * t + k]));
-    }
+    if (!root_open[root]) measure[root].add(&positions[3 * t]);
   }
   std::vector<uint32_t> index(triangles, kOpenPart);
   for (uint32_t t = 0; t < triangles; ++t) {
     const uint32_t root = find_root(parent, t);
     if (root_open[root]) continue;
     if (index[root] == kOpenPart) {
-      // A volume within a rounding of zero (a double-sided sheet: every face met by its reverse)
-      // encloses nothing: open.
-      const glm::dvec3 e = hi[root] - lo[root];
-      const double scale = std::max({e.x, e.y, e.z});
-      if (!(std::abs(volume[root]) > 1e-9 * scale * scale * scale)) {
+      const int winding = measure[root].winding();
+      if (winding == 0) {  // encloses nothing: open
         root_open[root] = 1;
         continue;
       }
       index[root] = uint32_t(r.orientation.size());
-      r.orientation.push_back(volume[root] > 0.0 ? 1.0f : -1.0f);
+      r.orientation.push_back(float(winding));
     }
     r.part[t] = index[root];
   }
@@ -211,10 +224,8 @@ void light_windings(const ClosedParts& parts, std::span<const glm::vec3> positio
   // Each part as posed now: its box, its signed volume (the pose may have mirrored it: the winding
   // is the volume's sign now), whether its corners are finite and its welds still hold.
   const size_t count = parts.parts();
-  std::vector<uint8_t> valid(count, 1), anchored(count, 0);
-  std::vector<glm::vec3> lo(count, glm::vec3(INFINITY)), hi(count, glm::vec3(-INFINITY));
-  std::vector<glm::dvec3> anchor(count);
-  std::vector<double> volume(count, 0.0);
+  std::vector<uint8_t> valid(count, 1);
+  std::vector<PartMeasure> measure(count);
   float big = max_component(glm::abs(light));
   for (size_t t = 0; t < triangles; ++t) {
     const uint32_t p = parts.part[t];
@@ -224,17 +235,8 @@ void light_windings(const ClosedParts& parts, std::span<const glm::vec3> positio
       valid[p] = 0;
       continue;
     }
-    if (!anchored[p]) {
-      anchor[p] = glm::dvec3(v[0]);
-      anchored[p] = 1;
-    }
-    const glm::dvec3 a = glm::dvec3(v[0]) - anchor[p], b = glm::dvec3(v[1]) - anchor[p], c = glm::dvec3(v[2]) - anchor[p];
-    volume[p] += glm::dot(a, glm::cross(b, c));
-    for (int k = 0; k < 3; ++k) {
-      lo[p] = glm::min(lo[p], v[k]);
-      hi[p] = glm::max(hi[p], v[k]);
-    }
-    big = std::max({big, max_component(glm::abs(lo[p])), max_component(glm::abs(hi[p]))});
+    measure[p].add(v);
+    big = std::max({big, max_component(glm::abs(measure[p].lo)), max_component(glm::abs(measure[p].hi))});
   }
   for (size_t v = 0; v + 1 < parts.first.size(); ++v) {
     // Within four times the weld's tolerance at analysis (a turn stretches the largest coordinate
@@ -257,11 +259,9 @@ void light_windings(const ClosedParts& parts, std::span<const glm::vec3> positio
   const float m = 1e-4f * big;
   std::vector<int8_t> sign(count, 0);
   for (size_t p = 0; p < count; ++p) {
-    const bool outside = glm::any(glm::lessThan(light, lo[p] - m)) || glm::any(glm::greaterThan(light, hi[p] + m));
-    const glm::dvec3 e = glm::dvec3(hi[p] - lo[p]);
-    const double scale = std::max({e.x, e.y, e.z});
-    const bool encloses = std::abs(volume[p]) > 1e-9 * scale * scale * scale;
-    sign[p] = valid[p] && outside && encloses ? (volume[p] > 0.0 ? int8_t(1) : int8_t(-1)) : int8_t(0);
+    const PartMeasure& part = measure[p];
+    const bool outside = glm::any(glm::lessThan(light, part.lo - m)) || glm::any(glm::greaterThan(light, part.hi + m));
+    sign[p] = valid[p] && outside ? int8_t(part.winding()) : int8_t(0);
   }
   for (size_t t = 0; t < triangles; ++t) {
     if (parts.part[t] != kOpenPart) winding[t] = sign[parts.part[t]];
