@@ -174,6 +174,46 @@ TEST(ClosedParts, WindingsPerLightAndPose) {
   EXPECT_TRUE(std::all_of(w.begin(), w.end(), [](int8_t x) { return x == 0; })) << "another soup";
 }
 
+// One pose measured for a frame serves each of its lights: the windings equal the one-light call's
+// for lights outside, inside and beside the parts, far away and near, on a mesh posed anew
+// (turned, scaled, one part torn); and a pose of another soup leaves every face in.
+TEST(ClosedParts, OnePoseServesEveryLight) {
+  Scene s;
+  test::add_box(s, {0, 0, 0}, {1, 1, 1}, 0);
+  test::add_box(s, {3, 0, 0}, {4, 1, 1}, 0);
+  Tessellation t;
+  t.segments = 12;
+  tessellate_sphere(s.mesh, {1.5f, 3.0f, 0.5f}, -0.7f, 0, t);
+  const ClosedParts parts = find_closed_parts(s.mesh.positions);
+  ASSERT_EQ(parts.parts(), 3u);
+  std::vector<glm::vec3> posed = s.mesh.positions;
+  for (glm::vec3& v : posed) v = glm::vec3(-v.z, 2.0f * v.y, v.x) + glm::vec3(0.0f, 0.0f, -5.0f);
+  std::vector<glm::vec3> torn = posed;
+  torn[5].y += 0.5f;  // a corner of the first box
+  const glm::vec3 lights[] = {{20, 3, 1}, {-0.5f, 1, -4.5f}, {-0.5f, 6, -3.5f}, {1e5f, -3e4f, 2e5f}, {0, 0, -5}};
+  for (const std::vector<glm::vec3>* positions : {&posed, &torn}) {
+    const PosedParts pose = pose_closed_parts(parts, *positions);
+    ASSERT_EQ(pose.winding.size(), 3u);
+    int differs = 0, nonzero = 0;
+    for (const glm::vec3& light : lights) {
+      std::vector<int8_t> once, each;
+      light_windings(pose, *positions, light, once);
+      light_windings(parts, *positions, light, each);
+      differs += once == each ? 0 : 1;
+      nonzero += int(std::count_if(once.begin(), once.end(), [](int8_t x) { return x != 0; }));
+    }
+    EXPECT_EQ(differs, 0);
+    EXPECT_GT(nonzero, 0);
+  }
+  EXPECT_EQ(pose_closed_parts(parts, torn).winding[0], 0) << "the torn box counts as open";
+  EXPECT_NE(pose_closed_parts(parts, posed).winding[0], 0);
+  const PosedParts other = pose_closed_parts(parts, std::vector<glm::vec3>(30));
+  EXPECT_EQ(other.of, nullptr);
+  std::vector<int8_t> w;
+  light_windings(other, posed, lights[0], w);
+  EXPECT_TRUE(std::all_of(w.begin(), w.end(), [](int8_t x) { return x == 0; }));
+}
+
 // Closed boxes and spheres (wound both ways) among open triangles: with their faces turned away
 // from the light left out, every segment's answer is still brute force's over all triangles, from
 // origins anywhere (inside the closed parts too, and just off their surfaces on both sides), for

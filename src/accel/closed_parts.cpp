@@ -216,17 +216,16 @@ ClosedParts find_closed_parts(std::span<const glm::vec3> positions) {
   return r;
 }
 
-void light_windings(const ClosedParts& parts, std::span<const glm::vec3> positions, glm::vec3 light,
-                    std::vector<int8_t>& winding) {
+PosedParts pose_closed_parts(const ClosedParts& parts, std::span<const glm::vec3> positions) {
+  PosedParts posed;
   const size_t triangles = positions.size() / 3;
-  winding.assign(triangles, 0);
-  if (parts.triangles != triangles || parts.parts() == 0) return;
+  if (parts.triangles != triangles || parts.parts() == 0) return posed;
+  posed.of = &parts;
   // Each part as posed now: its box, its signed volume (the pose may have mirrored it: the winding
   // is the volume's sign now), whether its corners are finite and its welds still hold.
   const size_t count = parts.parts();
   std::vector<uint8_t> valid(count, 1);
   std::vector<PartMeasure> measure(count);
-  float big = max_component(glm::abs(light));
   for (size_t t = 0; t < triangles; ++t) {
     const uint32_t p = parts.part[t];
     if (p == kOpenPart) continue;
@@ -236,7 +235,6 @@ void light_windings(const ClosedParts& parts, std::span<const glm::vec3> positio
       continue;
     }
     measure[p].add(v);
-    big = std::max({big, max_component(glm::abs(measure[p].lo)), max_component(glm::abs(measure[p].hi))});
   }
   for (size_t v = 0; v + 1 < parts.first.size(); ++v) {
     // Within four times the weld's tolerance at analysis (a turn stretches the largest coordinate
@@ -253,19 +251,46 @@ void light_windings(const ClosedParts& parts, std::span<const glm::vec3> positio
       if (p != kOpenPart) valid[p] = 0;
     }
   }
+  posed.lo.resize(count);
+  posed.hi.resize(count);
+  posed.winding.resize(count);
+  for (size_t p = 0; p < count; ++p) {
+    const PartMeasure& part = measure[p];
+    posed.lo[p] = part.lo;
+    posed.hi[p] = part.hi;
+    posed.winding[p] = valid[p] ? int8_t(part.winding()) : int8_t(0);
+    // Every measured part's box, valid or not, as light_windings measured it before the split.
+    if (part.anchored) {
+      posed.largest = std::max({posed.largest, max_component(glm::abs(part.lo)), max_component(glm::abs(part.hi))});
+    }
+  }
+  return posed;
+}
+
+void light_windings(const PosedParts& posed, std::span<const glm::vec3> positions, glm::vec3 light,
+                    std::vector<int8_t>& winding) {
+  const size_t triangles = positions.size() / 3;
+  winding.assign(triangles, 0);
+  if (!posed.of || posed.of->triangles != triangles) return;
+  const ClosedParts& parts = *posed.of;
   // The light outside the part's box by a ten-thousandth of the scene's largest coordinate (the
   // light's included): a segment's last crossing of the part, through a face turned towards the
   // light, then lies at t <= 1 - 1e-5 or so, well inside the shadow test's t <= 1 in float.
-  const float m = 1e-4f * big;
+  const float m = 1e-4f * std::max(posed.largest, max_component(glm::abs(light)));
+  const size_t count = posed.winding.size();
   std::vector<int8_t> sign(count, 0);
   for (size_t p = 0; p < count; ++p) {
-    const PartMeasure& part = measure[p];
-    const bool outside = glm::any(glm::lessThan(light, part.lo - m)) || glm::any(glm::greaterThan(light, part.hi + m));
-    sign[p] = valid[p] && outside ? int8_t(part.winding()) : int8_t(0);
+    const bool outside = glm::any(glm::lessThan(light, posed.lo[p] - m)) || glm::any(glm::greaterThan(light, posed.hi[p] + m));
+    sign[p] = outside ? posed.winding[p] : int8_t(0);
   }
   for (size_t t = 0; t < triangles; ++t) {
     if (parts.part[t] != kOpenPart) winding[t] = sign[parts.part[t]];
   }
+}
+
+void light_windings(const ClosedParts& parts, std::span<const glm::vec3> positions, glm::vec3 light,
+                    std::vector<int8_t>& winding) {
+  light_windings(pose_closed_parts(parts, positions), positions, light, winding);
 }
 
 }  // namespace mobirt

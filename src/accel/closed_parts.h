@@ -55,12 +55,26 @@ struct ClosedParts {
 // The closed parts of the triangles `positions` (three vertices each).
 ClosedParts find_closed_parts(std::span<const glm::vec3> positions);
 
+// The closed parts as posed in one frame, measured once for all of its lights: each part's box, and
+// its winding now (+1 outwards, -1 inwards: the sign of its volume now), 0 where a corner is not
+// finite or a weld no longer holds (the part counts as open this frame).
+struct PosedParts {
+  const ClosedParts* of = nullptr;  // null where the analysis is of another soup: nothing left out
+  std::vector<glm::vec3> lo, hi;
+  std::vector<int8_t> winding;
+  float largest = 0.0f;  // the largest coordinate magnitude of the parts' boxes
+};
+PosedParts pose_closed_parts(const ClosedParts& parts, std::span<const glm::vec3> positions);
+
 // winding[t] for triangle t of `positions` (the soup find_closed_parts analysed, posed anew): the
-// winding of its closed part as posed (+1 outwards, -1 inwards: the sign of its volume now) where
-// its corners are finite, its welds still hold and `light` lies outside its box by a ten-thousandth
-// of the largest coordinate, so that the triangle may be left out of the light's shadow
-// lists if it faces away from the light (faces_away); 0 elsewhere: it stays. Sized to the triangle
-// count; all 0 where `parts` is of another soup.
+// winding of its closed part as posed where that part is valid this frame and `light` lies outside
+// its box by a ten-thousandth of the largest coordinate (the light's included), so that the
+// triangle may be left out of the light's shadow lists if it faces away from the light
+// (faces_away); 0 elsewhere: it stays. Sized to the triangle count; all 0 where `posed` is of
+// another soup. `posed` is pose_closed_parts() of these positions.
+void light_windings(const PosedParts& posed, std::span<const glm::vec3> positions, glm::vec3 light,
+                    std::vector<int8_t>& winding);
+// The same for one light: pose_closed_parts(), then light_windings().
 void light_windings(const ClosedParts& parts, std::span<const glm::vec3> positions, glm::vec3 light,
                     std::vector<int8_t>& winding);
 

@@ -218,13 +218,19 @@ void light_buffers_for(std::span<const glm::vec3> positions, std::span<const Lig
                        const ClosedParts* parts, std::vector<LightBuffer>& out) {
   out.resize(lights.size());  // each buffer built into its arrays' memory, when it has some
   std::vector<int8_t> winding;
+  PosedParts posed;  // measured once a frame, for the first light that uses it
+  bool measured = false;
   for (size_t l = 0; l < lights.size(); ++l) {
     if (res <= 0 || lights[l].type == LightType::Directional) {
       out[l].resolution = 0;
       out[l].left_out = 0;
       continue;
     }
-    if (parts) light_windings(*parts, positions, lights[l].position, winding);
+    if (parts && !measured) {
+      posed = pose_closed_parts(*parts, positions);
+      measured = true;
+    }
+    if (parts) light_windings(posed, positions, lights[l].position, winding);
     build_light_buffer(positions, lights[l].position, res, out[l], 0, winding);
   }
 }
