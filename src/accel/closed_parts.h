@@ -15,10 +15,10 @@
 // through shared edges, and keeps those that are closed two-manifolds wound one way (every
 // directed edge met once each way; triangles with two corners welded together are left out of
 // the topology and stay in the lists) and enclose a volume. Posing moves the vertices, not the
-// topology: light_windings() checks each frame that the corners are finite and the welded ones
-// still meet (a part torn apart counts as open that frame), takes the winding from the part's
-// signed volume as posed (a mirrored pose turns it), and keeps every face of a part whose box the
-// light is not well outside of.
+// topology: pose_closed_parts() checks once a frame that the corners are finite and the welded
+// ones still meet (a part torn apart counts as open that frame) and takes the winding from the
+// part's signed volume as posed (a mirrored pose turns it); light_windings() then keeps, per
+// light, every face of a part whose box the light is not well outside of.
 //
 // Not checked: a part that passes through itself with a fold turned inside out (winding -1 inside
 // the fold) breaks the argument; models do not do that, a bad skin or morph could. And the front

@@ -21,9 +21,10 @@ namespace {
 constexpr const char* kUsage = R"(mobirt: a headless CPU-GPU hybrid Whitted ray tracer (MobiRT on Vulkan)
 
 Usage:
-  mobirt render SCENE -o OUT [options]   render a .gltf, .glb or .obj scene (or an OBJ sequence:
-                                         a folder or a pattern like doll_%02d.obj) to OUT
-  mobirt info [--device D]               print the Vulkan device and the limits that matter here
+  mobirt render SCENE -o OUT [options]   render a .gltf, .glb, .obj, .nff or .ply scene (or an OBJ
+                                         sequence: a folder or a pattern like doll_%02d.obj) to OUT
+  mobirt info [SCENE] [options]          what SCENE needs and the choices made for it, the device
+                                         and the limits that matter here
   mobirt accuracy SCENE [options]        the GPU image against the double-precision reference
   mobirt bench [SCENE...] [options]      the paper's Table 1 with Embree 3 beside it, stage by stage
   mobirt COMMAND --help                  help on one command

@@ -199,8 +199,8 @@ const Setting kSettings[] = {
     {"--shadow-cells", "N|auto", kFrames,
      "point and spot lights' shadow rays test the triangles of one cell of\n"
      "a light buffer (N x N cells per cube face around the light) instead\n"
-     "of walking the kd-tree; 0 walks it; auto: 64 up to 32,768 triangles,\n"
-     "else 0 (default auto)",
+     "of walking the kd-tree; 0 walks it; auto: 64 up to 32,768 triangles\n"
+     "under highp, else 0 (default auto)",
      [](CommonOptions& o, const Value& v) { o.settings.shadow_cells = v.text == "auto" ? -1 : v.integer(0, 1024); }},
     {"--light", "SPEC", kViews,
      "replaces the scene's lights (repeat for several):\n"

@@ -29,9 +29,10 @@
 namespace mobirt {
 namespace {
 
-constexpr const char* kRenderAbout = R"(Renders SCENE (.gltf, .glb or .obj) with the paper's passes: CPU kd-tree and primary rays, GPU
-traversal with shadow rays, CPU hit decoding, GPU Phong shading. OUT's extension picks the format
-(.png, .jpg: 8 bits; .exr, .hdr: float). The file is written whole or not at all.
+constexpr const char* kRenderAbout = R"(Renders SCENE (.gltf, .glb, .obj, .nff or .ply) with the paper's passes: CPU kd-tree and
+primary rays, GPU traversal with shadow rays, CPU hit decoding, GPU Phong shading. OUT's
+extension picks the format (.png, .jpg: 8 bits; .exr, .hdr: float). The file is written whole
+or not at all.
 )";
 
 constexpr const char* kHelp = "mobirt --help";
@@ -234,7 +235,8 @@ int cmd_render(const std::vector<std::string>& args) {
   cl.option("-o,--output", "FILE", "output image (required)", [&](const cli::Value& v) { output = v.text; });
   cl.option("--frames", "A:B",
             "render frames A to B of the animation at --fps into OUT, a pattern\n"
-            "such as out/frame_%04d.png; the kd-tree is rebuilt every frame",
+            "such as out/frame_%04d.png; each frame posed anew (its kd-tree rebuilt\n"
+            "where a ray walks one), the next posed and built while one renders",
             [&](const cli::Value& v) {
               int first = 0, last = 0;
               char extra = 0;
