@@ -3,6 +3,7 @@
 // frame, a static scene keeps its tree, and a worker's error reaches the caller.
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <filesystem>
@@ -187,6 +188,33 @@ TEST(FramePipeline, PosesTheNextFrameWhileTheFrameRenders) {
   ASSERT_EQ(pose_threads.size(), kFrames);
   EXPECT_EQ(pose_threads[0], std::this_thread::get_id());  // the first frame has nothing to hide behind
   for (size_t i = 1; i < kFrames; ++i) EXPECT_NE(pose_threads[i], std::this_thread::get_id()) << i;
+  // One worker for the pipeline's life (not a thread started per frame).
+  for (size_t i = 2; i < kFrames; ++i) EXPECT_EQ(pose_threads[i], pose_threads[1]) << i;
+}
+
+// A pipeline dropped while its worker still prepares the next frame waits for it and ends its
+// thread; one dropped after its last frame ends the idle worker.
+TEST(FramePipeline, EndsItsWorkerWhenDropped) {
+  MovingScene moving;
+  std::atomic<int> posed{0};
+  auto pose = [&](int slot, size_t index) {
+    if (index == 1) std::this_thread::sleep_for(std::chrono::milliseconds(50));  // still busy when dropped
+    moving.pose(slot, index);
+    ++posed;
+    return std::make_pair(static_cast<const Scene*>(&moving.slots[slot]), *moving.slots[slot].camera);
+  };
+  {
+    FramePipeline pipeline(5, pose, KdBuildOptions{}, true, true);
+    pipeline.step(0, [](PreparedFrame&) {});  // starts preparing frame 1
+  }
+  EXPECT_EQ(posed.load(), 2);  // frame 1's preparation ran to its end before the pipeline went
+  posed = 0;
+  {
+    FramePipeline pipeline(2, pose, KdBuildOptions{}, true, true);
+    pipeline.step(0, [](PreparedFrame&) {});
+    pipeline.step(1, [](PreparedFrame&) {});
+  }
+  EXPECT_EQ(posed.load(), 2);
 }
 
 // Serial, each frame is posed on the calling thread just before it renders.

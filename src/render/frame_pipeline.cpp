@@ -13,6 +13,41 @@ FramePipeline::FramePipeline(size_t frames, Pose pose, const KdBuildOptions& kd,
 
 FramePipeline::~FramePipeline() {
   if (ahead_.valid()) ahead_.wait();  // its error, if any, dies with the pipeline
+  if (worker_.joinable()) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stop_ = true;
+    }
+    wake_.notify_one();
+    worker_.join();
+  }
+}
+
+void FramePipeline::worker_loop() {
+  for (;;) {
+    std::packaged_task<double()> job;
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      wake_.wait(lock, [this] { return stop_ || job_.valid(); });
+      if (!job_.valid()) return;  // stopped with nothing left to run
+      job = std::move(job_);
+    }
+    job();  // its result or error goes to ahead_
+  }
+}
+
+void FramePipeline::start_ahead(size_t index) {
+  std::packaged_task<double()> job([this, index] { return prepare(index); });
+  ahead_ = job.get_future();
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    job_ = std::move(job);
+  }
+  if (!worker_.joinable()) {
+    worker_ = std::thread([this] { worker_loop(); });
+  } else {
+    wake_.notify_one();
+  }
 }
 
 double FramePipeline::prepare(size_t index) {
@@ -66,9 +101,7 @@ PipelineStep FramePipeline::step(size_t index, const std::function<void(Prepared
   // failed are prepared here; the others were prepared on the worker during the previous step.
   if (ready_ != index) prepare(index);
   ++next_;
-  if (pipelined_ && next_ < frames_) {
-    ahead_ = std::async(std::launch::async, [this, ahead = next_] { return prepare(ahead); });
-  }
+  if (pipelined_ && next_ < frames_) start_ahead(next_);
   const auto render_start = std::chrono::steady_clock::now();
   const double render_cpu_start = thread_cpu_ms();
   try {

@@ -15,11 +15,14 @@
 // same tree and scene (tests/frame_pipeline_test.cpp).
 #pragma once
 
+#include <condition_variable>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
 #include <future>
+#include <mutex>
 #include <optional>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -109,6 +112,17 @@ class FramePipeline {
   size_t next_ = 0;                // the index the next step must have
   size_t ready_ = SIZE_MAX;        // the index the worker prepared, once it finished without error
   std::future<double> ahead_;      // the worker preparing frame next_
+
+  // The worker: one thread for the pipeline's life, started by the first pipelined step, that
+  // runs one preparation at a time. (A thread started per frame cost its start and, on its first
+  // build, TBB's registration of a new external thread, every frame.)
+  void start_ahead(size_t index);
+  void worker_loop();
+  std::thread worker_;
+  std::mutex mutex_;
+  std::condition_variable wake_;
+  std::packaged_task<double()> job_;  // valid while a preparation waits for the worker
+  bool stop_ = false;
 };
 
 // Frame `f` through `renderer`: with the tree built ahead (swapped into the renderer, f.tree then
