@@ -115,12 +115,18 @@ int data_index(float index) {
 // Data arrays read through buffer references (--data device-addresses): the same buffers, laid
 // out as the storage buffers are, each reached by the address the backend pushes for its binding
 // (layout.h, MOBIRT_PASS_ADDRESSES). A name declares its slot; a read makes the reference.
+// The index is kept below 2^24 (every array's bound, kKdIndexLimit) by a mask: llvmpipe forms the
+// address of every lane of a SIMD group, a lane that is done too, whose index may be any float
+// (NaN, huge) and data_index() of it any int; on an AVX-512 CPU its masked gather then faulted
+// (#GP) on a non-canonical address past the buffer's by 2^31 elements (a Zen 4, 2026-12-06).
+// Within 2^24 elements of the buffer an inactive lane's address stays canonical, and a masked
+// lane's page fault is suppressed.
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer MobirtData_vec4 { vec4 e[]; };
 #define MOBIRT_REFERENCE_TYPE2(element) MobirtData_##element
 #define MOBIRT_REFERENCE_TYPE(element) MOBIRT_REFERENCE_TYPE2(element)
 #define DATA_SAMPLER(slot, name) const int mobirt_slot_##name = slot
 #define DATA_TEXEL(data, index) \
-  MOBIRT_REFERENCE_TYPE(MOBIRT_ELEMENT_##data)(u_address[mobirt_slot_##data]).e[data_index(index)]
+  MOBIRT_REFERENCE_TYPE(MOBIRT_ELEMENT_##data)(u_address[mobirt_slot_##data]).e[data_index(index) & 0xFFFFFF]
 #endif
 #else
 #define DATA_TEXEL(tex, index) texelFetch(tex, data_coord(index), 0)

@@ -196,6 +196,19 @@ const Setting kSettings[] = {
            {"trace", PrimaryHits::Trace}, {"raster", PrimaryHits::Raster}, {"auto", PrimaryHits::Auto}};
        o.settings.primary = v.choice(hits);
      }},
+    {"--mirrors", "HITS", kFrames,
+     "how the first bounce's mirror rays off a flat mirror (the plane of\n"
+     "reflective, flat-shaded triangles that sends the most) find their\n"
+     "closest hits:\n"
+     "trace (through the kd-tree, as every ray) or raster (the scene\n"
+     "mirrored in that plane drawn from the camera, their shadow rays\n"
+     "traced from those hits; the other rays walk), auto (raster where that\n"
+     "plane sends mirror rays from at least half the pixels) (default auto)",
+     [](CommonOptions& o, const Value& v) {
+       static constexpr std::pair<const char*, MirrorHits> hits[] = {
+           {"trace", MirrorHits::Trace}, {"raster", MirrorHits::Raster}, {"auto", MirrorHits::Auto}};
+       o.settings.mirrors = v.choice(hits);
+     }},
     {"--shadow-cells", "N|auto", kFrames,
      "point and spot lights' shadow rays test the triangles of one cell of\n"
      "a light buffer (N x N cells per cube face around the light) instead\n"

@@ -30,6 +30,7 @@ struct GenerationTimings {
   uint32_t hits = 0;
   uint32_t capped = 0;          // rays the loop cap handed back to the CPU
   uint64_t shadow_rays = 0;     // shadow rays cast
+  uint32_t mirrored = 0;        // mirror rays whose hits a raster pass of the mirrored scene found (--mirrors)
   double upload_ms = 0;         // textures uploaded for the passes (generation 0: the tree too)
   double trace_ms = 0;          // closest hits (GPU timestamps; CPU engines: wall clock), with the
                                 // shadow rays where the engine casts them in the same pass
@@ -119,6 +120,15 @@ class WhittedEngine {
   // --primary raster); by default traced as every generation is.
   virtual TracedGeneration trace_primary(const Scene& scene, const Camera&, const RayBatch& rays,
                                          GenerationTimings& g) {
+    return trace(scene, rays, g);
+  }
+
+  // A generation of secondary rays (generation 1: the primary hits' mirror and refracted rays),
+  // which an engine may find partly another way (the fragment passes' --mirrors raster: the mirror
+  // rays off a flat mirror drawn as the scene mirrored in it); by default traced as every
+  // generation is.
+  virtual TracedGeneration trace_secondary(const Scene& scene, const Camera&, int /*generation*/, const RayBatch& rays,
+                                           GenerationTimings& g) {
     return trace(scene, rays, g);
   }
 

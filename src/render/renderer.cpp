@@ -19,6 +19,7 @@
 #include "core/error.h"
 #include "core/parallel.h"
 #include "layout.h"
+#include "raytree/mirror_planes.h"
 #include "raytree/ray_order.h"
 #include "render/whitted.h"
 #include "scene/atlas.h"
@@ -151,6 +152,24 @@ std::vector<float> shade_uniforms(const Scene& scene, int pass_lights) {
                          light.direction, std::cos(light.inner_cone), std::cos(light.outer_cone), {0.0f, 0.0f, 0.0f}});
   }
   return u;
+}
+
+bool device_address_reads_fault(const DeviceInfo& info) {
+#if defined(__x86_64__) || defined(__i386__)
+  return info.is_software && __builtin_cpu_supports("avx512f");
+#else
+  (void)info;
+  return false;
+#endif
+}
+
+const char* mirror_hits_name(MirrorHits mirrors) {
+  switch (mirrors) {
+    case MirrorHits::Trace: return "trace";
+    case MirrorHits::Raster: return "raster";
+    case MirrorHits::Auto: return "auto";
+  }
+  return "?";
 }
 
 const char* primary_hits_name(PrimaryHits primary) {
@@ -509,6 +528,15 @@ class Renderer::Engine final : public WhittedEngine {
     return elapsed_ms(start);
   }
 
+  TracedGeneration trace_secondary(const Scene& scene, const Camera& camera, int generation, const RayBatch& rays,
+                                   GenerationTimings& g) override {
+    TracedGeneration traced;
+    if (generation == 1 && r_.data_->tree_walkable && r_.trace_mirrored(scene, camera, r_.data_->tree, rays, g, traced)) {
+      return traced;
+    }
+    return trace(scene, rays, g);
+  }
+
   TracedGeneration trace(const Scene& scene, const RayBatch& rays, GenerationTimings& g) override {
     TraceResult result = r_.trace_uploaded(scene, r_.data_->tree, rays);
     add_pass(g, result.timing);
@@ -581,6 +609,12 @@ Renderer::Renderer(Backend& backend, const RenderSettings& settings)
   if (settings_.data == DataReads::TexelBuffers && info.texel_buffers) data_kind_ = TextureKind::TexelBuffer;
   if (settings_.data == DataReads::StorageBuffers && info.storage_buffers) data_kind_ = TextureKind::StorageBuffer;
   if (settings_.data == DataReads::DeviceAddresses && info.device_addresses) data_kind_ = TextureKind::DeviceAddress;
+  if (data_kind_ == TextureKind::DeviceAddress && device_address_reads_fault(info)) {
+    throw Error(ErrorKind::BadInput,
+                "--data device-addresses: llvmpipe's reads through buffer references fault at random on a CPU with "
+                "AVX-512 (seen on a Zen 4: a masked gather of a finished lane's address), and this is one; use "
+                "--data storage-buffers (the same buffers, bounds-checked) or texel-buffers");
+  }
   if (settings_.stack_depth < 0 || settings_.stack_depth > MOBIRT_MAX_STACK_DEPTH) {
     throw Error(ErrorKind::BadInput, "--stack " + std::to_string(settings_.stack_depth) +
                                          ": the short stack holds 0 to " +
@@ -1070,6 +1104,140 @@ TracedGeneration Renderer::trace_rasterized(const Scene& scene, const Camera& ca
   if (result.packing != traced.packing) throw Error(ErrorKind::Internal, "--primary raster: the shadow pass packed otherwise");
   parallel_for(hit_count, 0, [&](uint32_t k) { traced.texels[hit_rays.pixel[k]] = result.texels[k]; }, 4096);
   return traced;
+}
+
+bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const FlatKdTree& tree, const RayBatch& rays,
+                              GenerationTimings& g, TracedGeneration& out) {
+  if (settings_.mirrors == MirrorHits::Trace || !scene.shapes.empty() || tree.nodes.empty() || rays.count() == 0) {
+    return false;
+  }
+  Data& d = *data_;
+  const auto stage = Clock::now();
+  const uint32_t width = uint32_t(settings_.width), height = uint32_t(settings_.height);
+  const MirrorPlanes planes = find_mirror_planes(scene);
+  if (planes.planes.empty()) {
+    g.upload_ms += elapsed_ms(stage);
+    return false;
+  }
+  // The planes facing the eye (up to the 8 largest), each turned to face it.
+  const glm::dvec3 eye(camera.eye);
+  const Aabb box = scene.bounds();
+  const auto largest = [](const glm::dvec3& v) { return std::max({std::abs(v.x), std::abs(v.y), std::abs(v.z)}); };
+  const double scale = std::max({largest(glm::dvec3(box.lo)), largest(glm::dvec3(box.hi)), largest(eye)});
+  const double on_plane = 1e-5 * scale;  // a mirror ray's origin: its hit point, offset a little along the normal
+  std::vector<MirrorPlane> candidates;
+  for (size_t p = 0; p < planes.planes.size() && candidates.size() < 8; ++p) {
+    MirrorPlane plane = planes.planes[p];
+    const double eye_side = glm::dot(plane.normal, eye) - plane.offset;
+    if (std::abs(eye_side) <= on_plane) continue;  // the eye in the plane sees it edge-on
+    if (eye_side < 0.0) {
+      plane.normal = -plane.normal;
+      plane.offset = -plane.offset;
+    }
+    candidates.push_back(plane);
+  }
+  // Each ray's plane where it is a mirror ray off one: leaving it on the eye's side, the mirror
+  // image of the line from the eye through its origin (its pixel's primary ray, whose hit on the
+  // plane it starts from). The plane that sends the most is drawn.
+  const uint32_t n = rays.count(), pixels = width * height;
+  constexpr uint8_t kNone = 0xFF;
+  std::vector<uint8_t> plane_of(n, kNone);
+  constexpr uint32_t kChunk = 4096;
+  const uint32_t chunks = chunk_count(n, kChunk);
+  const size_t planes_tried = candidates.size();
+  std::vector<uint32_t> counts(size_t(chunks) * planes_tried, 0);
+  parallel_for_chunks(n, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
+    for (uint32_t i = begin; i < end; ++i) {
+      if (rays.pixel[i] >= pixels) continue;
+      const glm::dvec3 o(rays.origin[i]), dir(rays.direction[i]);
+      const glm::dvec3 v = o - eye;
+      for (size_t p = 0; p < planes_tried; ++p) {
+        const MirrorPlane& plane = candidates[p];
+        const double above = glm::dot(plane.normal, o) - plane.offset;
+        const double dn = glm::dot(dir, plane.normal);
+        if (!(above >= -on_plane && above <= on_plane && dn > 0.0)) continue;
+        const glm::dvec3 back = dir - 2.0 * dn * plane.normal;  // the primary ray's direction, if a mirror ray
+        const double lengths = glm::length(back) * glm::length(v);
+        if (!(lengths > 0.0) || glm::length(glm::cross(back, v)) > 1e-5 * lengths || glm::dot(back, v) <= 0.0) continue;
+        plane_of[i] = uint8_t(p);
+        ++counts[size_t(c) * planes_tried + p];
+        break;
+      }
+    }
+  });
+  size_t best = 0;
+  uint32_t mirrored = 0;
+  for (size_t p = 0; p < planes_tried; ++p) {
+    uint32_t total = 0;
+    for (uint32_t c = 0; c < chunks; ++c) total += counts[size_t(c) * planes_tried + p];
+    if (total > mirrored) {
+      mirrored = total;
+      best = p;
+    }
+  }
+  if (mirrored == 0 || (settings_.mirrors == MirrorHits::Auto && double(mirrored) < kMirrorRasterMinShare * pixels)) {
+    g.upload_ms += elapsed_ms(stage);
+    return false;
+  }
+  const MirrorPlane& plane = candidates[best];
+  std::vector<uint8_t> mirror(n);
+  parallel_for(n, 0, [&](uint32_t i) { mirror[i] = plane_of[i] == uint8_t(best) ? 1 : 0; }, 16384);
+  // The raster pass of the mirrored scene, clipped to the plane's front side.
+  d.raster_vertices.clear();
+  mirrored_raster_vertices(scene.mesh.positions, plane, d.raster_vertices);
+  std::vector<glm::vec3> mirrored_positions(d.raster_vertices.size() / 4);
+  for (size_t k = 0; k < mirrored_positions.size(); ++k) {
+    mirrored_positions[k] = glm::vec3(d.raster_vertices[4 * k], d.raster_vertices[4 * k + 1], d.raster_vertices[4 * k + 2]);
+  }
+  RasterView view{};
+  if (!raster_view(camera, int(width), int(height), mirrored_positions, view)) d.raster_vertices.clear();
+  g.upload_ms += elapsed_ms(stage);
+  backend_.start_raster(d.raster_vertices, view, width, height);
+  d.raster_texels.resize(pixels);
+  add_pass(g, backend_.finish_raster(d.raster_texels));
+
+  // The mirror rays that met a triangle, with its index + 1, through the PRIMARY_HITS pass (their
+  // shadow rays, and a walk where the raster's triangle misses at an edge); the other rays as usual.
+  const auto split = Clock::now();
+  RayBatch& hit_rays = d.hit_rays;
+  hit_rays.clear();
+  hit_rays.width = rays.width;
+  hit_rays.unique_pixels = false;
+  RayBatch rest;
+  rest.width = rays.width;
+  rest.reserve(n - mirrored);
+  for (uint32_t i = 0; i < n; ++i) {
+    if (!mirror[i]) {
+      rest.origin.push_back(rays.origin[i]);
+      rest.direction.push_back(rays.direction[i]);
+      rest.pixel.push_back(i);  // the ray it stands for
+      rest.weight.push_back(glm::vec3(0.0f));
+      continue;
+    }
+    const uint32_t index_plus_one = d.raster_texels[rays.pixel[i]] & 0xFFFFFFu;
+    if (index_plus_one == 0) continue;  // the mirror shows nothing there: a miss
+    hit_rays.origin.push_back(rays.origin[i]);
+    hit_rays.direction.push_back(glm::vec4(glm::vec3(rays.direction[i]), float(index_plus_one)));
+    hit_rays.pixel.push_back(i);
+    hit_rays.weight.push_back(glm::vec3(0.0f));
+  }
+  order_in_simd_tiles(hit_rays);
+  g.upload_ms += elapsed_ms(split);
+  g.mirrored += mirrored;
+  out = TracedGeneration{};
+  out.form = TracedGeneration::Form::PackedTexels;
+  const int lights = pass_lights(int(shadow_lights(scene).size()));
+  out.packing = choose_packing(scene.primitive_count(), lights, scene.source);
+  out.texels.assign(n, pack_trace(out.packing, 0, 0));
+  for (RayBatch* part : {&hit_rays, &rest}) {
+    if (part->count() == 0) continue;
+    TraceResult result = trace_uploaded(scene, tree, *part, part == &hit_rays ? MOBIRT_PRIMARY_HITS_WALK : 0);
+    add_pass(g, result.timing);
+    if (result.packing != out.packing) throw Error(ErrorKind::Internal, "--mirrors raster: a pass packed otherwise");
+    const RayBatch& batch = *part;
+    parallel_for(batch.count(), 0, [&](uint32_t k) { out.texels[batch.pixel[k]] = result.texels[k]; }, 4096);
+  }
+  return true;
 }
 
 int Renderer::pass_lights(int scene_lights) const {

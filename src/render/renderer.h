@@ -46,6 +46,24 @@ enum class DataReads { TexelBuffers, Images, StorageBuffers, DeviceAddresses };
 enum class PrimaryHits { Trace, Raster, Auto };
 const char* primary_hits_name(PrimaryHits primary);
 
+// How the first secondary generation's mirror rays off a flat mirror find their closest hits
+// (src/raytree/mirror_planes.h): Trace, through the kd-tree like every ray (the paper's pipeline);
+// Raster, drawn by a raster pass of the scene mirrored in the mirror's plane and clipped to its
+// front side, seen from the camera, for the rays off the mirror plane that sends the most (of the
+// 8 largest; each the mirror
+// image of its pixel's primary ray), their shadow rays then traced from those hits as the
+// rasterized primaries' are; the other rays walk. Auto (the default): Raster where one plane sends
+// mirror rays from at least half the pixels (kMirrorRasterMinShare), else Trace: measured, the
+// toaster's floor (54 % of the pixels) and the marbles' (84 %) made their frames faster, the Utah
+// toasters' (35 %) slower (README, *Flat mirrors rasterized*).
+enum class MirrorHits { Trace, Raster, Auto };
+// Whether --data device-addresses is refused on this device: llvmpipe (a software device) on a CPU
+// with AVX-512, where its reads through buffer references faulted at random (a masked gather whose
+// inactive lanes held non-canonical addresses: seen on a Zen 4, 2026-12-06, in every kind of frame).
+bool device_address_reads_fault(const DeviceInfo& info);
+const char* mirror_hits_name(MirrorHits mirrors);
+inline constexpr double kMirrorRasterMinShare = 0.5;
+
 struct RenderSettings {
   int width = 400;
   int height = 240;
@@ -70,6 +88,7 @@ struct RenderSettings {
   ColourDepth colour = ColourDepth::Bits8;
   DataReads data = DataReads::TexelBuffers;  // faster on lavapipe (README: "Data reads")
   PrimaryHits primary = PrimaryHits::Auto;
+  MirrorHits mirrors = MirrorHits::Auto;
   // --shadow-cells N: point and spot lights' shadow rays test the triangles of one cell of a light
   // buffer of N x N cells per cube face (src/accel/light_buffer.h) instead of walking the kd-tree;
   // 0: they walk it; -1 (auto, the default): kAutoShadowCells up to kAutoShadowCellsTriangles
@@ -197,6 +216,12 @@ class Renderer {
   TracedGeneration trace_rasterized(const Scene& scene, const Camera& camera, const FlatKdTree& tree,
                                     const RayBatch& rays, GenerationTimings& g, bool walk_edge_misses,
                                     bool started = false);
+  // The first secondary generation `rays` (the primaries through `camera` being one per pixel) with
+  // the mirror rays off the scene's largest mirror plane found by a raster pass of the mirrored
+  // scene (--mirrors), the others traced; false (and `out` untouched) where --mirrors or the rays
+  // say to trace them all. Edge misses of the raster walk `tree`.
+  bool trace_mirrored(const Scene& scene, const Camera& camera, const FlatKdTree& tree, const RayBatch& rays,
+                      GenerationTimings& g, TracedGeneration& out);
   // The raster pass of the primary hits through `camera` at width x height started
   // (Backend::start_raster): the posed triangles' vertices written, the draw submitted; its time
   // on the CPU goes to the generation's upload stage when trace_rasterized finishes it.

@@ -17,6 +17,7 @@ GenerationTimings& GenerationTimings::operator+=(const GenerationTimings& g) {
   hits += g.hits;
   capped += g.capped;
   shadow_rays += g.shadow_rays;
+  mirrored += g.mirrored;
   upload_ms += g.upload_ms;
   trace_ms += g.trace_ms;
   trace_readback_ms += g.trace_readback_ms;
@@ -137,7 +138,7 @@ Image render_whitted(const Scene& scene, const Camera& camera, const RenderSetti
     GenerationTimings g;
     g.rays = rays.count();
     TracedGeneration traced = generation == 0 ? engine.trace_primary(scene, camera, rays, g)
-                                               : engine.trace(scene, rays, g);
+                                               : engine.trace_secondary(scene, camera, generation, rays, g);
 
     stage = std::chrono::steady_clock::now();
     const SurfaceHits hits = decode_generation(scene, settings, tree, rays, std::move(traced), g);
