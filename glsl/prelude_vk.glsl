@@ -119,8 +119,8 @@ int data_index(float index) {
 // address of every lane of a SIMD group, a lane that is done too, whose index may be any float
 // (NaN, huge) and data_index() of it any int; on an AVX-512 CPU its masked gather then faulted
 // (#GP) on a non-canonical address past the buffer's by 2^31 elements (a Zen 4, 2026-12-06).
-// Within 2^24 elements of the buffer an inactive lane's address stays canonical, and a masked
-// lane's page fault is suppressed.
+// The mask ends that kind, not all: other gathers there faulted on addresses with no index in
+// them, so the renderer refuses this mode on such CPUs (device_address_reads_fault).
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer MobirtData_vec4 { vec4 e[]; };
 #define MOBIRT_REFERENCE_TYPE2(element) MobirtData_##element
 #define MOBIRT_REFERENCE_TYPE(element) MOBIRT_REFERENCE_TYPE2(element)

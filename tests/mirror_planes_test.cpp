@@ -245,7 +245,8 @@ TEST_P(MirrorRaster, FramesMatchTracedMirrorRays) {
     }
   }
   // Auto: a small mirror tile on a matte floor sends mirror rays from far fewer than half the
-  // pixels, so they are traced; the marbles' floor at its own view (84 % of the pixels) is drawn.
+  // pixels, so they are traced; the marbles' floor at its own view (84 % of the pixels) is drawn,
+  // at a size where the raster pays (kRasterTrianglesPerPixel), and not at one where it does not.
   Scene tile = materials_scene();
   test::add_triangle(tile, {-10, 0, -10}, {-10, 0, 10}, {10, 0, 10}, 0);
   test::add_triangle(tile, {-10, 0, -10}, {10, 0, 10}, {10, 0, -10}, 0);
@@ -286,13 +287,20 @@ TEST_P(MirrorRaster, FramesMatchTracedMirrorRays) {
   EXPECT_LE(tile_diff.share_over, 0.005);
   const Scene marbles = load_scene(std::string(MOBIRT_SOURCE_DIR "/scenes/marbles.gltf"));
   settings.mirrors = MirrorHits::Auto;
-  settings.width = 48;
-  settings.height = 80;
+  settings.width = 120;  // auto's triangle budget: at most half a triangle a pixel (8,000 here)
+  settings.height = 200;
   Renderer automatic_marbles(*backend, settings);
   FrameTimings front;
   automatic_marbles.render(marbles, *marbles.camera, &front);
   ASSERT_GT(front.generations.size(), 1u);
   EXPECT_GT(front.generations[1].mirrored, front.generations[1].rays / 2) << "auto draws the floor's mirror rays";
+  settings.width = 48;
+  settings.height = 80;
+  Renderer small_marbles(*backend, settings);
+  FrameTimings small;
+  small_marbles.render(marbles, *marbles.camera, &small);
+  ASSERT_GT(small.generations.size(), 1u);
+  EXPECT_EQ(small.generations[1].mirrored, 0u) << "8,000 triangles over 3,840 pixels: the raster does not pay";
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, MirrorRaster, ::testing::Values(Api::Vulkan, Api::Gles), test::api_param_name);

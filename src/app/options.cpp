@@ -203,7 +203,8 @@ const Setting kSettings[] = {
      "trace (through the kd-tree, as every ray) or raster (the scene\n"
      "mirrored in that plane drawn from the camera, their shadow rays\n"
      "traced from those hits; the other rays walk), auto (raster where that\n"
-     "plane sends mirror rays from at least half the pixels) (default auto)",
+     "plane sends mirror rays from at least half the pixels and the mesh has\n"
+     "at most half a triangle a pixel) (default auto)",
      [](CommonOptions& o, const Value& v) {
        static constexpr std::pair<const char*, MirrorHits> hits[] = {
            {"trace", MirrorHits::Trace}, {"raster", MirrorHits::Raster}, {"auto", MirrorHits::Auto}};

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <tuple>
 #include <unordered_map>
 
 namespace mobirt {
@@ -166,8 +167,14 @@ void mirrored_raster_vertices(std::span<const glm::vec3> positions, const Mirror
         ps[count++] = s[k];
       }
       if ((sk > 0.0) != (sj > 0.0)) {
-        const double f = sk / (sk - sj);
-        poly[count] = p[k] + f * (p[j] - p[k]);  // on the cut
+        // From the edge's lesser end (by coordinates), so that the two triangles sharing the edge
+        // cut it at the same point, bit for bit: no crack between their parts.
+        const bool forward = std::tie(p[k].x, p[k].y, p[k].z) < std::tie(p[j].x, p[j].y, p[j].z);
+        const glm::dvec3& a = forward ? p[k] : p[j];
+        const glm::dvec3& b = forward ? p[j] : p[k];
+        const double sa = forward ? sk : sj, sb = forward ? sj : sk;
+        const double f = sa / (sa - sb);
+        poly[count] = a + f * (b - a);  // on the cut
         ps[count] = glm::dot(n, poly[count]) - plane.offset;
         ++count;
       }

@@ -30,7 +30,8 @@ struct GenerationTimings {
   uint32_t hits = 0;
   uint32_t capped = 0;          // rays the loop cap handed back to the CPU
   uint64_t shadow_rays = 0;     // shadow rays cast
-  uint32_t mirrored = 0;        // mirror rays whose hits a raster pass of the mirrored scene found (--mirrors)
+  uint32_t mirrored = 0;        // mirror rays handed to a raster pass of the mirrored scene (--mirrors;
+                                // one it drew nothing for is a miss); its CPU work counts as upload
   double upload_ms = 0;         // textures uploaded for the passes (generation 0: the tree too)
   double trace_ms = 0;          // closest hits (GPU timestamps; CPU engines: wall clock), with the
                                 // shadow rays where the engine casts them in the same pass

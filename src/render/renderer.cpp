@@ -156,7 +156,7 @@ std::vector<float> shade_uniforms(const Scene& scene, int pass_lights) {
 
 bool device_address_reads_fault(const DeviceInfo& info) {
 #if defined(__x86_64__) || defined(__i386__)
-  return info.is_software && __builtin_cpu_supports("avx512f");
+  return info.device.find("llvmpipe") != std::string::npos && __builtin_cpu_supports("avx512f");
 #else
   (void)info;
   return false;
@@ -1111,9 +1111,21 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
   if (settings_.mirrors == MirrorHits::Trace || !scene.shapes.empty() || tree.nodes.empty() || rays.count() == 0) {
     return false;
   }
+  const uint32_t width = uint32_t(settings_.width), height = uint32_t(settings_.height);
+  const uint32_t pixels = width * height;
+  // Auto draws only where the raster pays as --primary auto's does: up to kRasterTrianglesPerPixel
+  // triangles a pixel (llvmpipe sets up every triangle, and the mirror's pass draws every one in
+  // front of the plane), and only in a scene with a material that reflects without refracting.
+  if (settings_.mirrors == MirrorHits::Auto &&
+      double(scene.mesh.triangle_count()) > kRasterTrianglesPerPixel * double(pixels)) {
+    return false;
+  }
+  if (std::none_of(scene.materials.begin(), scene.materials.end(),
+                   [](const Material& m) { return m.reflectance > 0.0f && m.transmittance == 0.0f; })) {
+    return false;
+  }
   Data& d = *data_;
   const auto stage = Clock::now();
-  const uint32_t width = uint32_t(settings_.width), height = uint32_t(settings_.height);
   const MirrorPlanes planes = find_mirror_planes(scene);
   if (planes.planes.empty()) {
     g.upload_ms += elapsed_ms(stage);
@@ -1121,10 +1133,14 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
   }
   // The planes facing the eye (up to the 8 largest), each turned to face it.
   const glm::dvec3 eye(camera.eye);
-  const Aabb box = scene.bounds();
   const auto largest = [](const glm::dvec3& v) { return std::max({std::abs(v.x), std::abs(v.y), std::abs(v.z)}); };
-  const double scale = std::max({largest(glm::dvec3(box.lo)), largest(glm::dvec3(box.hi)), largest(eye)});
-  const double on_plane = 1e-5 * scale;  // a mirror ray's origin: its hit point, offset a little along the normal
+  const double scale = std::max(largest(glm::dvec3(tree.bounds.lo)), largest(glm::dvec3(tree.bounds.hi)));
+  // A mirror ray's origin is its hit point offset along the normal (secondary.cpp, offset_origin):
+  // by the absolute offset, at least a few ulps of the point, or (normal-ulp) up to 256 ulps of
+  // each coordinate. Twice that, and no more, counts as on the plane.
+  const double absolute = double(absolute_offset(tree.bounds, settings_.secondary.offset));
+  const double ulps = (settings_.secondary.offset.mode == OffsetMode::NormalUlp ? 300.0 : 8.0) * scale * 0x1p-23;
+  const double on_plane = 2.0 * std::max(absolute, ulps);
   std::vector<MirrorPlane> candidates;
   for (size_t p = 0; p < planes.planes.size() && candidates.size() < 8; ++p) {
     MirrorPlane plane = planes.planes[p];
@@ -1136,10 +1152,11 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
     }
     candidates.push_back(plane);
   }
-  // Each ray's plane where it is a mirror ray off one: leaving it on the eye's side, the mirror
-  // image of the line from the eye through its origin (its pixel's primary ray, whose hit on the
-  // plane it starts from). The plane that sends the most is drawn.
-  const uint32_t n = rays.count(), pixels = width * height;
+  // Each ray's plane where it is a mirror ray off one: starting on it, leaving it on the eye's
+  // side, the mirror image of its pixel's primary ray (the ray through the pixel centre, which the
+  // raster pass samples). The plane that sends the most is drawn.
+  const CameraBasis basis(camera, int(width), int(height));
+  const uint32_t n = rays.count();
   constexpr uint8_t kNone = 0xFF;
   std::vector<uint8_t> plane_of(n, kNone);
   constexpr uint32_t kChunk = 4096;
@@ -1148,9 +1165,10 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
   std::vector<uint32_t> counts(size_t(chunks) * planes_tried, 0);
   parallel_for_chunks(n, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
     for (uint32_t i = begin; i < end; ++i) {
-      if (rays.pixel[i] >= pixels) continue;
+      const uint32_t pixel = rays.pixel[i];
+      if (pixel >= pixels) continue;
       const glm::dvec3 o(rays.origin[i]), dir(rays.direction[i]);
-      const glm::dvec3 v = o - eye;
+      const glm::dvec3 v(basis.ray(float(pixel % width) + 0.5f, float(pixel / width) + 0.5f).direction);
       for (size_t p = 0; p < planes_tried; ++p) {
         const MirrorPlane& plane = candidates[p];
         const double above = glm::dot(plane.normal, o) - plane.offset;
@@ -1192,7 +1210,16 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
   RasterView view{};
   if (!raster_view(camera, int(width), int(height), mirrored_positions, view)) d.raster_vertices.clear();
   g.upload_ms += elapsed_ms(stage);
-  backend_.start_raster(d.raster_vertices, view, width, height);
+  try {
+    backend_.start_raster(d.raster_vertices, view, width, height);
+  } catch (const Error& e) {
+    // A raster pass over the device's limits (the frame's size): auto traces the mirror rays as
+    // every other ray; --mirrors raster says which option to change.
+    if (settings_.mirrors == MirrorHits::Auto && (e.kind() == ErrorKind::BadInput || e.kind() == ErrorKind::Unsupported)) {
+      return false;
+    }
+    throw Error(e.kind(), std::string("--mirrors raster: ") + e.what() + " (or --mirrors trace)");
+  }
   d.raster_texels.resize(pixels);
   add_pass(g, backend_.finish_raster(d.raster_texels));
 
@@ -1206,7 +1233,11 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
   RayBatch rest;
   rest.width = rays.width;
   rest.reserve(n - mirrored);
-  for (uint32_t i = 0; i < n; ++i) {
+  // In the generation's coherent order (the k-th ray of the order sits at simd_tile_place(k)), so
+  // that each part, laid out in tiles again, keeps neighbouring rays in one SIMD group.
+  const uint32_t tiled = simd_tiled_rays(rays);
+  for (uint32_t k = 0; k < n; ++k) {
+    const uint32_t i = simd_tile_place(k, tiled, rays.width);
     if (!mirror[i]) {
       rest.origin.push_back(rays.origin[i]);
       rest.direction.push_back(rays.direction[i]);
@@ -1222,6 +1253,7 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
     hit_rays.weight.push_back(glm::vec3(0.0f));
   }
   order_in_simd_tiles(hit_rays);
+  order_in_simd_tiles(rest);
   g.upload_ms += elapsed_ms(split);
   g.mirrored += mirrored;
   out = TracedGeneration{};

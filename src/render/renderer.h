@@ -53,7 +53,9 @@ const char* primary_hits_name(PrimaryHits primary);
 // 8 largest; each the mirror
 // image of its pixel's primary ray), their shadow rays then traced from those hits as the
 // rasterized primaries' are; the other rays walk. Auto (the default): Raster where one plane sends
-// mirror rays from at least half the pixels (kMirrorRasterMinShare), else Trace: measured, the
+// mirror rays from at least half the pixels (kMirrorRasterMinShare) and the mesh has at most
+// kRasterTrianglesPerPixel triangles a pixel, else Trace (also where the raster pass is over the
+// device's limits): measured, the
 // toaster's floor (54 % of the pixels) and the marbles' (84 %) made their frames faster, the Utah
 // toasters' (35 %) slower (README, *Flat mirrors rasterized*).
 enum class MirrorHits { Trace, Raster, Auto };
