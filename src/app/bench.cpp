@@ -955,6 +955,7 @@ int cmd_bench(const std::vector<std::string>& args) {
                         {"compute_data", compute_data_name(o.compute_data)},
                         {"kd_rebuilt_every_frame", true},
                         {"primary", primary_hits_name(o.settings.primary)},
+                        {"mirrors", mirror_hits_name(o.settings.mirrors)},
                         {"pipelined", o.pipelined},
                         {"serial_twin", o.pipelined && o.serial_twin},
                         {"build_threads", o.settings.kd.threads},
@@ -977,6 +978,13 @@ int cmd_bench(const std::vector<std::string>& args) {
                 "pass plus the shadow pass from its hits\n",
                 primary_hits_name(o.settings.primary),
                 o.settings.primary == PrimaryHits::Auto ? " where that pays (each cell's \"primary\" in the JSON)" : "");
+  }
+  if (o.settings.mirrors != MirrorHits::Trace) {
+    std::printf("--mirrors %s: the first bounce's mirror rays off a flat mirror found by a raster pass of the scene\n"
+                "mirrored in it%s, not traced as in the paper and as every peer traces them (--mirrors trace: as the\n"
+                "paper); where drawn, mobirt's \"traversal\" of that generation includes that pass\n",
+                mirror_hits_name(o.settings.mirrors),
+                o.settings.mirrors == MirrorHits::Auto ? " where that pays (half the pixels' rays or more)" : "");
   }
   std::printf("machine: %u cores; %s, %s, %s, LP_NUM_THREADS=%s, %d rasterizer threads pinned one per CPU%s; %s on %u threads\n",
               std::thread::hardware_concurrency(), info.api.c_str(), info.device.c_str(), info.driver.c_str(),
