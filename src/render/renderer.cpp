@@ -417,6 +417,13 @@ struct Renderer::Data {
   bool raster_started = false;  // by Engine::start_frame, for this frame's trace_primary
   double raster_start_ms = 0.0;  // start_raster's CPU time, for the generation's upload stage
   RayBatch hit_rays;
+  // find_mirror_planes of the last frame that looked for them, with the triangles and materials it
+  // saw: a mesh that did not move (the bench rebuilds the Utah toasters' still tray every frame)
+  // keeps them.
+  MirrorPlanes mirror_planes;
+  std::vector<glm::vec3> mirror_positions;
+  std::vector<uint32_t> mirror_material_ids;
+  std::vector<glm::vec2> mirror_materials;  // reflectance, transmittance
   // --shadow-cells: per shadow light the head of its light buffer (MOBIRT_TP_LIGHT_BUFFERS; z = 0
   // where it has none) and the lights' positions they were built for.
   std::vector<glm::vec4> light_buffer_heads;
@@ -1126,7 +1133,18 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
   }
   Data& d = *data_;
   const auto stage = Clock::now();
-  const MirrorPlanes planes = find_mirror_planes(scene);
+  std::vector<glm::vec2> materials(scene.materials.size());
+  for (size_t m = 0; m < materials.size(); ++m) {
+    materials[m] = glm::vec2(scene.materials[m].reflectance, scene.materials[m].transmittance);
+  }
+  if (d.mirror_positions != scene.mesh.positions || d.mirror_material_ids != scene.mesh.material_ids ||
+      d.mirror_materials != materials || d.mirror_planes.plane_of.size() != scene.mesh.triangle_count()) {
+    d.mirror_planes = find_mirror_planes(scene);
+    d.mirror_positions = scene.mesh.positions;
+    d.mirror_material_ids = scene.mesh.material_ids;
+    d.mirror_materials = std::move(materials);
+  }
+  const MirrorPlanes& planes = d.mirror_planes;
   if (planes.planes.empty()) {
     g.upload_ms += elapsed_ms(stage);
     return false;
@@ -1162,25 +1180,43 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
   constexpr uint32_t kChunk = 4096;
   const uint32_t chunks = chunk_count(n, kChunk);
   const size_t planes_tried = candidates.size();
+  // Ray i's plane, or planes_tried where it is no mirror ray off any.
+  const auto plane_of_ray = [&](uint32_t i) -> size_t {
+    const uint32_t pixel = rays.pixel[i];
+    if (pixel >= pixels) return planes_tried;
+    const glm::dvec3 o(rays.origin[i]), dir(rays.direction[i]);
+    glm::dvec3 v(0.0);  // the pixel's primary direction, made once a plane holds the origin
+    for (size_t p = 0; p < planes_tried; ++p) {
+      const MirrorPlane& plane = candidates[p];
+      const double above = glm::dot(plane.normal, o) - plane.offset;
+      const double dn = glm::dot(dir, plane.normal);
+      if (!(above >= -on_plane && above <= on_plane && dn > 0.0)) continue;
+      if (v == glm::dvec3(0.0)) v = glm::dvec3(basis.ray(float(pixel % width) + 0.5f, float(pixel / width) + 0.5f).direction);
+      const glm::dvec3 back = dir - 2.0 * dn * plane.normal;  // the primary ray's direction, if a mirror ray
+      const double lengths = glm::length(back) * glm::length(v);
+      if (!(lengths > 0.0) || glm::length(glm::cross(back, v)) > 1e-5 * lengths || glm::dot(back, v) <= 0.0) continue;
+      return p;
+    }
+    return planes_tried;
+  };
+  if (settings_.mirrors == MirrorHits::Auto) {
+    // One ray in 16 first: a frame whose planes are far from auto's share is declined for a
+    // sixteenth of the work (the Utah toasters' tray: 0.7 ms a frame for all its rays).
+    std::vector<uint32_t> sampled(planes_tried + 1, 0);
+    for (uint32_t i = 0; i < n; i += 16) ++sampled[plane_of_ray(i)];
+    const uint32_t most = planes_tried == 0 ? 0 : *std::max_element(sampled.begin(), sampled.end() - 1);
+    if (16.0 * most < 0.75 * kMirrorRasterMinShare * pixels) {
+      g.upload_ms += elapsed_ms(stage);
+      return false;
+    }
+  }
   std::vector<uint32_t> counts(size_t(chunks) * planes_tried, 0);
   parallel_for_chunks(n, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
     for (uint32_t i = begin; i < end; ++i) {
-      const uint32_t pixel = rays.pixel[i];
-      if (pixel >= pixels) continue;
-      const glm::dvec3 o(rays.origin[i]), dir(rays.direction[i]);
-      const glm::dvec3 v(basis.ray(float(pixel % width) + 0.5f, float(pixel / width) + 0.5f).direction);
-      for (size_t p = 0; p < planes_tried; ++p) {
-        const MirrorPlane& plane = candidates[p];
-        const double above = glm::dot(plane.normal, o) - plane.offset;
-        const double dn = glm::dot(dir, plane.normal);
-        if (!(above >= -on_plane && above <= on_plane && dn > 0.0)) continue;
-        const glm::dvec3 back = dir - 2.0 * dn * plane.normal;  // the primary ray's direction, if a mirror ray
-        const double lengths = glm::length(back) * glm::length(v);
-        if (!(lengths > 0.0) || glm::length(glm::cross(back, v)) > 1e-5 * lengths || glm::dot(back, v) <= 0.0) continue;
-        plane_of[i] = uint8_t(p);
-        ++counts[size_t(c) * planes_tried + p];
-        break;
-      }
+      const size_t p = plane_of_ray(i);
+      if (p == planes_tried) continue;
+      plane_of[i] = uint8_t(p);
+      ++counts[size_t(c) * planes_tried + p];
     }
   });
   size_t best = 0;
