@@ -1103,14 +1103,18 @@ TracedGeneration Renderer::trace_rasterized(const Scene& scene, const Camera& ca
   });
   g.upload_ms += elapsed_ms(stage);
   traced.texels.assign(n, pack_trace(traced.packing, 0, 0));
-  if (hit_count == 0) return traced;
   // Edge misses walk where the frame has a kd-tree, else keep their triangle (trace_main.glsl).
-  TraceResult result = trace_uploaded(scene, tree, hit_rays,
-                                      walk_edge_misses ? MOBIRT_PRIMARY_HITS_WALK : MOBIRT_PRIMARY_HITS_PLANE);
-  add_pass(g, result.timing);
-  if (result.packing != traced.packing) throw Error(ErrorKind::Internal, "--primary raster: the shadow pass packed otherwise");
-  parallel_for(hit_count, 0, [&](uint32_t k) { traced.texels[hit_rays.pixel[k]] = result.texels[k]; }, 4096);
+  trace_part(scene, tree, hit_rays, walk_edge_misses ? MOBIRT_PRIMARY_HITS_WALK : MOBIRT_PRIMARY_HITS_PLANE, g, traced);
   return traced;
+}
+
+void Renderer::trace_part(const Scene& scene, const FlatKdTree& tree, const RayBatch& part, int primary_hits,
+                          GenerationTimings& g, TracedGeneration& out) {
+  if (part.count() == 0) return;
+  TraceResult result = trace_uploaded(scene, tree, part, primary_hits);
+  add_pass(g, result.timing);
+  if (result.packing != out.packing) throw Error(ErrorKind::Internal, "a pass over part of a generation packed otherwise");
+  parallel_for(part.count(), 0, [&](uint32_t k) { out.texels[part.pixel[k]] = result.texels[k]; }, 4096);
 }
 
 bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const FlatKdTree& tree, const RayBatch& rays,
@@ -1234,8 +1238,6 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
     return false;
   }
   const MirrorPlane& plane = candidates[best];
-  std::vector<uint8_t> mirror(n);
-  parallel_for(n, 0, [&](uint32_t i) { mirror[i] = plane_of[i] == uint8_t(best) ? 1 : 0; }, 16384);
   // The raster pass of the mirrored scene, clipped to the plane's front side.
   d.raster_vertices.clear();
   mirrored_raster_vertices(scene.mesh.positions, plane, d.raster_vertices);
@@ -1274,7 +1276,7 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
   const uint32_t tiled = simd_tiled_rays(rays);
   for (uint32_t k = 0; k < n; ++k) {
     const uint32_t i = simd_tile_place(k, tiled, rays.width);
-    if (!mirror[i]) {
+    if (plane_of[i] != uint8_t(best)) {
       rest.origin.push_back(rays.origin[i]);
       rest.direction.push_back(rays.direction[i]);
       rest.pixel.push_back(i);  // the ray it stands for
@@ -1297,14 +1299,8 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
   const int lights = pass_lights(int(shadow_lights(scene).size()));
   out.packing = choose_packing(scene.primitive_count(), lights, scene.source);
   out.texels.assign(n, pack_trace(out.packing, 0, 0));
-  for (RayBatch* part : {&hit_rays, &rest}) {
-    if (part->count() == 0) continue;
-    TraceResult result = trace_uploaded(scene, tree, *part, part == &hit_rays ? MOBIRT_PRIMARY_HITS_WALK : 0);
-    add_pass(g, result.timing);
-    if (result.packing != out.packing) throw Error(ErrorKind::Internal, "--mirrors raster: a pass packed otherwise");
-    const RayBatch& batch = *part;
-    parallel_for(batch.count(), 0, [&](uint32_t k) { out.texels[batch.pixel[k]] = result.texels[k]; }, 4096);
-  }
+  trace_part(scene, tree, hit_rays, MOBIRT_PRIMARY_HITS_WALK, g, out);
+  trace_part(scene, tree, rest, 0, g, out);
   return true;
 }
 

@@ -50,14 +50,13 @@ const char* primary_hits_name(PrimaryHits primary);
 // (src/raytree/mirror_planes.h): Trace, through the kd-tree like every ray (the paper's pipeline);
 // Raster, drawn by a raster pass of the scene mirrored in the mirror's plane and clipped to its
 // front side, seen from the camera, for the rays off the mirror plane that sends the most (of the
-// 8 largest; each the mirror
-// image of its pixel's primary ray), their shadow rays then traced from those hits as the
-// rasterized primaries' are; the other rays walk. Auto (the default): Raster where one plane sends
-// mirror rays from at least half the pixels (kMirrorRasterMinShare) and the mesh has at most
-// kRasterTrianglesPerPixel triangles a pixel, else Trace (also where the raster pass is over the
-// device's limits): measured, the
-// toaster's floor (54 % of the pixels) and the marbles' (84 %) made their frames faster, the Utah
-// toasters' (35 %) slower (README, *Flat mirrors rasterized*).
+// 8 largest; each the mirror image of its pixel's primary ray), their shadow rays then traced from
+// those hits as the rasterized primaries' are; the other rays walk. Auto (the default): Raster
+// where one plane sends mirror rays from at least half the pixels (kMirrorRasterMinShare) and the
+// mesh has at most kRasterTrianglesPerPixel triangles a pixel, else Trace (also where the raster
+// pass is over the device's limits): measured, the toaster's floor (54 % of the pixels) and the
+// marbles' (84 %) made their frames faster, the Utah toasters' (35 %) slower (README, *Flat
+// mirrors rasterized*).
 enum class MirrorHits { Trace, Raster, Auto };
 // Whether --data device-addresses is refused on this device: llvmpipe (a software device) on a CPU
 // with AVX-512, where its reads through buffer references faulted at random (a masked gather whose
@@ -219,11 +218,16 @@ class Renderer {
                                     const RayBatch& rays, GenerationTimings& g, bool walk_edge_misses,
                                     bool started = false);
   // The first secondary generation `rays` (the primaries through `camera` being one per pixel) with
-  // the mirror rays off the scene's largest mirror plane found by a raster pass of the mirrored
+  // the mirror rays off the mirror plane that sends the most found by a raster pass of the mirrored
   // scene (--mirrors), the others traced; false (and `out` untouched) where --mirrors or the rays
   // say to trace them all. Edge misses of the raster walk `tree`.
   bool trace_mirrored(const Scene& scene, const Camera& camera, const FlatKdTree& tree, const RayBatch& rays,
                       GenerationTimings& g, TracedGeneration& out);
+  // One pass over `part`, a part of a generation whose rays each hold in `pixel` the index of the
+  // ray they stand for (trace_uploaded with primary_hits), its texels written there in out.texels
+  // (sized to the generation, out.packing set).
+  void trace_part(const Scene& scene, const FlatKdTree& tree, const RayBatch& part, int primary_hits,
+                  GenerationTimings& g, TracedGeneration& out);
   // The raster pass of the primary hits through `camera` at width x height started
   // (Backend::start_raster): the posed triangles' vertices written, the draw submitted; its time
   // on the CPU goes to the generation's upload stage when trace_rasterized finishes it.
