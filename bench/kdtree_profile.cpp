@@ -67,6 +67,9 @@ int main(int argc, char** argv) {
   // MOBIRT_KD_DEEP (deep_levels: 0 = the depth limit alone), MOBIRT_KD_DEEP_REFS (deep_refs).
   if (const char* deep = std::getenv("MOBIRT_KD_DEEP")) options.deep_levels = std::atoi(deep);
   if (const char* deep_refs = std::getenv("MOBIRT_KD_DEEP_REFS")) options.deep_refs = std::atoi(deep_refs);
+  // MOBIRT_KD_RAYS (rays: the rays the tree is built for), MOBIRT_KD_REF_COST (build_ref_cost).
+  if (const char* rays = std::getenv("MOBIRT_KD_RAYS")) options.rays = std::strtod(rays, nullptr);
+  if (const char* cost = std::getenv("MOBIRT_KD_REF_COST")) options.build_ref_cost = std::strtod(cost, nullptr);
   if (env_on("MOBIRT_KD_SSE2")) {
     options.sweep_simd = KdSweepSimd::Sse2;
   }
@@ -162,9 +165,9 @@ int main(int argc, char** argv) {
   const double trace_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - trace_start).count();
   const double tris = double(positions.size() / 3);
   std::printf("%s %s: %.0f triangles, build median %.3f ms (min %.3f, CPU median %.3f) over %d, nodes %zu, refs/tri %.3f, "
-              "sah %.2f, depth %d/%d, hash %016llx; traversal: %zu hits, %.2f steps/ray, %.2f Mrays/s (1 thread)\n",
+              "sah %.2f, largest leaf %zu, depth %d/%d, hash %016llx; traversal: %zu hits, %.2f steps/ray, %.2f Mrays/s (1 thread)\n",
               name.c_str(), kd_build_mode_name(options.build), tris, ms[ms.size() / 2], ms[0], cpu[cpu.size() / 2], iterations, stats.nodes,
-              double(stats.prim_references) / std::max(tris, 1.0), stats.sah_cost, stats.max_depth_reached, tree.max_depth, static_cast<unsigned long long>(hash), hits,
+              double(stats.prim_references) / std::max(tris, 1.0), stats.sah_cost, stats.max_leaf_size, stats.max_depth_reached, tree.max_depth, static_cast<unsigned long long>(hash), hits,
               double(traversal.steps) / double(rays.size()), double(rays.size()) / trace_s * 1e-6);
   return 0;
 }

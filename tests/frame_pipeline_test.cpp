@@ -3,6 +3,7 @@
 // frame, a static scene keeps its tree, and a worker's error reaches the caller.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -37,6 +38,18 @@ std::unique_ptr<Backend> make_backend(Api api) {
 
 class PipelinePerBackend : public ::testing::TestWithParam<Api> {};
 
+// Frame i of the pipeline: `animation` at i / 8 seconds, posed into slots[i % 2]; pipelined.
+FramePipeline animation_pipeline(const AnimatedScene& animation, Scene (&slots)[2], size_t frames,
+                                 const RenderSettings& settings) {
+  return FramePipeline(
+      frames,
+      [&animation, &slots](int slot, size_t index) {
+        animation.evaluate(double(index) / 8.0, slots[slot]);
+        return std::make_pair(static_cast<const Scene*>(&slots[slot]), *slots[slot].camera);
+      },
+      settings.kd, settings.always_rebuild, true);
+}
+
 // The fish at depth 2: refraction, reflection, textures and a swimming goldfish (seen through the
 // glass); frames 1/8 s apart move it; a tree walked every frame, the pipeline without the renderer's
 // settings. The toaster at depth 0: rasterized primaries and no kd-tree, with them, so that its
@@ -54,7 +67,7 @@ TEST_P(PipelinePerBackend, PipelinedFramesEqualSerialFrames) {
     settings.always_rebuild = true;  // as the bench renders
     settings.kd.threads = 2;
     constexpr size_t kFrames = 4;
-    auto seconds = [](size_t index) { return double(index) / 8.0; };
+    auto seconds = [](size_t index) { return double(index) / 8.0; };  // as animation_pipeline
 
     std::unique_ptr<Backend> serial_backend = make_backend(GetParam());
     std::vector<Image> serial;
@@ -72,13 +85,7 @@ TEST_P(PipelinePerBackend, PipelinedFramesEqualSerialFrames) {
     std::unique_ptr<Backend> backend = make_backend(GetParam());
     Renderer renderer(*backend, settings);
     Scene slots[2];
-    FramePipeline pipeline(
-        kFrames,
-        [&](int slot, size_t index) {
-          animation.evaluate(seconds(index), slots[slot]);
-          return std::make_pair(static_cast<const Scene*>(&slots[slot]), *slots[slot].camera);
-        },
-        settings.kd, settings.always_rebuild, true);
+    FramePipeline pipeline = animation_pipeline(animation, slots, kFrames, settings);
     // With the renderer's settings (as the CLI and the bench give them) the worker builds the light
     // buffers; without (the fish), every frame gets a tree and the renderer builds them.
     if (depth == 0) pipeline.set_render_settings(settings);
@@ -110,6 +117,89 @@ TEST_P(PipelinePerBackend, PipelinedFramesEqualSerialFrames) {
       const std::vector<std::string> messages = b->take_debug_messages();
       EXPECT_TRUE(messages.empty()) << test::join(messages);
     }
+  }
+}
+
+// --tree walks on the toaster at depth 1 (primary hits drawn, shadow rays through the light
+// buffer, the floor's mirror rays drawn, the other secondary rays walked): the frames' walks are counted
+// as the passes make them (none for drawn primaries whose shadow rays test a buffer; closest hit
+// plus one shadow ray per ray where all are traced and no buffer is kept), frames 2 on get trees
+// for those walks, smaller than the full tree, and every image is the serial loop's with full
+// trees, bit for bit.
+TEST_P(PipelinePerBackend, TreesBuiltForTheWalksGiveTheFullTreesImages) {
+  const AnimatedScene animation = load_animated_scene(std::string(MOBIRT_SOURCE_DIR) + "/scenes/toaster.gltf");
+  RenderSettings settings;
+  settings.width = 64;
+  settings.height = 40;
+  settings.depth = 1;
+  settings.always_rebuild = true;
+  settings.kd.threads = 2;
+  settings.primary = PrimaryHits::Raster;  // auto traces them at this size (more triangles than pixels)
+  settings.mirrors = MirrorHits::Raster;
+  constexpr size_t kFrames = 5;
+  auto seconds = [](size_t index) { return double(index) / 8.0; };  // as animation_pipeline
+  Scene scene;
+  animation.evaluate(0.0, scene);
+  const uint64_t pixels = uint64_t(settings.width) * uint64_t(settings.height);
+
+  std::unique_ptr<Backend> serial_backend = make_backend(GetParam());
+  {
+    // Every ray traced, no light buffer: each primary ray walks once, and once for the light.
+    RenderSettings traced = settings;
+    traced.depth = 0;
+    traced.primary = PrimaryHits::Trace;
+    traced.shadow_cells = 0;
+    Renderer renderer(*serial_backend, traced);
+    FrameTimings t;
+    renderer.render(scene, *scene.camera, &t);
+    ASSERT_EQ(scene.lights.size(), 1u);
+    EXPECT_EQ(t.sum.walks, 2 * pixels);
+  }
+  std::vector<Image> serial;
+  {
+    RenderSettings full = settings;
+    full.tree = TreeFit::Full;
+    Renderer renderer(*serial_backend, full);
+    for (size_t i = 0; i < kFrames; ++i) {
+      animation.evaluate(seconds(i), scene);
+      serial.push_back(renderer.render(scene, *scene.camera));
+    }
+  }
+  std::unique_ptr<Backend> backend = make_backend(GetParam());
+  Renderer renderer(*backend, settings);
+  Scene slots[2];
+  FramePipeline pipeline = animation_pipeline(animation, slots, kFrames, settings);
+  pipeline.set_render_settings(settings);
+  std::vector<int64_t> walks;
+  for (size_t i = 0; i < kFrames; ++i) {
+    SCOPED_TRACE("frame " + std::to_string(i));
+    Image image;
+    FrameTimings t;
+    pipeline.step(i, [&](PreparedFrame& f) {
+      ASSERT_TRUE(f.tree_built);
+      const size_t full_nodes = build_kdtree(f.scene->mesh.positions, settings.kd).nodes.size();
+      if (i < 2) {
+        EXPECT_EQ(f.tree_rays, 0.0);
+        EXPECT_EQ(f.tree.nodes.size(), full_nodes);
+      } else {
+        EXPECT_EQ(f.tree_rays, std::max(double(walks[i - 2]), 1.0));
+        EXPECT_LT(f.tree.nodes.size(), full_nodes);
+      }
+      image = render_prepared(renderer, f, &t);
+      walks.push_back(f.walks);
+    });
+    ASSERT_EQ(t.generations.size(), 2u);
+    EXPECT_EQ(t.generations[0].walks, 0u);  // drawn primaries, shadow rays through the light buffer
+    EXPECT_EQ(uint64_t(walks.back()), t.sum.walks);
+    EXPECT_LT(t.sum.walks, pixels);  // far fewer than a traced frame's 2 per pixel
+    ASSERT_EQ(image.pixels.size(), serial[i].pixels.size());
+    size_t differing = 0;
+    for (size_t p = 0; p < image.pixels.size(); ++p) differing += image.pixels[p] != serial[i].pixels[p];
+    EXPECT_EQ(differing, 0u) << "pixels that differ from the full trees' frame";
+  }
+  for (Backend* b : {serial_backend.get(), backend.get()}) {
+    const std::vector<std::string> messages = b->take_debug_messages();
+    EXPECT_TRUE(messages.empty()) << test::join(messages);
   }
 }
 
@@ -297,6 +387,47 @@ TEST(FramePipeline, BuildsLightBuffersAndTheTreeOnlyWhereAFrameWalksIt) {
           EXPECT_EQ(light_buffer_pays(f.light_buffers[0]), i == 0);
         }
       });
+    }
+  }
+}
+
+// --tree walks: frame N's kd-tree is built for the walks frame N - 2 reported (the latest frame
+// rendered before N is built, pipelined or serial alike, so both loops build the same trees); the
+// first two frames, a frame two after one that reported nothing, and every frame of --tree full
+// get the full tree; no walk gets a tree for one ray (0 would be unbounded); fewer walks, fewer
+// nodes.
+TEST(FramePipeline, BuildsEachTreeForTheWalksOfTwoFramesBefore) {
+  const Scene scene = test::box_grid_scene();
+  const FlatKdTree full = build_kdtree(scene.mesh.positions, KdBuildOptions{});
+  const std::vector<int64_t> reported = {3, -1, 100000000, 0, 5, 7};  // each frame's walks (-1: not said)
+  for (const TreeFit fit : {TreeFit::Walks, TreeFit::Full}) {
+    for (const bool pipelined : {true, false}) {
+      SCOPED_TRACE(std::string(tree_fit_name(fit)) + (pipelined ? ", pipelined" : ", serial"));
+      RenderSettings settings;  // depth 2: every frame walks a tree
+      settings.tree = fit;
+      FramePipeline pipeline(
+          reported.size(), [&](int, size_t) { return std::make_pair(&scene, *scene.camera); }, KdBuildOptions{},
+          true, pipelined);
+      pipeline.set_render_settings(settings);
+      std::vector<size_t> nodes;
+      for (size_t i = 0; i < reported.size(); ++i) {
+        pipeline.step(i, [&](PreparedFrame& f) {
+          const double expected = fit == TreeFit::Walks && i >= 2 && reported[i - 2] >= 0
+                                      ? std::max(double(reported[i - 2]), 1.0)
+                                      : 0.0;
+          EXPECT_EQ(f.tree_rays, expected) << "frame " << i;
+          nodes.push_back(f.tree.nodes.size());
+          if (expected == 0.0) {
+            EXPECT_EQ(f.tree.nodes, full.nodes) << "frame " << i;
+          }
+          f.walks = reported[i];
+        });
+      }
+      if (fit == TreeFit::Walks) {
+        EXPECT_LT(nodes[2], full.nodes.size());  // for 3 walks
+        EXPECT_LE(nodes[2], nodes[4]);           // 3 against 100,000,000
+        EXPECT_LE(nodes[5], nodes[4]);           // one (no walk) against 100,000,000
+      }
     }
   }
 }

@@ -1212,6 +1212,59 @@ TEST(KdTree, SmallSplitGainMakesFewerNodesAndStaysExact) {
   expect_same_nodes(build_kdtree(soup, quality), build_kdtree(soup, quality_none));
 }
 
+// KdBuildOptions::rays: a tree built for fewer rays has fewer nodes (a split must save those rays
+// more walking than it costs to build), never a leaf of more than rays_leaf_limit references that
+// the full tree does not have, the same nodes for any thread count, and every walk exact; 0 and
+// a count past any node's price give the full tree.
+TEST(KdTree, TreesForFewerRaysHaveFewerNodesAndStayExact) {
+  const Positions mesh = terrain(48);
+  const Positions soup = random_soup(3000, 51);
+  for (const Positions* p : {&mesh, &soup}) {
+    SCOPED_TRACE(p == &mesh ? "terrain" : "soup");
+    const FlatKdTree full = build_kdtree(*p, KdBuildOptions{});
+    const std::vector<Ray> rays = make_rays(full, *p, 600 / test::sanitizer_stride(4), 52);
+    KdBuildOptions unbounded;
+    unbounded.rays = 1e30;
+    expect_same_nodes(full, build_kdtree(*p, unbounded));
+    size_t last_nodes = 0;
+    for (double count : {1.0, 100.0, 10000.0, 1000000.0}) {
+      const std::string what = "rays " + std::to_string(count);
+      SCOPED_TRACE(what);
+      KdBuildOptions o;
+      o.rays = count;
+      const FlatKdTree tree = build_kdtree(*p, o);
+      check_layout(tree, *p, o);
+      ASSERT_EQ(check_rays(tree, rays, what), 0);
+      EXPECT_GE(tree.stats.nodes, last_nodes);
+      EXPECT_LE(tree.stats.nodes, full.stats.nodes);
+      EXPECT_GE(tree.stats.sah_cost, full.stats.sah_cost * 0.999);
+      EXPECT_LE(tree.stats.max_leaf_size, std::max(size_t(o.rays_leaf_limit), full.stats.max_leaf_size));
+      last_nodes = tree.stats.nodes;
+      KdBuildOptions one_thread = o;
+      one_thread.threads = 1;
+      expect_same_nodes(tree, build_kdtree(*p, one_thread));
+    }
+    KdBuildOptions few;
+    few.rays = 1.0;
+    EXPECT_LT(build_kdtree(*p, few).stats.nodes, full.stats.nodes / 4);
+    few.rays_leaf_limit = 8;  // a lower limit: more nodes, leaves of 8 where the rule made them
+    const FlatKdTree limited = build_kdtree(*p, few);
+    EXPECT_LE(limited.stats.max_leaf_size, std::max(size_t(8), full.stats.max_leaf_size));
+    EXPECT_GT(limited.stats.nodes, build_kdtree(*p, KdBuildOptions{.rays = 1.0}).stats.nodes);
+  }
+  for (double bad : {-1.0, std::numeric_limits<double>::infinity(), std::numeric_limits<double>::quiet_NaN()}) {
+    KdBuildOptions o;
+    o.rays = bad;
+    test::expect_bad_input([&] { build_kdtree(soup, o); }, {"rays"});
+    o = KdBuildOptions{};
+    o.build_ref_cost = bad == -1.0 ? -2.0 : bad;
+    test::expect_bad_input([&] { build_kdtree(soup, o); }, {"build_ref_cost"});
+  }
+  KdBuildOptions o;
+  o.rays_leaf_limit = -1;
+  test::expect_bad_input([&] { build_kdtree(soup, o); }, {"rays_leaf_limit"});
+}
+
 TEST(KdTree, NonFiniteAndMalformedInputIsBadInput) {
   Positions p = random_soup(10, 3);
   p[7].y = std::numeric_limits<float>::quiet_NaN();

@@ -169,6 +169,14 @@ constexpr int kFastLeafSize = 3;
 // and 38,681 nodes); 8 to 16 take a little more build time off for more steps per ray.
 constexpr int kFastClusterRefs = 6;
 
+// KdBuildOptions::build_ref_cost's default: what one reference at one node costs the build, in
+// the SAH's units (a traversal step 1, a triangle test intersection_cost = 80). Estimated from the
+// toaster's full build (9 ms of CPU for about 400,000 references at nodes, some 20 ns each) against
+// the CPU walk's cost per SAH unit; in mobirt bench (toaster and marbles, + 1 and + 2 bounces, two
+// rounds each, Zen 4) 100 and 400, with leaf limits of 16, 32 and 64, all ran within the noise of
+// one another (README, *The tree a frame's walks pay for*).
+constexpr double kKdBuildRefCost = 100.0;
+
 // KdBuildOptions::deep_levels of --build fast (kd_deep_levels): pbrt's depth limit stops the
 // project's meshes (they reach it), and the leaves it forces hold the references that cost the
 // traversal passes the most triangle tests. Up to 4 more levels for nodes of more than 10
@@ -517,6 +525,8 @@ class Builder {
     subtree_refs_ = std::clamp(triangle_count_ / 4, kMinSubtreeRefs, kSubtreeRefs);
     cluster_refs_ = size_t(kd_cluster_refs(options));
     deep_refs_ = size_t(std::max(options.deep_refs, 0));
+    build_ref_cost_ = options.build_ref_cost >= 0.0 ? options.build_ref_cost : kKdBuildRefCost;
+    rays_leaf_limit_ = size_t(std::max(options.rays_leaf_limit, 0));
   }
 
   // Into `tree`, whose arrays keep their memory: emptied first, so that resizing them writes
@@ -605,6 +615,8 @@ class Builder {
       const float scale = std::max({ext.x, ext.y, ext.z, magnitude.x, magnitude.y, magnitude.z});
       min_width_ = std::max(kMinWidthRelative * scale, std::numeric_limits<float>::min());
     }
+    const double root_area = area(root);
+    rays_per_area_ = options_.rays > 0.0 && root_area > 0.0 ? options_.rays / root_area : 0.0;
     std::unique_ptr<Histogram> hist;
     if (n >= subtree_refs_ && can_split(n, 0, area(root))) {
       hist = std::make_unique<Histogram>(bins_);
@@ -906,6 +918,11 @@ class Builder {
                                                                     double(n) / double(binned);
     const bool small = n <= size_t(std::max(0, options_.small_node_refs));
     if (!(cost < (small ? leaf_cost * (1.0 - double(small_split_gain_)) : leaf_cost))) return Split{};
+    // The rays the tree is built for (KdBuildOptions::rays): a split that saves them less walking
+    // than it costs to build is not made.
+    if (rays_per_area_ > 0.0 && n <= rays_leaf_limit_ && !(rays_per_area_ * box_area * (leaf_cost - cost) > build_ref_cost_ * double(n))) {
+      return Split{};
+    }
     return best;
   }
 
@@ -1388,6 +1405,10 @@ class Builder {
   int max_depth_ = 0;    // the hard limit: pbrt's depth limit plus kd_deep_levels
   int depth_limit_ = 0;  // pbrt's depth limit, past which only nodes of more than deep_refs_ split
   float min_width_ = std::numeric_limits<float>::min();
+  // KdBuildOptions::rays per unit of the root's surface area (0: unbounded), and build_ref_cost.
+  double rays_per_area_ = 0.0;
+  double build_ref_cost_ = kKdBuildRefCost;
+  size_t rays_leaf_limit_ = 0;
   bool avx2_ = false;  // the CPU runs sweep_avx2
   size_t sparse_refs_ = kSparseSweepRefs;
   float small_split_gain_ = 0.0f;  // options_.small_split_gain, the mode's when -1
@@ -1501,6 +1522,18 @@ void build_into(FlatKdTree& tree, std::span<const glm::vec3> positions, std::spa
   if (options.deep_refs < 0) {
     throw Error(ErrorKind::BadInput, "kd-tree: deep_refs must be 0 or more (got " +
                                          std::to_string(options.deep_refs) + ")");
+  }
+  if (!(options.rays >= 0.0 && std::isfinite(options.rays))) {
+    throw Error(ErrorKind::BadInput, "kd-tree: rays must be 0 (unbounded) or a finite count (got " +
+                                         std::to_string(options.rays) + ")");
+  }
+  if (!(options.build_ref_cost == -1.0 || (options.build_ref_cost >= 0.0 && std::isfinite(options.build_ref_cost)))) {
+    throw Error(ErrorKind::BadInput, "kd-tree: build_ref_cost must be -1 (the default) or a finite cost of 0 or more (got " +
+                                         std::to_string(options.build_ref_cost) + ")");
+  }
+  if (options.rays_leaf_limit < 0) {
+    throw Error(ErrorKind::BadInput, "kd-tree: rays_leaf_limit must be 0 or more (got " +
+                                         std::to_string(options.rays_leaf_limit) + ")");
   }
   if (options.threads < 0) {
     throw Error(ErrorKind::BadInput, "kd-tree: threads must be 0 (all) or more (got " +

@@ -175,6 +175,8 @@ void add_frame(Samples& s, double animate_ms, const FrameTimings& t, double cpu_
     s.add("build_wait", step->wait_ms);
   }
   s.add("build", t.build_ms);
+  s.add("walks", double(g.walks));        // the kd-tree's walks in the passes (GenerationTimings::walks)
+  s.add("mirrored", double(g.mirrored));  // mirror rays drawn (--mirrors)
   s.add("rays", t.rays_ms);
   s.add("upload", g.upload_ms);
   s.add("trace", g.trace_ms);
@@ -333,15 +335,19 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
     // Frame f of GPU column c through a pipeline and a renderer of the column's backend.
     const auto gpu_frame = [&](size_t c, FramePipeline& pipeline, Renderer& renderer, Samples& samples) {
       FrameTimings ft;
-      double pose_ms = 0;
+      double pose_ms = 0, tree_rays = 0;
       const double cpu_start = process_cpu_ms();
       const PipelineStep step = pipeline.step(size_t(f), [&](PreparedFrame& prepared) {
         render_prepared(renderer, prepared, &ft);
         pose_ms = prepared.pose_ms;
+        tree_rays = prepared.tree_built ? prepared.tree_rays : 0.0;
       });
       const double cpu_ms = process_cpu_ms() - cpu_start;
       check_messages(columns[c].backend->take_debug_messages());
-      if (timed) add_frame(samples, pose_ms, ft, cpu_ms, &step);
+      if (timed) {
+        add_frame(samples, pose_ms, ft, cpu_ms, &step);
+        samples.add("tree_rays", tree_rays);  // what its kd-tree was built for (--tree; 0: full)
+      }
       // What the frame had, not what was planned: a light whose buffer does not pay, or a capped
       // ray, makes a frame planned without a kd-tree build one (Renderer::Engine).
       if (timed && renderer.frame_had_kd_tree()) any_kd_tree = true;
@@ -956,6 +962,7 @@ int cmd_bench(const std::vector<std::string>& args) {
                         {"kd_rebuilt_every_frame", true},
                         {"primary", primary_hits_name(o.settings.primary)},
                         {"mirrors", mirror_hits_name(o.settings.mirrors)},
+                        {"tree", tree_fit_name(o.settings.tree)},
                         {"pipelined", o.pipelined},
                         {"serial_twin", o.pipelined && o.serial_twin},
                         {"build_threads", o.settings.kd.threads},
@@ -985,6 +992,11 @@ int cmd_bench(const std::vector<std::string>& args) {
                 "paper); where drawn, mobirt's \"traversal\" of that generation includes that pass\n",
                 mirror_hits_name(o.settings.mirrors),
                 o.settings.mirrors == MirrorHits::Auto ? " where that pays (half the pixels' rays or more)" : "");
+  }
+  if (o.settings.tree == TreeFit::Walks) {
+    std::printf("--tree walks: each frame's kd-tree built for the walks of the tree two frames before (a shallow\n"
+                "tree where most rays are drawn or test light buffers; each cell's \"tree_rays\" and \"walks\" in the\n"
+                "JSON; --tree full: every tree for unboundedly many rays, as the paper and the CPU kd-tree column)\n");
   }
   std::printf("machine: %u cores; %s, %s, %s, LP_NUM_THREADS=%s, %d rasterizer threads pinned one per CPU%s; %s on %u threads\n",
               std::thread::hardware_concurrency(), info.api.c_str(), info.device.c_str(), info.driver.c_str(),

@@ -210,6 +210,15 @@ const Setting kSettings[] = {
            {"trace", MirrorHits::Trace}, {"raster", MirrorHits::Raster}, {"auto", MirrorHits::Auto}};
        o.settings.mirrors = v.choice(hits);
      }},
+    {"--tree", "FIT", kFrames,
+     "what an animation's per-frame kd-tree is built for: walks (the walks\n"
+     "of the tree two frames before: where most rays are drawn or test\n"
+     "light buffers, the shallow tree those few walks pay for) or full (for\n"
+     "unboundedly many rays: the SAH alone, as the paper) (default walks)",
+     [](CommonOptions& o, const Value& v) {
+       static constexpr std::pair<const char*, TreeFit> fits[] = {{"walks", TreeFit::Walks}, {"full", TreeFit::Full}};
+       o.settings.tree = v.choice(fits);
+     }},
     {"--shadow-cells", "N|auto", kFrames,
      "point and spot lights' shadow rays test the triangles of one cell of\n"
      "a light buffer (N x N cells per cube face around the light) instead\n"

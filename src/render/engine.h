@@ -30,6 +30,10 @@ struct GenerationTimings {
   uint32_t hits = 0;
   uint32_t capped = 0;          // rays the loop cap handed back to the CPU
   uint64_t shadow_rays = 0;     // shadow rays cast
+  // Walks of the kd-tree in the passes: each closest-hit ray traced (not drawn), plus one per ray
+  // and shadow light without a light buffer (an upper bound: a miss casts none). What the next
+  // frames' trees are built for (KdBuildOptions::rays, FramePipeline).
+  uint64_t walks = 0;
   uint32_t mirrored = 0;        // mirror rays handed to a raster pass of the mirrored scene (--mirrors;
                                 // one it drew nothing for is a miss); its CPU work counts as upload
   double upload_ms = 0;         // textures uploaded for the passes (generation 0: the tree too)

@@ -1,5 +1,6 @@
 #include "render/frame_pipeline.h"
 
+#include <algorithm>
 #include <chrono>
 #include <string>
 
@@ -9,7 +10,8 @@
 namespace mobirt {
 
 FramePipeline::FramePipeline(size_t frames, Pose pose, const KdBuildOptions& kd, bool always_rebuild, bool pipelined)
-    : frames_(frames), pose_(std::move(pose)), kd_(kd), always_rebuild_(always_rebuild), pipelined_(pipelined) {}
+    : frames_(frames), pose_(std::move(pose)), kd_(kd), always_rebuild_(always_rebuild), pipelined_(pipelined),
+      walks_(frames, -1) {}
 
 FramePipeline::~FramePipeline() {
   if (ahead_.valid()) ahead_.wait();  // its error, if any, dies with the pipeline
@@ -59,6 +61,7 @@ double FramePipeline::prepare(size_t index) {
   f.camera = camera;
   f.pose_ms = elapsed_ms(start);
   const auto build_start = std::chrono::steady_clock::now();
+  f.tree_rays = 0.0;
   f.tree_built = always_rebuild_ || !built_any_ || built_positions_ != scene->mesh.positions ||
                  built_shapes_ != scene->shapes;
   // Into the slot's tree, which holds the arrays of an older tree (render_prepared swaps them
@@ -77,7 +80,12 @@ double FramePipeline::prepare(size_t index) {
   if (f.tree_built && !walks) {
     flatten_primitives(f.tree, scene->mesh.positions, scene->shapes);
   } else if (f.tree_built) {
-    rebuild_kdtree(f.tree, scene->mesh.positions, scene->shapes, kd_);
+    KdBuildOptions kd = kd_;
+    if (settings_ && settings_->tree == TreeFit::Walks && index >= 2 && walks_[index - 2] >= 0) {
+      kd.rays = std::max(double(walks_[index - 2]), 1.0);  // no walk: a tree for one (0 is unbounded)
+    }
+    f.tree_rays = kd.rays;
+    rebuild_kdtree(f.tree, scene->mesh.positions, scene->shapes, kd);
   } else {
     f.tree.clear();
   }
@@ -104,6 +112,7 @@ PipelineStep FramePipeline::step(size_t index, const std::function<void(Prepared
   if (pipelined_ && next_ < frames_) start_ahead(next_);
   const auto render_start = std::chrono::steady_clock::now();
   const double render_cpu_start = thread_cpu_ms();
+  slots_[index % 2].walks = -1;
   try {
     render(slots_[index % 2]);
   } catch (...) {
@@ -111,6 +120,7 @@ PipelineStep FramePipeline::step(size_t index, const std::function<void(Prepared
     throw;
   }
   s.render_ms = elapsed_ms(render_start);
+  walks_[index] = slots_[index % 2].walks;
   s.render_cpu_ms = thread_cpu_ms() - render_cpu_start;
   if (ahead_.valid()) {
     const auto wait_start = std::chrono::steady_clock::now();
@@ -123,8 +133,12 @@ PipelineStep FramePipeline::step(size_t index, const std::function<void(Prepared
 }
 
 Image render_prepared(Renderer& renderer, PreparedFrame& f, FrameTimings* timings) {
-  if (!f.tree_built) return renderer.render(*f.scene, f.camera, timings);
-  return renderer.render(*f.scene, f.camera, f.tree, f.build_ms, timings, &f.light_buffers);
+  FrameTimings own;
+  FrameTimings* t = timings ? timings : &own;
+  Image image = f.tree_built ? renderer.render(*f.scene, f.camera, f.tree, f.build_ms, t, &f.light_buffers)
+                             : renderer.render(*f.scene, f.camera, t);
+  f.walks = int64_t(t->sum.walks);
+  return image;
 }
 
 }  // namespace mobirt

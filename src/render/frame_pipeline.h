@@ -53,6 +53,11 @@ struct PreparedFrame {
   double build_ms = 0.0;        // the kd-tree and light buffers' build, wall clock; pipelined, on
                                 // the worker while the previous frame rendered, so not part of
                                 // this frame's time
+  double tree_rays = 0.0;       // the rays its kd-tree was built for (KdBuildOptions::rays; 0: a full tree)
+  // Set by render_prepared: the frame's walks of the kd-tree (GenerationTimings::walks, all
+  // generations); -1 where the render callback did not say. With --tree walks, frame N + 2's tree
+  // is built for them.
+  int64_t walks = -1;
 };
 
 // What one step cost, on the rendering thread's clock (milliseconds).
@@ -92,8 +97,10 @@ class FramePipeline {
 
   // The renderer's settings: a frame gets a kd-tree where frame_walks_tree says it walks one, else
   // only the primitives' texels (flatten_primitives), and its light buffers (frame_light_buffers)
-  // are built with it. Without, every frame gets a kd-tree and no light buffer is built ahead. Set
-  // before the first step.
+  // are built with it; with --tree walks (RenderSettings::tree), frame N's kd-tree is built for
+  // the walks frame N - 2 reported (the latest frame rendered before it is built, pipelined or
+  // not, so that both loops build the same trees). Without, every frame gets a full kd-tree and
+  // no light buffer is built ahead. Set before the first step.
   void set_render_settings(const RenderSettings& settings) { settings_ = settings; }
 
  private:
@@ -105,6 +112,7 @@ class FramePipeline {
   bool always_rebuild_;
   bool pipelined_;
   std::optional<RenderSettings> settings_;  // empty: every frame walks a tree, no light buffers ahead
+  std::vector<int64_t> walks_;     // per frame, as its render reported them (-1: not, or not yet)
   PreparedFrame slots_[2];
   std::vector<glm::vec3> built_positions_;  // of the last tree built (when not always_rebuild)
   std::vector<Shape> built_shapes_;         // and its analytic shapes

@@ -172,6 +172,8 @@ const char* mirror_hits_name(MirrorHits mirrors) {
   return "?";
 }
 
+const char* tree_fit_name(TreeFit fit) { return fit == TreeFit::Walks ? "walks" : "full"; }
+
 const char* primary_hits_name(PrimaryHits primary) {
   switch (primary) {
     case PrimaryHits::Trace: return "trace";
@@ -547,6 +549,7 @@ class Renderer::Engine final : public WhittedEngine {
   TracedGeneration trace(const Scene& scene, const RayBatch& rays, GenerationTimings& g) override {
     TraceResult result = r_.trace_uploaded(scene, r_.data_->tree, rays);
     add_pass(g, result.timing);
+    g.walks += result.walks;
     TracedGeneration traced;
     traced.form = TracedGeneration::Form::PackedTexels;
     traced.texels = std::move(result.texels);
@@ -996,6 +999,14 @@ TraceResult Renderer::trace_uploaded(const Scene& scene, const FlatKdTree& tree,
   result.texels.resize(rays.count());
   result.timing = backend_.run_pass(pass, textures, uniforms, rays.width, rays.count(), result.texels);
   result.timing.upload_ms += std::exchange(data_->written_ms, 0.0);
+  // The pass's walks of the tree: its closest hits unless they are drawn hits (an edge miss walks:
+  // rare), and its shadow rays for each light without a buffer.
+  const size_t shadow_count = shadow_lights(scene).size();
+  size_t buffered = 0;
+  for (size_t l = 0; light_buffers && l < std::min(shadow_count, d.light_buffer_heads.size()); ++l) {
+    buffered += d.light_buffer_heads[l].y != 0.0f ? 1 : 0;
+  }
+  result.walks = uint64_t(rays.count()) * ((primary_hits == 0 ? 1 : 0) + (shadow_count - buffered));
   return result;
 }
 
@@ -1113,6 +1124,7 @@ void Renderer::trace_part(const Scene& scene, const FlatKdTree& tree, const RayB
   if (part.count() == 0) return;
   TraceResult result = trace_uploaded(scene, tree, part, primary_hits);
   add_pass(g, result.timing);
+  g.walks += result.walks;
   if (result.packing != out.packing) throw Error(ErrorKind::Internal, "a pass over part of a generation packed otherwise");
   parallel_for(part.count(), 0, [&](uint32_t k) { out.texels[part.pixel[k]] = result.texels[k]; }, 4096);
 }

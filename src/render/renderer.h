@@ -65,6 +65,15 @@ bool device_address_reads_fault(const DeviceInfo& info);
 const char* mirror_hits_name(MirrorHits mirrors);
 inline constexpr double kMirrorRasterMinShare = 0.5;
 
+// What an animation's per-frame kd-tree is built for (--tree). Walks (the default): for the walks
+// of the kd-tree two frames before it (GenerationTimings::walks, handed to KdBuildOptions::rays by
+// the FramePipeline), so that a frame whose rays are mostly drawn (--primary raster, --mirrors) or
+// test light buffers gets the shallow tree those few walks pay for; Full: every tree for
+// unboundedly many rays, the SAH's own termination alone (the paper's). The first two frames of a
+// pipeline, and every tree built outside one, are full trees.
+enum class TreeFit { Full, Walks };
+const char* tree_fit_name(TreeFit fit);
+
 struct RenderSettings {
   int width = 400;
   int height = 240;
@@ -90,6 +99,7 @@ struct RenderSettings {
   DataReads data = DataReads::TexelBuffers;  // faster on lavapipe (README: "Data reads")
   PrimaryHits primary = PrimaryHits::Auto;
   MirrorHits mirrors = MirrorHits::Auto;
+  TreeFit tree = TreeFit::Walks;
   // --shadow-cells N: point and spot lights' shadow rays test the triangles of one cell of a light
   // buffer of N x N cells per cube face (src/accel/light_buffer.h) instead of walking the kd-tree;
   // 0: they walk it; -1 (auto, the default): kAutoShadowCells up to kAutoShadowCellsTriangles
@@ -106,6 +116,7 @@ struct TraceResult {
   std::vector<uint32_t> texels;  // one packed texel per ray
   Packing packing = Packing::Bits24_8;
   PassTiming timing;
+  uint64_t walks = 0;  // GenerationTimings::walks of the pass
 };
 
 class Renderer {

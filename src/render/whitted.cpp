@@ -17,6 +17,7 @@ GenerationTimings& GenerationTimings::operator+=(const GenerationTimings& g) {
   hits += g.hits;
   capped += g.capped;
   shadow_rays += g.shadow_rays;
+  walks += g.walks;
   mirrored += g.mirrored;
   upload_ms += g.upload_ms;
   trace_ms += g.trace_ms;
