@@ -96,8 +96,9 @@ struct KdBuildOptions {
   // Only nodes of at most this many references become leaves by the rule above (a larger node
   // splits as the SAH says): a ray the rays' estimate left out (the next frame's rays are not the
   // last one's) never meets a leaf longer than this, and the shader's step cap (--max-steps) stays
-  // far. 64: on the toaster for 2,500 rays, 1.6 ms builds (2 threads) and 25 CPU steps per ray,
-  // against 2.1 ms and 22 for 32, 4.5 ms and 23 for the full tree (mobirt_kdprofile).
+  // far. 64: on the toaster for 2,500 rays (build_ref_cost 100), 1.6 ms builds (2 threads) and 25
+  // CPU steps per ray, against 2.1 ms and 22 for 32, 4.5 ms and 23 for the full tree
+  // (mobirt_kdprofile); in mobirt bench 16, 32 and 64 within the noise.
   int rays_leaf_limit = 64;
   bool split_clipping = true;    // clip each triangle to the child boxes (tighter references)
   // Split clipping clips the triangle polygon against the child boxes (Sutherland-Hodgman, in

@@ -170,12 +170,15 @@ constexpr int kFastLeafSize = 3;
 constexpr int kFastClusterRefs = 6;
 
 // KdBuildOptions::build_ref_cost's default: what one reference at one node costs the build, in
-// the SAH's units (a traversal step 1, a triangle test intersection_cost = 80). Estimated from the
-// toaster's full build (9 ms of CPU for about 400,000 references at nodes, some 20 ns each) against
-// the CPU walk's cost per SAH unit; in mobirt bench (toaster and marbles, + 1 and + 2 bounces, two
-// rounds each, Zen 4) 100 and 400, with leaf limits of 16, 32 and 64, all ran within the noise of
-// one another (README, *The tree a frame's walks pay for*).
-constexpr double kKdBuildRefCost = 100.0;
+// the SAH's units (a traversal step 1, a triangle test intersection_cost = 80). The toaster's full
+// build spends some 20 ns of CPU per reference at a node (9 ms for about 400,000), its CPU walk
+// some 0.25 ns per SAH unit: about 100. Measured in mobirt bench (--levels bounce1,bounce2
+// --frames 12 --warmup 2 --no-cpu --no-serial-twin --backend vulkan, four rounds each, Zen 4):
+// 100, 400 and 1,600 within a few hundredths of one another on the toaster, marbles, fish and
+// doll; the Utah toasters' + 1 bounce (its walks 69,500 a frame, its full tree 6.9 ms) 0.76-0.79x
+// Embree's with 100 against 0.82-0.84 with 400 and 0.81-0.86 with 1,600 (README, *The tree a
+// frame's walks pay for*). 400: as fast there, the less aggressive of the two.
+constexpr double kKdBuildRefCost = 400.0;
 
 // KdBuildOptions::deep_levels of --build fast (kd_deep_levels): pbrt's depth limit stops the
 // project's meshes (they reach it), and the leaves it forces hold the references that cost the
