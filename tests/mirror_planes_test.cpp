@@ -212,7 +212,7 @@ class MirrorRaster : public test::PerBackendTest {};
 // one and two bounces, primaries rasterized and traced. Pixels may differ where a mirror ray's
 // pixel centre lies on an edge (as with --primary raster); --mirrors raster must have found the
 // hits (GenerationTimings::mirrored), trace none. Auto draws a plane's mirror rays only where they
-// come from at least half the pixels (kMirrorRasterMinShare).
+// come from at least a quarter of the pixels (kMirrorRasterMinShare).
 TEST_P(MirrorRaster, FramesMatchTracedMirrorRays) {
   for (const char* name : {"toaster", "marbles"}) {
     const Scene scene = load_scene(std::string(MOBIRT_SOURCE_DIR "/scenes/") + name + ".gltf");
@@ -244,8 +244,8 @@ TEST_P(MirrorRaster, FramesMatchTracedMirrorRays) {
       if (d.psnr < 40.0) write_image(test::output_path("mirrors-" + what + "-diff.png").string(), difference_image(a, b));
     }
   }
-  // Auto: a small mirror tile on a matte floor sends mirror rays from far fewer than half the
-  // pixels, so they are traced; the marbles' floor at its own view (84 % of the pixels) is drawn,
+  // Auto: a small mirror tile on a matte floor sends mirror rays from far fewer than a quarter of
+  // the pixels, so they are traced; the marbles' floor at its own view (84 % of the pixels) is drawn,
   // at a size where the raster pays (kRasterTrianglesPerPixel), and not at one where it does not.
   Scene tile = materials_scene();
   test::add_triangle(tile, {-10, 0, -10}, {-10, 0, 10}, {10, 0, 10}, 0);

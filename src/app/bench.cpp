@@ -991,7 +991,7 @@ int cmd_bench(const std::vector<std::string>& args) {
                 "mirrored in it%s, not traced as in the paper and as every peer traces them (--mirrors trace: as the\n"
                 "paper); where drawn, mobirt's \"traversal\" of that generation includes that pass\n",
                 mirror_hits_name(o.settings.mirrors),
-                o.settings.mirrors == MirrorHits::Auto ? " where that pays (half the pixels' rays or more)" : "");
+                o.settings.mirrors == MirrorHits::Auto ? " where that pays (a quarter of the pixels' rays or more)" : "");
   }
   if (o.settings.tree == TreeFit::Walks) {
     std::printf("--tree walks: each frame's kd-tree built for the walks of the tree two frames before (a shallow\n"

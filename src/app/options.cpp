@@ -199,12 +199,11 @@ const Setting kSettings[] = {
     {"--mirrors", "HITS", kFrames,
      "how the first bounce's mirror rays off a flat mirror (the plane of\n"
      "reflective, flat-shaded triangles that sends the most) find their\n"
-     "closest hits:\n"
-     "trace (through the kd-tree, as every ray) or raster (the scene\n"
-     "mirrored in that plane drawn from the camera, their shadow rays\n"
+     "closest hits: trace (through the kd-tree, as every ray) or raster (the\n"
+     "scene mirrored in that plane drawn from the camera, their shadow rays\n"
      "traced from those hits; the other rays walk), auto (raster where that\n"
-     "plane sends mirror rays from at least half the pixels and the mesh has\n"
-     "at most half a triangle a pixel) (default auto)",
+     "plane sends mirror rays from at least a quarter of the pixels and the\n"
+     "mesh has at most half a triangle a pixel) (default auto)",
      [](CommonOptions& o, const Value& v) {
        static constexpr std::pair<const char*, MirrorHits> hits[] = {
            {"trace", MirrorHits::Trace}, {"raster", MirrorHits::Raster}, {"auto", MirrorHits::Auto}};

@@ -52,10 +52,11 @@ const char* primary_hits_name(PrimaryHits primary);
 // front side, seen from the camera, for the rays off the mirror plane that sends the most (of the
 // 8 largest; each the mirror image of its pixel's primary ray), their shadow rays then traced from
 // those hits as the rasterized primaries' are; the other rays walk. Auto (the default): Raster
-// where one plane sends mirror rays from at least half the pixels (kMirrorRasterMinShare) and the
-// mesh has at most kRasterTrianglesPerPixel triangles a pixel, else Trace (also where the raster
-// pass is over the device's limits): measured, the toaster's floor (54 % of the pixels) and the
-// marbles' (84 %) made their frames faster, the Utah toasters' (35 %) slower (README, *Flat
+// where one plane sends mirror rays from at least a quarter of the pixels (kMirrorRasterMinShare)
+// and the mesh has at most kRasterTrianglesPerPixel triangles a pixel, else Trace (also where the
+// raster pass is over the device's limits): measured, the toaster's floor (54 % of the pixels),
+// the marbles' (84 %), and since session 37 (--tree walks, the rest pass in coherent tiles) also
+// the Utah toasters' (35 %) and the fish's table (34 %) made their frames faster (README, *Flat
 // mirrors rasterized*).
 enum class MirrorHits { Trace, Raster, Auto };
 // Whether --data device-addresses is refused on this device: llvmpipe (a software device) on a CPU
@@ -63,7 +64,7 @@ enum class MirrorHits { Trace, Raster, Auto };
 // inactive lanes held non-canonical addresses: seen on a Zen 4, 2026-12-06, in every kind of frame).
 bool device_address_reads_fault(const DeviceInfo& info);
 const char* mirror_hits_name(MirrorHits mirrors);
-inline constexpr double kMirrorRasterMinShare = 0.5;
+inline constexpr double kMirrorRasterMinShare = 0.25;
 
 // What an animation's per-frame kd-tree is built for (--tree). Walks (the default): for the walks
 // of the kd-tree two frames before it (GenerationTimings::walks, handed to KdBuildOptions::rays by
