@@ -175,6 +175,7 @@ TEST_P(PipelinePerBackend, TreesBuiltForTheWalksGiveTheFullTreesImages) {
     SCOPED_TRACE("frame " + std::to_string(i));
     Image image;
     FrameTimings t;
+    ASSERT_EQ(walks.size(), i);  // each earlier frame reported its walks
     pipeline.step(i, [&](PreparedFrame& f) {
       ASSERT_TRUE(f.tree_built);
       const size_t full_nodes = build_kdtree(f.scene->mesh.positions, settings.kd).nodes.size();
@@ -182,7 +183,8 @@ TEST_P(PipelinePerBackend, TreesBuiltForTheWalksGiveTheFullTreesImages) {
         EXPECT_EQ(f.tree_rays, 0.0);
         EXPECT_EQ(f.tree.nodes.size(), full_nodes);
       } else {
-        EXPECT_EQ(f.tree_rays, std::max(double(walks[i - 2]), 1.0));
+        ASSERT_GT(walks[i - 2], 0);  // the rays off the toaster and the edge misses walk
+        EXPECT_EQ(f.tree_rays, double(walks[i - 2]));
         EXPECT_LT(f.tree.nodes.size(), full_nodes);
       }
       image = render_prepared(renderer, f, &t);
@@ -190,6 +192,7 @@ TEST_P(PipelinePerBackend, TreesBuiltForTheWalksGiveTheFullTreesImages) {
     });
     ASSERT_EQ(t.generations.size(), 2u);
     EXPECT_EQ(t.generations[0].walks, 0u);  // drawn primaries, shadow rays through the light buffer
+    EXPECT_GT(t.generations[1].mirrored, 0u);  // the floor's mirror rays drawn
     EXPECT_EQ(uint64_t(walks.back()), t.sum.walks);
     EXPECT_LT(t.sum.walks, pixels);  // far fewer than a traced frame's 2 per pixel
     ASSERT_EQ(image.pixels.size(), serial[i].pixels.size());
@@ -241,6 +244,16 @@ struct MovingScene {
     Scene& s = slots[slot];
     s = test::box_grid_scene();
     for (glm::vec3& p : s.mesh.positions) p.y += 0.01f * float(index);
+  }
+  // A pipelined loop whose frame i is this scene at pose position_of[i] (which must outlive it).
+  FramePipeline pipeline(const std::vector<size_t>& position_of, bool always_rebuild) {
+    return FramePipeline(
+        position_of.size(),
+        [this, &position_of](int slot, size_t index) {
+          pose(slot, position_of[index]);
+          return std::make_pair(static_cast<const Scene*>(&slots[slot]), *slots[slot].camera);
+        },
+        KdBuildOptions{}, always_rebuild, true);
   }
 };
 
@@ -337,13 +350,7 @@ TEST(FramePipeline, SerialPreparesEachFrameBeforeItRenders) {
 TEST(FramePipeline, KeepsTheTreeWhileTheTrianglesStay) {
   MovingScene moving;
   const std::vector<size_t> position_of = {0, 0, 0, 1, 1};  // the frame's pose
-  FramePipeline pipeline(
-      position_of.size(),
-      [&](int slot, size_t index) {
-        moving.pose(slot, position_of[index]);
-        return std::make_pair(static_cast<const Scene*>(&moving.slots[slot]), *moving.slots[slot].camera);
-      },
-      KdBuildOptions{}, false, true);
+  FramePipeline pipeline = moving.pipeline(position_of, false);
   const std::vector<bool> built = {true, false, false, true, false};
   for (size_t i = 0; i < built.size(); ++i) {
     pipeline.step(i, [&](PreparedFrame& f) {
@@ -393,14 +400,14 @@ TEST(FramePipeline, BuildsLightBuffersAndTheTreeOnlyWhereAFrameWalksIt) {
 
 // --tree walks: frame N's kd-tree is built for the walks frame N - 2 reported (the latest frame
 // rendered before N is built, pipelined or serial alike, so both loops build the same trees); the
-// first two frames, a frame two after one that reported nothing, and every frame of --tree full
-// get the full tree; no walk gets a tree for one ray (0 would be unbounded); fewer walks, fewer
-// nodes.
+// first two frames, a frame two after one that did not say or walked nothing (no estimate), and
+// every frame of --tree full get the full tree; fewer walks, fewer nodes.
 TEST(FramePipeline, BuildsEachTreeForTheWalksOfTwoFramesBefore) {
   const Scene scene = test::box_grid_scene();
   const FlatKdTree full = build_kdtree(scene.mesh.positions, KdBuildOptions{});
   const std::vector<int64_t> reported = {3, -1, 100000000, 0, 5, 7};  // each frame's walks (-1: not said)
   for (const TreeFit fit : {TreeFit::Walks, TreeFit::Full}) {
+    std::vector<size_t> node_counts[2];  // serial, pipelined: the same trees
     for (const bool pipelined : {true, false}) {
       SCOPED_TRACE(std::string(tree_fit_name(fit)) + (pipelined ? ", pipelined" : ", serial"));
       RenderSettings settings;  // depth 2: every frame walks a tree
@@ -409,12 +416,11 @@ TEST(FramePipeline, BuildsEachTreeForTheWalksOfTwoFramesBefore) {
           reported.size(), [&](int, size_t) { return std::make_pair(&scene, *scene.camera); }, KdBuildOptions{},
           true, pipelined);
       pipeline.set_render_settings(settings);
-      std::vector<size_t> nodes;
+      std::vector<size_t>& nodes = node_counts[pipelined ? 1 : 0];
       for (size_t i = 0; i < reported.size(); ++i) {
         pipeline.step(i, [&](PreparedFrame& f) {
-          const double expected = fit == TreeFit::Walks && i >= 2 && reported[i - 2] >= 0
-                                      ? std::max(double(reported[i - 2]), 1.0)
-                                      : 0.0;
+          const double expected =
+              fit == TreeFit::Walks && i >= 2 && reported[i - 2] > 0 ? double(reported[i - 2]) : 0.0;
           EXPECT_EQ(f.tree_rays, expected) << "frame " << i;
           nodes.push_back(f.tree.nodes.size());
           if (expected == 0.0) {
@@ -426,9 +432,32 @@ TEST(FramePipeline, BuildsEachTreeForTheWalksOfTwoFramesBefore) {
       if (fit == TreeFit::Walks) {
         EXPECT_LT(nodes[2], full.nodes.size());  // for 3 walks
         EXPECT_LE(nodes[2], nodes[4]);           // 3 against 100,000,000
-        EXPECT_LE(nodes[5], nodes[4]);           // one (no walk) against 100,000,000
+        EXPECT_EQ(nodes[5], full.nodes.size());  // frame 3 walked nothing: no estimate
       }
     }
+    EXPECT_EQ(node_counts[0], node_counts[1]);
+  }
+}
+
+// Without --always-rebuild a tree is kept while the triangles stay: one built for few walks is
+// built again (for the walks now reported) once they pass twice what it was built for, so an
+// animation that stops does not keep a shallow tree for good.
+TEST(FramePipeline, RebuildsAKeptTreeTheWalksOutgrew) {
+  MovingScene moving;
+  const std::vector<size_t> position_of = {0, 1, 2, 3, 3, 3, 3, 3};  // moves, then stops
+  const std::vector<int64_t> reported = {5, 5, 5, 5, 5, 1000, 1000, 1000};
+  const std::vector<bool> built = {true, true, true, true, false, false, false, true};
+  RenderSettings settings;  // --tree walks, depth 2: every frame walks
+  FramePipeline pipeline = moving.pipeline(position_of, false);
+  pipeline.set_render_settings(settings);
+  for (size_t i = 0; i < position_of.size(); ++i) {
+    pipeline.step(i, [&](PreparedFrame& f) {
+      EXPECT_EQ(f.tree_built, built[i]) << "frame " << i;
+      if (f.tree_built) {
+        EXPECT_EQ(f.tree_rays, i >= 2 ? double(reported[i - 2]) : 0.0) << "frame " << i;
+      }
+      f.walks = reported[i];
+    });
   }
 }
 

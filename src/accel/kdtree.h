@@ -87,18 +87,22 @@ struct KdBuildOptions {
   //   rays * area(node) / area(root) * (leaf cost - split cost) > build_ref_cost * references,
   // all in the SAH's units (a traversal step = traversal_cost). A frame whose tree only a few rays
   // walk (the flat mirrors drawn, the shadow rays testing light buffers, the primary hits
-  // rasterized) gets a shallow tree in a fraction of a full build's time; with the hundreds of
-  // thousands of rays of a traced frame it is the full tree.
+  // rasterized) gets a shallow tree in a fraction of a full build's time. Even 100,000 rays trim
+  // the full tree (the toaster's: 9,777 nodes against 32,101, SAH cost 438 against 317, CPU walks
+  // 8 % longer): measured in mobirt bench, frames walked 70,000-130,000 times (the fish's glass,
+  // the Utah toasters' tray) ran as fast or faster with such trees (README, *The tree a frame's
+  // walks pay for*).
   double rays = 0.0;
   // What partitioning (and binning, clipping) one reference at one node costs, in SAH units, for
-  // the rule above. Measured: kd_build_ref_cost's comment (kdtree_build.cpp).
+  // the rule above. Measured: kKdBuildRefCost's comment (kdtree_build.cpp).
   double build_ref_cost = -1.0;  // -1: kKdBuildRefCost
   // Only nodes of at most this many references become leaves by the rule above (a larger node
-  // splits as the SAH says): a ray the rays' estimate left out (the next frame's rays are not the
-  // last one's) never meets a leaf longer than this, and the shader's step cap (--max-steps) stays
-  // far. 64: on the toaster for 2,500 rays (build_ref_cost 100), 1.6 ms builds (2 threads) and 25
-  // CPU steps per ray, against 2.1 ms and 22 for 32, 4.5 ms and 23 for the full tree
-  // (mobirt_kdprofile); in mobirt bench 16, 32 and 64 within the noise.
+  // splits as the SAH says; 0 turns the rule off): a ray the rays' estimate left out (the next
+  // frame's rays are not the last one's) never meets a leaf the rule made longer than this (the
+  // SAH and the depth limit make their own leaves as without the rule), and the shader's step cap
+  // (--max-steps) stays far. 64: on the toaster for 2,500 rays (build_ref_cost 100), 1.6 ms builds
+  // (2 threads) and 25 CPU steps per ray, against 2.1 ms and 22 for 32, 4.5 ms and 23 for the full
+  // tree (mobirt_kdprofile); in mobirt bench 16, 32 and 64 within the noise.
   int rays_leaf_limit = 64;
   bool split_clipping = true;    // clip each triangle to the child boxes (tighter references)
   // Split clipping clips the triangle polygon against the child boxes (Sutherland-Hodgman, in
@@ -122,6 +126,10 @@ int kd_leaf_size(const KdBuildOptions& options);
 // The cluster rule a build uses (KdBuildOptions::cluster_refs): options.cluster_refs when >= 0,
 // else the build mode's: fast 6 (measured: kdtree_build.cpp, kFastClusterRefs), quality 0 (none).
 int kd_cluster_refs(const KdBuildOptions& options);
+
+// The cost per reference a build's rays rule uses (KdBuildOptions::build_ref_cost): the option
+// when >= 0, else kKdBuildRefCost (kdtree_build.cpp).
+double kd_build_ref_cost(const KdBuildOptions& options);
 
 // The levels past the depth limit a build gives large nodes (KdBuildOptions::deep_levels):
 // options.deep_levels when >= 0, else the build mode's: fast 4, quality 0 (none).

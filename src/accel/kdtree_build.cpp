@@ -177,7 +177,9 @@ constexpr int kFastClusterRefs = 6;
 // 100, 400 and 1,600 within a few hundredths of one another on the toaster, marbles, fish and
 // doll; the Utah toasters' + 1 bounce (its walks 69,500 a frame, its full tree 6.9 ms) 0.76-0.79x
 // Embree's with 100 against 0.82-0.84 with 400 and 0.81-0.86 with 1,600 (README, *The tree a
-// frame's walks pay for*). 400: as fast there, the less aggressive of the two.
+// frame's walks pay for*). 400: as fast there, the less aggressive of the two. Measured while
+// --mirrors auto still traced the Utah toasters' floor (before dadd524; drawn now, its frames walk
+// about 35,600 times), not measured again since.
 constexpr double kKdBuildRefCost = 400.0;
 
 // KdBuildOptions::deep_levels of --build fast (kd_deep_levels): pbrt's depth limit stops the
@@ -528,7 +530,7 @@ class Builder {
     subtree_refs_ = std::clamp(triangle_count_ / 4, kMinSubtreeRefs, kSubtreeRefs);
     cluster_refs_ = size_t(kd_cluster_refs(options));
     deep_refs_ = size_t(std::max(options.deep_refs, 0));
-    build_ref_cost_ = options.build_ref_cost >= 0.0 ? options.build_ref_cost : kKdBuildRefCost;
+    build_ref_cost_ = kd_build_ref_cost(options);
     rays_leaf_limit_ = size_t(std::max(options.rays_leaf_limit, 0));
   }
 
@@ -1428,6 +1430,10 @@ class Builder {
 int kd_leaf_size(const KdBuildOptions& options) {
   if (options.max_leaf_prims >= 0) return options.max_leaf_prims;
   return options.build == KdBuildMode::Fast ? kFastLeafSize : 1;
+}
+
+double kd_build_ref_cost(const KdBuildOptions& options) {
+  return options.build_ref_cost >= 0.0 ? options.build_ref_cost : kKdBuildRefCost;
 }
 
 int kd_cluster_refs(const KdBuildOptions& options) {

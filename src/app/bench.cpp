@@ -175,8 +175,6 @@ void add_frame(Samples& s, double animate_ms, const FrameTimings& t, double cpu_
     s.add("build_wait", step->wait_ms);
   }
   s.add("build", t.build_ms);
-  s.add("walks", double(g.walks));        // the kd-tree's walks in the passes (GenerationTimings::walks)
-  s.add("mirrored", double(g.mirrored));  // mirror rays drawn (--mirrors)
   s.add("rays", t.rays_ms);
   s.add("upload", g.upload_ms);
   s.add("trace", g.trace_ms);
@@ -346,7 +344,12 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
       check_messages(columns[c].backend->take_debug_messages());
       if (timed) {
         add_frame(samples, pose_ms, ft, cpu_ms, &step);
-        samples.add("tree_rays", tree_rays);  // what its kd-tree was built for (--tree; 0: full)
+        // mobirt's columns only: the kd-tree's walks in the passes (GenerationTimings::walks), the
+        // mirror rays drawn (--mirrors), what the frame's kd-tree was built for (--tree; 0: a full
+        // tree, or none where the frame built no kd-tree: the cell's kd_tree_built).
+        samples.add("walks", double(ft.sum.walks));
+        samples.add("mirrored", double(ft.sum.mirrored));
+        samples.add("tree_rays", tree_rays);
       }
       // What the frame had, not what was planned: a light whose buffer does not pay, or a capped
       // ray, makes a frame planned without a kd-tree build one (Renderer::Engine).

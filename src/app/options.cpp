@@ -210,7 +210,8 @@ const Setting kSettings[] = {
        o.settings.mirrors = v.choice(hits);
      }},
     {"--tree", "FIT", kFrames,
-     "what an animation's per-frame kd-tree is built for: walks (the walks\n"
+     "what an animation's per-frame kd-tree is built for (render --frames,\n"
+     "bench; a single frame always gets the full tree): walks (the walks\n"
      "of the tree two frames before: where most rays are drawn or test\n"
      "light buffers, the shallow tree those few walks pay for) or full (for\n"
      "unboundedly many rays: the SAH alone, as the paper) (default walks)",
@@ -431,7 +432,9 @@ nlohmann::json kd_settings_json(const KdBuildOptions& kd) {
           {"empty_bonus", kd.empty_bonus},
           {"max_depth", kd.max_depth},
           {"deep_levels", kd_deep_levels(kd)},
-          {"deep_refs", kd.deep_refs}};
+          {"deep_refs", kd.deep_refs},
+          {"build_ref_cost", kd_build_ref_cost(kd)},
+          {"rays_leaf_limit", kd.rays_leaf_limit}};
 }
 
 }  // namespace mobirt::cli

@@ -1,6 +1,5 @@
 #include "render/frame_pipeline.h"
 
-#include <algorithm>
 #include <chrono>
 #include <string>
 
@@ -62,8 +61,18 @@ double FramePipeline::prepare(size_t index) {
   f.pose_ms = elapsed_ms(start);
   const auto build_start = std::chrono::steady_clock::now();
   f.tree_rays = 0.0;
+  // What a tree built now is for (KdBuildOptions::rays; 0: a full tree): with --tree walks, the
+  // walks frame index - 2 reported, where it walked at all (a frame that walked nothing, or did
+  // not say, gives no estimate: the full tree; a frame whose light buffer turns out not to pay
+  // may walk where the last ones did not).
+  const double fit_rays =
+      settings_ && settings_->tree == TreeFit::Walks && index >= 2 && walks_[index - 2] > 0 ? double(walks_[index - 2])
+                                                                                           : 0.0;
+  // A kept tree (the triangles did not move) that was built for fewer rays than are walking now is
+  // built again for them: a shallow tree is not kept for good once an animation stops.
+  const bool outgrown = built_tree_rays_ > 0.0 && (fit_rays == 0.0 || fit_rays > 2.0 * built_tree_rays_);
   f.tree_built = always_rebuild_ || !built_any_ || built_positions_ != scene->mesh.positions ||
-                 built_shapes_ != scene->shapes;
+                 built_shapes_ != scene->shapes || outgrown;
   // Into the slot's tree, which holds the arrays of an older tree (render_prepared swaps them
   // out of the renderer): their memory is reused. A frame without a build carries no tree, its
   // arrays emptied but their memory kept.
@@ -79,13 +88,13 @@ double FramePipeline::prepare(size_t index) {
   }
   if (f.tree_built && !walks) {
     flatten_primitives(f.tree, scene->mesh.positions, scene->shapes);
+    built_tree_rays_ = 0.0;
   } else if (f.tree_built) {
     KdBuildOptions kd = kd_;
-    if (settings_ && settings_->tree == TreeFit::Walks && index >= 2 && walks_[index - 2] >= 0) {
-      kd.rays = std::max(double(walks_[index - 2]), 1.0);  // no walk: a tree for one (0 is unbounded)
-    }
+    kd.rays = fit_rays;
     f.tree_rays = kd.rays;
     rebuild_kdtree(f.tree, scene->mesh.positions, scene->shapes, kd);
+    built_tree_rays_ = kd.rays;
   } else {
     f.tree.clear();
   }

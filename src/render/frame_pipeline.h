@@ -53,7 +53,8 @@ struct PreparedFrame {
   double build_ms = 0.0;        // the kd-tree and light buffers' build, wall clock; pipelined, on
                                 // the worker while the previous frame rendered, so not part of
                                 // this frame's time
-  double tree_rays = 0.0;       // the rays its kd-tree was built for (KdBuildOptions::rays; 0: a full tree)
+  double tree_rays = 0.0;       // the rays its kd-tree was built for (KdBuildOptions::rays; 0: a full
+                                // tree, or none: tree_built false or only the primitives' texels)
   // Set by render_prepared: the frame's walks of the kd-tree (GenerationTimings::walks, all
   // generations); -1 where the render callback did not say. With --tree walks, frame N + 2's tree
   // is built for them.
@@ -99,8 +100,10 @@ class FramePipeline {
   // only the primitives' texels (flatten_primitives), and its light buffers (frame_light_buffers)
   // are built with it; with --tree walks (RenderSettings::tree), frame N's kd-tree is built for
   // the walks frame N - 2 reported (the latest frame rendered before it is built, pipelined or
-  // not, so that both loops build the same trees). Without, every frame gets a full kd-tree and
-  // no light buffer is built ahead. Set before the first step.
+  // not, so that both loops build the same trees; the full tree where it walked nothing or did
+  // not say), and a tree kept while the triangles stay is built again once the walks outgrow it
+  // (more than twice what it was built for). Without, every frame gets a full kd-tree and no
+  // light buffer is built ahead. Set before the first step.
   void set_render_settings(const RenderSettings& settings) { settings_ = settings; }
 
  private:
@@ -113,6 +116,7 @@ class FramePipeline {
   bool pipelined_;
   std::optional<RenderSettings> settings_;  // empty: every frame walks a tree, no light buffers ahead
   std::vector<int64_t> walks_;     // per frame, as its render reported them (-1: not, or not yet)
+  double built_tree_rays_ = 0.0;   // what the last kd-tree built was for (0: a full tree, or none)
   PreparedFrame slots_[2];
   std::vector<glm::vec3> built_positions_;  // of the last tree built (when not always_rebuild)
   std::vector<Shape> built_shapes_;         // and its analytic shapes
