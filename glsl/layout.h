@@ -210,6 +210,10 @@
                                      // the triangle, t from its plane
 #define MOBIRT_PRIMARY_HITS_WALK 1
 #define MOBIRT_PRIMARY_HITS_PLANE 2
+// The direction's w of a ray in a MOBIRT_PRIMARY_HITS_WALK pass whose closest primitive is not
+// known: it walks the tree from its tmin, tmax infinite (the mirror rays drawn and the other rays
+// of their generation in one pass, --mirrors).
+#define MOBIRT_HIT_UNKNOWN (-1.0)
 #define MOBIRT_SPEC_LIGHT_BUFFERS 13  // trace: 1 = point and spot lights' shadow rays test their light
                                       // buffer's cell (MOBIRT_TP_LIGHT_BUFFERS) instead of walking the tree
 // Element indices reach the shaders as exact floats: below 2^24 (a float's consecutive integers end

@@ -24,24 +24,31 @@ void main() {
     // rasterizer's choice stands, as it does in a frame without shadow rays: t from the
     // triangle's plane (the CPU's decoding clamps the barycentrics into the triangle, surface_hit).
     float prim = direction.w - 1.0;
-    if (prim < 0.0) {
-      OUTPUT(pack_trace(0.0, 0.0));
-      return;
-    }
-    float base = prim * float(MOBIRT_TEXELS_PER_TRIANGLE);
-    vec3 v0 = DATA_TEXEL(u_triangles, base).xyz;
-    vec3 v1 = DATA_TEXEL(u_triangles, base + 1.0).xyz;
-    vec3 v2 = DATA_TEXEL(u_triangles, base + 2.0).xyz;
-    vec3 tuv = intersect_triangle_texels(v0, v1, v2, origin.xyz, direction.xyz, origin.w, 3.0e38);
-    if (tuv.x >= 0.0) {
-      hit = vec3(prim, tuv.x, 0.0);
-    } else if (PRIMARY_HITS == MOBIRT_PRIMARY_HITS_PLANE) {
-      vec3 ng = cross(v1 - v0, v2 - v0);
-      float denom = dot(ng, direction.xyz);
-      float t = mp(denom != 0.0 ? dot(ng, v0 - origin.xyz) / denom : origin.w);
-      hit = vec3(prim, t >= origin.w ? t : origin.w, 0.0);
-    } else {
+    if (PRIMARY_HITS == MOBIRT_PRIMARY_HITS_WALK && direction.w < 0.0) {
+      // MOBIRT_HIT_UNKNOWN: a ray of the same pass whose closest primitive no raster found (the
+      // other rays of a generation whose mirror rays were drawn, --mirrors) walks as without
+      // PRIMARY_HITS, its tmax infinite.
       hit = traverse(origin.xyz, direction.xyz, origin.w, 3.0e38, false);
+    } else {
+      if (prim < 0.0) {
+        OUTPUT(pack_trace(0.0, 0.0));
+        return;
+      }
+      float base = prim * float(MOBIRT_TEXELS_PER_TRIANGLE);
+      vec3 v0 = DATA_TEXEL(u_triangles, base).xyz;
+      vec3 v1 = DATA_TEXEL(u_triangles, base + 1.0).xyz;
+      vec3 v2 = DATA_TEXEL(u_triangles, base + 2.0).xyz;
+      vec3 tuv = intersect_triangle_texels(v0, v1, v2, origin.xyz, direction.xyz, origin.w, 3.0e38);
+      if (tuv.x >= 0.0) {
+        hit = vec3(prim, tuv.x, 0.0);
+      } else if (PRIMARY_HITS == MOBIRT_PRIMARY_HITS_PLANE) {
+        vec3 ng = cross(v1 - v0, v2 - v0);
+        float denom = dot(ng, direction.xyz);
+        float t = mp(denom != 0.0 ? dot(ng, v0 - origin.xyz) / denom : origin.w);
+        hit = vec3(prim, t >= origin.w ? t : origin.w, 0.0);
+      } else {
+        hit = traverse(origin.xyz, direction.xyz, origin.w, 3.0e38, false);
+      }
     }
   } else {
     hit = traverse(origin.xyz, direction.xyz, origin.w, direction.w, false);
