@@ -178,8 +178,10 @@ constexpr int kFastClusterRefs = 6;
 // doll; the Utah toasters' + 1 bounce (its walks 69,500 a frame, its full tree 6.9 ms) 0.76-0.79x
 // Embree's with 100 against 0.82-0.84 with 400 and 0.81-0.86 with 1,600 (README, *The tree a
 // frame's walks pay for*). 400: as fast there, the less aggressive of the two. Measured while
-// --mirrors auto still traced the Utah toasters' floor (before dadd524; drawn now, its frames walk
-// about 35,600 times), not measured again since.
+// --mirrors auto still traced the Utah toasters' floor; again after dadd524 drew it (two rounds,
+// 08:23-08:26 UTC): 400 against 1,600 the same on the Utah toasters, toaster and marbles, and
+// 1,600 slower on the fish (+ 1 bounce 0.76-0.82x Embree's against 0.86-0.88, + 2 bounces
+// 0.69-0.71 against 0.74-0.75).
 constexpr double kKdBuildRefCost = 400.0;
 
 // KdBuildOptions::deep_levels of --build fast (kd_deep_levels): pbrt's depth limit stops the
