@@ -1002,10 +1002,7 @@ TraceResult Renderer::trace_uploaded(const Scene& scene, const FlatKdTree& tree,
   // The pass's walks of the tree: its closest hits unless they are drawn hits (an edge miss walks:
   // rare), and its shadow rays for each light without a buffer.
   const size_t shadow_count = shadow_lights(scene).size();
-  size_t buffered = 0;
-  for (size_t l = 0; light_buffers && l < std::min(shadow_count, d.light_buffer_heads.size()); ++l) {
-    buffered += d.light_buffer_heads[l].y != 0.0f ? 1 : 0;
-  }
+  const size_t buffered = light_buffers ? std::min(shadow_count, size_t(light_buffers_used())) : 0;
   result.walks = uint64_t(rays.count()) * ((primary_hits == 0 ? 1 : 0) + (shadow_count - buffered));
   return result;
 }
@@ -1292,8 +1289,15 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
   hit_rays.clear();
   hit_rays.width = rays.width;
   hit_rays.unique_pixels = false;
-  RayBatch rest;
-  rest.width = rays.width;
+  // Ray i of the generation into the pass, its direction's w the hit's index + 1 or
+  // MOBIRT_HIT_UNKNOWN.
+  const auto add = [&](uint32_t i, float w) {
+    hit_rays.origin.push_back(rays.origin[i]);
+    hit_rays.direction.push_back(glm::vec4(glm::vec3(rays.direction[i]), w));
+    hit_rays.pixel.push_back(i);  // the ray it stands for
+    hit_rays.weight.push_back(glm::vec3(0.0f));
+  };
+  std::vector<uint32_t> rest;  // the other rays, in the same order
   rest.reserve(n - mirrored);
   // In the generation's coherent order (the k-th ray of the order sits at simd_tile_place(k)), so
   // that each part, laid out in tiles again, keeps neighbouring rays in one SIMD group.
@@ -1301,30 +1305,19 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
   for (uint32_t k = 0; k < n; ++k) {
     const uint32_t i = simd_tile_place(k, tiled, rays.width);
     if (plane_of[i] != uint8_t(best)) {
-      rest.origin.push_back(rays.origin[i]);
-      rest.direction.push_back(rays.direction[i]);
-      rest.pixel.push_back(i);  // the ray it stands for
-      rest.weight.push_back(glm::vec3(0.0f));
+      rest.push_back(i);
       continue;
     }
     const uint32_t index_plus_one = d.raster_texels[rays.pixel[i]] & 0xFFFFFFu;
     if (index_plus_one == 0) continue;  // the mirror shows nothing there: a miss
-    hit_rays.origin.push_back(rays.origin[i]);
-    hit_rays.direction.push_back(glm::vec4(glm::vec3(rays.direction[i]), float(index_plus_one)));
-    hit_rays.pixel.push_back(i);
-    hit_rays.weight.push_back(glm::vec3(0.0f));
+    add(i, float(index_plus_one));
   }
   // One pass for both parts (a pass has a fixed cost: the toaster's 983 other rays took 0.9-1.3 ms
   // in a pass of their own): the other rays after the mirror hits, their w MOBIRT_HIT_UNKNOWN, so
   // that they walk (trace_main.glsl); each part keeps its tiles, so a SIMD group mixes the two only
   // where the first part ends.
-  const size_t rest_count = rest.origin.size();
-  for (size_t k = 0; k < rest_count; ++k) {
-    hit_rays.origin.push_back(rest.origin[k]);
-    hit_rays.direction.push_back(glm::vec4(glm::vec3(rest.direction[k]), float(MOBIRT_HIT_UNKNOWN)));
-    hit_rays.pixel.push_back(rest.pixel[k]);
-    hit_rays.weight.push_back(glm::vec3(0.0f));
-  }
+  const size_t rest_count = rest.size();
+  for (const uint32_t i : rest) add(i, float(MOBIRT_HIT_UNKNOWN));
   order_in_simd_tiles(hit_rays);
   g.upload_ms += elapsed_ms(split);
   g.mirrored += mirrored;
