@@ -19,6 +19,7 @@
 
 #include "backend/backend.h"
 #include "core/error.h"
+#include "core/thread_priority.h"
 #include "render/frame_pipeline.h"
 #include "render/renderer.h"
 #include "scene/animation.h"
@@ -293,6 +294,42 @@ TEST(FramePipeline, PosesTheNextFrameWhileTheFrameRenders) {
   for (size_t i = 1; i < kFrames; ++i) EXPECT_NE(pose_threads[i], std::this_thread::get_id()) << i;
   // One worker for the pipeline's life (not a thread started per frame).
   for (size_t i = 2; i < kFrames; ++i) EXPECT_EQ(pose_threads[i], pose_threads[1]) << i;
+}
+
+// The worker runs at SCHED_IDLE by default (WorkerPriority::Idle) and at the normal class with
+// WorkerPriority::Normal; the calling thread keeps its class either way, and so does a serial
+// pipeline's (it prepares on the caller).
+TEST(FramePipeline, RunsItsWorkerAtTheClassTheSettingsAsk) {
+  for (const WorkerPriority priority : {WorkerPriority::Idle, WorkerPriority::Normal}) {
+    for (const bool pipelined : {true, false}) {
+      MovingScene moving;
+      std::vector<int> idle;  // per frame posed: whether its thread ran at SCHED_IDLE
+      FramePipeline pipeline(
+          3,
+          [&](int slot, size_t index) {
+            moving.pose(slot, index);
+            idle.push_back(runs_at_idle_priority() ? 1 : 0);
+            return std::make_pair(static_cast<const Scene*>(&moving.slots[slot]), *moving.slots[slot].camera);
+          },
+          KdBuildOptions{}, true, pipelined);
+      RenderSettings settings;
+      settings.worker = priority;
+      pipeline.set_render_settings(settings);
+      for (size_t i = 0; i < 3; ++i) pipeline.step(i, [](PreparedFrame&) {});
+      SCOPED_TRACE(std::string(worker_priority_name(priority)) + (pipelined ? ", pipelined" : ", serial"));
+      ASSERT_EQ(idle.size(), 3u);
+      EXPECT_EQ(idle[0], 0);  // the first frame is prepared on the caller
+      const bool worker_idle = priority == WorkerPriority::Idle && pipelined;
+#if defined(__linux__)
+      EXPECT_EQ(idle[1], worker_idle ? 1 : 0);
+      EXPECT_EQ(idle[2], worker_idle ? 1 : 0);
+      EXPECT_EQ(pipeline.worker_at_idle_priority(), worker_idle);
+#else
+      EXPECT_FALSE(pipeline.worker_at_idle_priority());
+#endif
+      EXPECT_FALSE(runs_at_idle_priority());  // the caller's class never changes
+    }
+  }
 }
 
 // A pipeline dropped while its worker still prepares the next frame waits for it and ends its

@@ -414,6 +414,8 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
   for (size_t c = 0; c < columns.size(); ++c) {
     const std::string& key = columns[c].key;
     cell[key] = {{"fps", fps_json(gpu[c].all("frame"))}, {"stages_ms", gpu[c].medians()}, {"pipelined", o.pipelined}};
+    // Whether the column's pipelined worker ran at SCHED_IDLE (--worker idle, where Linux granted it).
+    if (o.pipelined) cell[key]["worker_idle"] = pipelines[c]->worker_at_idle_priority();
     const double gpu_fps = cell[key]["fps"]["median"];
     best_fps = std::max(best_fps, gpu_fps);
     // fps over a peer's fps; a stage's median over the peer's (traversal: Mrays/s on the same rays).
@@ -966,6 +968,7 @@ int cmd_bench(const std::vector<std::string>& args) {
                         {"primary", primary_hits_name(o.settings.primary)},
                         {"mirrors", mirror_hits_name(o.settings.mirrors)},
                         {"tree", tree_fit_name(o.settings.tree)},
+                        {"worker", worker_priority_name(o.settings.worker)},
                         {"pipelined", o.pipelined},
                         {"serial_twin", o.pipelined && o.serial_twin},
                         {"build_threads", o.settings.kd.threads},
@@ -975,7 +978,9 @@ int cmd_bench(const std::vector<std::string>& args) {
               o.frames, o.warmup);
   std::printf("%s; kd-tree build on %d threads\n",
               o.pipelined ? (std::string("mobirt's frames pipelined: frame N+1 posed and its kd-tree built on a worker while\n"
-                                         "frame N renders (--serial: one after the other)") +
+                                         "frame N renders (--serial: one after the other), the worker at ") +
+                             (o.settings.worker == WorkerPriority::Idle ? "idle priority\n(SCHED_IDLE: --worker)"
+                                                                         : "normal priority\n(--worker normal)") +
                              (o.serial_twin ? "; every frame also rendered a second time,\nserially (--no-serial-twin: not)" : ""))
                                 .c_str()
                           : "mobirt's frames serial (--serial): pose, build, passes, one after the other",

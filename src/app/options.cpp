@@ -219,6 +219,16 @@ const Setting kSettings[] = {
        static constexpr std::pair<const char*, TreeFit> fits[] = {{"walks", TreeFit::Walks}, {"full", TreeFit::Full}};
        o.settings.tree = v.choice(fits);
      }},
+    {"--worker", "idle|normal", kFrames,
+     "scheduling class of the pipelined frame loop's worker (render --frames,\n"
+     "bench), which poses the next frame and builds its kd-tree: idle\n"
+     "(SCHED_IDLE: it runs only where a CPU would idle, and never holds\n"
+     "up the driver's pinned rasterizer threads) or normal (default idle)",
+     [](CommonOptions& o, const Value& v) {
+       static constexpr std::pair<const char*, WorkerPriority> classes[] = {{"idle", WorkerPriority::Idle},
+                                                                            {"normal", WorkerPriority::Normal}};
+       o.settings.worker = v.choice(classes);
+     }},
     {"--shadow-cells", "N|auto", kFrames,
      "point and spot lights' shadow rays test the triangles of one cell of\n"
      "a light buffer (N x N cells per cube face around the light) instead\n"

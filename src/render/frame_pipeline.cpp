@@ -5,6 +5,7 @@
 
 #include "core/cpu_time.h"
 #include "core/error.h"
+#include "core/thread_priority.h"
 
 namespace mobirt {
 
@@ -24,7 +25,8 @@ FramePipeline::~FramePipeline() {
   }
 }
 
-void FramePipeline::worker_loop() {
+void FramePipeline::worker_loop(WorkerPriority priority) {
+  if (priority == WorkerPriority::Idle) worker_idle_.store(lower_to_idle_priority(), std::memory_order_release);
   for (;;) {
     std::packaged_task<double()> job;
     {
@@ -45,7 +47,8 @@ void FramePipeline::start_ahead(size_t index) {
     job_ = std::move(job);
   }
   if (!worker_.joinable()) {
-    worker_ = std::thread([this] { worker_loop(); });
+    const WorkerPriority priority = settings_ ? settings_->worker : WorkerPriority::Idle;
+    worker_ = std::thread([this, priority] { worker_loop(priority); });
   } else {
     wake_.notify_one();
   }

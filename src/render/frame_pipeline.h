@@ -5,6 +5,13 @@
 // only where a core idles meanwhile: on 2 cores lavapipe's threads already hold both during the
 // passes, and the measured gain is within the noise (README, "Frames pipelined against serial").
 //
+// The worker runs at Linux's SCHED_IDLE (RenderSettings::worker, --worker): lavapipe's rasterizer
+// threads are pinned one per CPU (--pin-threads), and a worker of the normal class that held the
+// CPU of one of them kept it waiting up to a scheduler slice (about 1 ms, perf sched timehist) at
+// every pass, while the other CPU idled. At SCHED_IDLE a woken rasterizer thread takes the CPU at
+// once and the build fills only time nothing else wants (README, "The pipeline's worker at idle
+// priority").
+//
 // Two slots, so that frame N's scene and tree are never written while frame N uses them. The GPU
 // side needs no second copy: the next frame's tree is uploaded by the rendering thread in its
 // begin_frame, after frame N's last pass finished (every pass is waited for). The backends' contexts
@@ -15,6 +22,7 @@
 // same tree and scene (tests/frame_pipeline_test.cpp).
 #pragma once
 
+#include <atomic>
 #include <condition_variable>
 #include <cstddef>
 #include <cstdint>
@@ -104,7 +112,12 @@ class FramePipeline {
   // not say), and a tree kept while the triangles stay is built again once the walks outgrow it
   // (more than twice what it was built for). Without, every frame gets a full kd-tree and no
   // light buffer is built ahead. Set before the first step.
+  // Its worker's class (RenderSettings::worker) comes from them too: at idle priority without.
   void set_render_settings(const RenderSettings& settings) { settings_ = settings; }
+
+  // Whether the worker runs at SCHED_IDLE (WorkerPriority::Idle, where Linux granted it); false
+  // before the first pipelined step started it.
+  bool worker_at_idle_priority() const { return worker_idle_.load(std::memory_order_acquire); }
 
  private:
   double prepare(size_t index);  // into slots_[index % 2]; returns its milliseconds
@@ -129,7 +142,8 @@ class FramePipeline {
   // runs one preparation at a time. (A thread started per frame cost its start and, on its first
   // build, TBB's registration of a new external thread, every frame.)
   void start_ahead(size_t index);
-  void worker_loop();
+  void worker_loop(WorkerPriority priority);
+  std::atomic<bool> worker_idle_{false};
   std::thread worker_;
   std::mutex mutex_;
   std::condition_variable wake_;

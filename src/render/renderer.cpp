@@ -173,6 +173,7 @@ const char* mirror_hits_name(MirrorHits mirrors) {
 }
 
 const char* tree_fit_name(TreeFit fit) { return fit == TreeFit::Walks ? "walks" : "full"; }
+const char* worker_priority_name(WorkerPriority priority) { return priority == WorkerPriority::Idle ? "idle" : "normal"; }
 
 const char* primary_hits_name(PrimaryHits primary) {
   switch (primary) {

@@ -75,6 +75,14 @@ inline constexpr double kMirrorRasterMinShare = 0.25;
 enum class TreeFit { Full, Walks };
 const char* tree_fit_name(TreeFit fit);
 
+// The pipelined frame loop's worker (FramePipeline: posing frame N + 1 and building its kd-tree
+// while frame N renders). Idle: at Linux's SCHED_IDLE (core/thread_priority.h), so that it only
+// fills CPU time nothing else wants; lavapipe's rasterizer threads are pinned one per CPU
+// (--pin-threads) and, with the worker at the normal class, waited up to a scheduler slice (about
+// 1 ms, perf sched) for the CPU it held before a pass could finish. Normal: the default class.
+enum class WorkerPriority { Idle, Normal };
+const char* worker_priority_name(WorkerPriority priority);
+
 struct RenderSettings {
   int width = 400;
   int height = 240;
@@ -101,6 +109,7 @@ struct RenderSettings {
   PrimaryHits primary = PrimaryHits::Auto;
   MirrorHits mirrors = MirrorHits::Auto;
   TreeFit tree = TreeFit::Walks;
+  WorkerPriority worker = WorkerPriority::Idle;  // the pipelined loop's worker (FramePipeline)
   // --shadow-cells N: point and spot lights' shadow rays test the triangles of one cell of a light
   // buffer of N x N cells per cube face (src/accel/light_buffer.h) instead of walking the kd-tree;
   // 0: they walk it; -1 (auto, the default): kAutoShadowCells up to kAutoShadowCellsTriangles
