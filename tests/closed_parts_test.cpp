@@ -214,6 +214,43 @@ TEST(ClosedParts, OnePoseServesEveryLight) {
   EXPECT_TRUE(std::all_of(w.begin(), w.end(), [](int8_t x) { return x == 0; }));
 }
 
+// The faces a raster pass from a viewpoint leaves out (faces_turned_away): a box's three faces
+// turned away from an eye outside it, none from an eye inside it, none of an open sheet; with
+// rays_from, only the parts that point is outside of too.
+TEST(ClosedParts, FacesTurnedAwayFromAnEye) {
+  Scene s;
+  test::add_box(s, {0, 0, 0}, {1, 1, 1}, 0);  // triangles 0-11
+  test::add_box(s, {3, 0, 0}, {4, 1, 1}, 0);  // 12-23
+  test::add_triangle(s, {-5, -1, -5}, {5, -1, -5}, {0, -1, 5}, 0);  // 24, open
+  const ClosedParts parts = find_closed_parts(s.mesh.positions);
+  ASSERT_EQ(parts.parts(), 2u);
+  const PosedParts posed = pose_closed_parts(parts, s.mesh.positions);
+  const auto count = [](const std::vector<uint8_t>& away, size_t first, size_t last) {
+    return size_t(std::count(away.begin() + std::ptrdiff_t(first), away.begin() + std::ptrdiff_t(last), uint8_t(1)));
+  };
+  const glm::vec3 eye(2.0f, 5.0f, 9.0f);  // above and in front of both boxes: three faces of each seen
+  std::vector<uint8_t> away;
+  faces_turned_away(posed, s.mesh.positions, eye, away);
+  ASSERT_EQ(away.size(), 25u);
+  EXPECT_EQ(count(away, 0, 12), 6u);
+  EXPECT_EQ(count(away, 12, 24), 6u);
+  EXPECT_EQ(away[24], 0) << "an open sheet keeps both sides";
+  for (size_t t = 0; t < 24; ++t) {
+    if (!away[t]) continue;
+    const glm::vec3* c = &s.mesh.positions[3 * t];
+    EXPECT_LT(glm::dot(glm::cross(c[1] - c[0], c[2] - c[0]), eye - c[0]), 0.0f) << "triangle " << t << " faces the eye";
+  }
+  faces_turned_away(posed, s.mesh.positions, glm::vec3(0.5f, 0.5f, 0.5f), away);  // inside the first box
+  EXPECT_EQ(count(away, 0, 12), 0u);
+  EXPECT_EQ(count(away, 12, 24), 10u) << "the second box seen from within its height and depth: all but its near face";
+  const glm::vec3 inside_second(3.5f, 0.5f, 0.5f);
+  faces_turned_away(posed, s.mesh.positions, eye, away, &inside_second);
+  EXPECT_EQ(count(away, 0, 12), 6u);
+  EXPECT_EQ(count(away, 12, 24), 0u) << "rays that start inside the second box's bounds";
+  faces_turned_away(pose_closed_parts(parts, std::vector<glm::vec3>(30)), s.mesh.positions, eye, away);
+  EXPECT_EQ(count(away, 0, away.size()), 0u) << "a pose of another soup leaves nothing out";
+}
+
 // Closed boxes and spheres (wound both ways) among open triangles: with their faces turned away
 // from the light left out, every segment's answer is still brute force's over all triangles, from
 // origins anywhere (inside the closed parts too, and just off their surfaces on both sides), for

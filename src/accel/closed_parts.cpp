@@ -2,9 +2,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <numeric>
 #include <unordered_map>
 #include <utility>
+
+#include "core/parallel.h"
 
 namespace mobirt {
 
@@ -291,6 +294,30 @@ void light_windings(const PosedParts& posed, std::span<const glm::vec3> position
 void light_windings(const ClosedParts& parts, std::span<const glm::vec3> positions, glm::vec3 light,
                     std::vector<int8_t>& winding) {
   light_windings(pose_closed_parts(parts, positions), positions, light, winding);
+}
+
+void faces_turned_away(const PosedParts& posed, std::span<const glm::vec3> positions, glm::vec3 eye,
+                       std::vector<uint8_t>& away, const glm::vec3* rays_from) {
+  const size_t triangles = positions.size() / 3;
+  away.assign(triangles, 0);
+  if (!posed.of || posed.of->triangles != triangles) return;
+  std::vector<int8_t> winding, from;
+  light_windings(posed, positions, eye, winding);
+  if (rays_from) {
+    light_windings(posed, positions, *rays_from, from);
+    for (size_t t = 0; t < triangles; ++t) {
+      if (from[t] == 0) winding[t] = 0;
+    }
+  }
+  const glm::dvec3 e(eye);
+  parallel_for_chunks(uint32_t(triangles), 4096, 0, [&](uint32_t, uint32_t begin, uint32_t end) {
+    for (uint32_t t = begin; t < end; ++t) {
+      if (winding[t] == 0) continue;
+      const glm::dvec3 c[3] = {glm::dvec3(positions[3 * size_t(t)]) - e, glm::dvec3(positions[3 * size_t(t) + 1]) - e,
+                               glm::dvec3(positions[3 * size_t(t) + 2]) - e};
+      away[t] = faces_away(c, winding[t]) ? 1 : 0;
+    }
+  });
 }
 
 }  // namespace mobirt

@@ -87,4 +87,17 @@ inline bool faces_away(const glm::dvec3 (&c)[3], int8_t w) {
   return s < 0.0 && s * s > 1e-10 * glm::dot(n, n) * glm::dot(c[0], c[0]);
 }
 
+// The faces a ray from a viewpoint never meets first, for a raster pass of the nearest triangles
+// (the primary hits, Renderer::start_raster, and the mirrored scene, --mirrors): away[t] = 1 where
+// triangle t of `positions` lies on a closed part, as posed, whose box `eye` is outside of, and
+// faces away from `eye` (light_windings and faces_away, with the eye for the light). A ray from the
+// eye enters such a part through a face turned towards the eye before it meets one turned away
+// (the header's argument), so leaving those out of the draw changes no pixel's nearest triangle.
+// `rays_from` (optional): where the rays really come from when it is not `eye`. A mirror's
+// reflected rays are drawn from the eye's mirror image, but start on the mirror, at points the eye
+// sees first: outside every closed part whose box the real eye is outside of, so only those parts
+// count. Sized to the triangle count; all 0 where `posed` is of another soup.
+void faces_turned_away(const PosedParts& posed, std::span<const glm::vec3> positions, glm::vec3 eye,
+                       std::vector<uint8_t>& away, const glm::vec3* rays_from = nullptr);
+
 }  // namespace mobirt

@@ -2,8 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <string>
 #include <tuple>
 #include <unordered_map>
+
+#include "core/error.h"
 
 namespace mobirt {
 namespace {
@@ -129,7 +132,8 @@ MirrorPlanes find_mirror_planes(const Scene& scene) {
   return out;
 }
 
-void mirrored_raster_vertices(std::span<const glm::vec3> positions, const MirrorPlane& plane, std::vector<float>& out) {
+void mirrored_raster_vertices(std::span<const glm::vec3> positions, const MirrorPlane& plane, std::vector<float>& out,
+                              std::span<const uint8_t> skip) {
   const double margin = 1e-6 * largest_coordinate(positions);
   const glm::dvec3 n = plane.normal;
   const size_t triangles = positions.size() / 3;
@@ -138,7 +142,12 @@ void mirrored_raster_vertices(std::span<const glm::vec3> positions, const Mirror
     const glm::dvec3 q = p - 2.0 * s * n;
     out.insert(out.end(), {float(q.x), float(q.y), float(q.z), index});
   };
+  if (!skip.empty() && skip.size() != triangles) {
+    throw Error(ErrorKind::Internal, "mirrored_raster_vertices: skip has " + std::to_string(skip.size()) +
+                                         " entries for " + std::to_string(triangles) + " triangles");
+  }
   for (size_t t = 0; t < triangles; ++t) {
+    if (!skip.empty() && skip[t]) continue;
     const glm::vec3* v = &positions[3 * t];
     if (!finite(v[0]) || !finite(v[1]) || !finite(v[2])) continue;
     const float index = float(t + 1);

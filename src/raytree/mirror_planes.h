@@ -48,7 +48,9 @@ MirrorPlanes find_mirror_planes(const Scene& scene);
 // margin = 1e-6 of the largest coordinate, so that the mirror's own triangles and whatever lies
 // in the plane stay out), mirrored, as one triangle or, where the plane cuts it, one or two.
 // Appends to `out` four floats per vertex, x, y, z and the source triangle's index + 1 (exact
-// in float below 2^24), as Renderer::start_raster writes the primary raster's vertices.
-void mirrored_raster_vertices(std::span<const glm::vec3> positions, const MirrorPlane& plane, std::vector<float>& out);
+// in float below 2^24), as Renderer::start_raster writes the primary raster's vertices. A
+// triangle t with skip[t] set is left out (skip empty: none is).
+void mirrored_raster_vertices(std::span<const glm::vec3> positions, const MirrorPlane& plane, std::vector<float>& out,
+                              std::span<const uint8_t> skip = {});
 
 }  // namespace mobirt

@@ -416,6 +416,12 @@ struct Renderer::Data {
   // --primary raster: the vertices drawn, the raster pass's texels and the rays that hit, each with
   // its rasterized index + 1 in its direction's w (kept: their memory reused frame after frame).
   std::vector<float> raster_vertices;
+  // The frame's closed parts as posed (pose_closed_parts), for the raster passes' faces left out
+  // (faces_turned_away); measured at most once a frame (frame, posed_frame).
+  uint64_t frame = 0;
+  uint64_t posed_frame = 0;
+  PosedParts posed;
+  std::vector<uint8_t> away;  // per triangle: left out of the raster pass being drawn
   std::vector<uint32_t> raster_texels;
   bool raster_started = false;  // by Engine::start_frame, for this frame's trace_primary
   double raster_start_ms = 0.0;  // start_raster's CPU time, for the generation's upload stage
@@ -564,6 +570,7 @@ class Renderer::Engine final : public WhittedEngine {
   void start_frame(const Scene& scene, const Camera& camera, const RenderSettings&) override {
     Data& d = *r_.data_;
     d.raster_started = false;
+    ++d.frame;
     if (!primaries_rasterized(scene, r_.settings_)) return;
     try {
       // A scene over a limit is refused here, as begin_frame would, before any pass starts.
@@ -1008,6 +1015,18 @@ TraceResult Renderer::trace_uploaded(const Scene& scene, const FlatKdTree& tree,
   return result;
 }
 
+const std::vector<uint8_t>& Renderer::faces_away_from(const Scene& scene, glm::vec3 eye, const glm::vec3* rays_from) {
+  Data& d = *data_;
+  d.away.clear();
+  if (!scene.closed_parts || scene.closed_parts->triangles != scene.mesh.triangle_count()) return d.away;
+  if (d.posed_frame != d.frame || d.posed.of != scene.closed_parts.get()) {
+    d.posed = pose_closed_parts(*scene.closed_parts, scene.mesh.positions);
+    d.posed_frame = d.frame;
+  }
+  faces_turned_away(d.posed, scene.mesh.positions, eye, d.away, rays_from);
+  return d.away;
+}
+
 void Renderer::start_raster(const Scene& scene, const Camera& camera, uint32_t width, uint32_t height) {
   Data& d = *data_;
   // The vertices: each triangle's three, with its index + 1 (an exact float below 2^24), on all cores.
@@ -1016,15 +1035,30 @@ void Renderer::start_raster(const Scene& scene, const Camera& camera, uint32_t w
   const uint32_t triangles = uint32_t(scene.mesh.triangle_count());
   RasterView view{};
   const bool visible = raster_view(camera, int(width), int(height), positions, view);
-  d.raster_vertices.resize(visible ? size_t(triangles) * 12 : 0);
+  // The faces of closed parts turned away from the eye are left out: never a pixel's nearest
+  // triangle, they cost llvmpipe's setup, which runs on one thread (faces_turned_away).
+  const std::vector<uint8_t>& away = faces_away_from(scene, camera.eye, nullptr);
+  constexpr uint32_t kChunk = 4096;
+  const uint32_t chunks = chunk_count(triangles, kChunk);
+  std::vector<uint32_t> first(size_t(chunks) + 1, 0);  // the triangles drawn before chunk c
+  if (visible) {
+    parallel_for_chunks(triangles, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
+      uint32_t drawn = 0;
+      for (uint32_t t = begin; t < end; ++t) drawn += away.empty() || !away[t] ? 1u : 0u;
+      first[c + 1] = drawn;
+    });
+    for (uint32_t c = 0; c < chunks; ++c) first[c + 1] += first[c];
+  }
+  d.raster_vertices.resize(size_t(first[chunks]) * 12);
   if (visible) {
     float* out = d.raster_vertices.data();
-    parallel_for_chunks(triangles, 4096, 0, [&](uint32_t, uint32_t begin, uint32_t end) {
+    parallel_for_chunks(triangles, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
+      float* v = out + size_t(first[c]) * 12;
       for (uint32_t t = begin; t < end; ++t) {
+        if (!away.empty() && away[t]) continue;
         const float index = float(t + 1);
-        for (uint32_t k = 0; k < 3; ++k) {
+        for (uint32_t k = 0; k < 3; ++k, v += 4) {
           const glm::vec3& p = positions[3 * t + k];
-          float* v = out + (3 * size_t(t) + k) * 4;
           v[0] = p.x;
           v[1] = p.y;
           v[2] = p.z;
@@ -1261,7 +1295,11 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
   const MirrorPlane& plane = candidates[best];
   // The raster pass of the mirrored scene, clipped to the plane's front side.
   d.raster_vertices.clear();
-  mirrored_raster_vertices(scene.mesh.positions, plane, d.raster_vertices);
+  // The faces turned away from the eye's mirror image are left out, of the closed parts both the
+  // eye and its image are outside of (faces_turned_away).
+  const glm::dvec3 mirrored_eye = eye - 2.0 * (glm::dot(plane.normal, eye) - plane.offset) * plane.normal;
+  mirrored_raster_vertices(scene.mesh.positions, plane, d.raster_vertices,
+                           faces_away_from(scene, glm::vec3(mirrored_eye), &camera.eye));
   std::vector<glm::vec3> mirrored_positions(d.raster_vertices.size() / 4);
   for (size_t k = 0; k < mirrored_positions.size(); ++k) {
     mirrored_positions[k] = glm::vec3(d.raster_vertices[4 * k], d.raster_vertices[4 * k + 1], d.raster_vertices[4 * k + 2]);

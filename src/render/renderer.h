@@ -253,6 +253,10 @@ class Renderer {
   // (Backend::start_raster): the posed triangles' vertices written, the draw submitted; its time
   // on the CPU goes to the generation's upload stage when trace_rasterized finishes it.
   void start_raster(const Scene& scene, const Camera& camera, uint32_t width, uint32_t height);
+  // Per triangle: whether a raster pass from `eye` leaves it out (faces_turned_away over the scene's
+  // closed parts as posed this frame; `rays_from` as there); empty where the scene has no closed
+  // parts analysed. Valid until the next call.
+  const std::vector<uint8_t>& faces_away_from(const Scene& scene, glm::vec3 eye, const glm::vec3* rays_from);
 
   Backend& backend_;
   RenderSettings settings_;
