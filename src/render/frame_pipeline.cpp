@@ -84,10 +84,11 @@ double FramePipeline::prepare(size_t index) {
   // rendering thread (Renderer::Engine::begin_frame builds one where a buffer fails later still).
   bool walks = !settings_ || frame_walks_tree(*scene, *settings_);
   if (f.tree_built && settings_) {
-    frame_light_buffers(*scene, *settings_, f.light_buffers);  // one per shadow light
+    frame_light_buffers(*scene, *settings_, f.light_buffers, &f.posed_parts);  // one per shadow light
     for (const LightBuffer& lb : f.light_buffers) walks = walks || !light_buffer_pays(lb);
   } else {
     f.light_buffers.clear();
+    f.posed_parts = PosedParts{};
   }
   if (f.tree_built && !walks) {
     flatten_primitives(f.tree, scene->mesh.positions, scene->shapes);
@@ -147,7 +148,7 @@ PipelineStep FramePipeline::step(size_t index, const std::function<void(Prepared
 Image render_prepared(Renderer& renderer, PreparedFrame& f, FrameTimings* timings) {
   FrameTimings own;
   FrameTimings* t = timings ? timings : &own;
-  Image image = f.tree_built ? renderer.render(*f.scene, f.camera, f.tree, f.build_ms, t, &f.light_buffers)
+  Image image = f.tree_built ? renderer.render(*f.scene, f.camera, f.tree, f.build_ms, t, &f.light_buffers, &f.posed_parts)
                              : renderer.render(*f.scene, f.camera, t);
   f.walks = int64_t(t->sum.walks);
   return image;

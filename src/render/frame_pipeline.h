@@ -57,6 +57,9 @@ struct PreparedFrame {
   // With tree_built and set_render_settings: the shadow lights' light buffers (frame_light_buffers),
   // built with the tree; handed to the renderer as the tree is.
   std::vector<LightBuffer> light_buffers;
+  // With them: the closed parts as posed for them (none where no buffer posed them), handed on to
+  // the raster passes as the buffers are (Renderer::render).
+  PosedParts posed_parts;
   double pose_ms = 0.0;         // posing the scene
   double build_ms = 0.0;        // the kd-tree and light buffers' build, wall clock; pipelined, on
                                 // the worker while the previous frame rendered, so not part of

@@ -236,8 +236,11 @@ const ClosedParts* closed_parts_for(const Scene& scene, const RenderSettings& se
 // One light buffer per light of `lights` at `res` cells a face edge (none where res <= 0) over the
 // triangles `positions`; resolution 0 where a light gets none (a directional light). parts (may be
 // null): the closed parts of `positions`, whose faces turned away from a light stay out of its lists.
+// known (may be null): `parts` as posed at `positions` already; posed_out (may be null): the
+// pose used, or none (`of` null) where no buffer needed one.
 void light_buffers_for(std::span<const glm::vec3> positions, std::span<const Light> lights, int res,
-                       const ClosedParts* parts, std::vector<LightBuffer>& out) {
+                       const ClosedParts* parts, std::vector<LightBuffer>& out, const PosedParts* known,
+                       PosedParts* posed_out) {
   out.resize(lights.size());  // each buffer built into its arrays' memory, when it has some
   std::vector<int8_t> winding;
   PosedParts posed;  // measured once a frame, for the first light that uses it
@@ -249,23 +252,26 @@ void light_buffers_for(std::span<const glm::vec3> positions, std::span<const Lig
       continue;
     }
     if (parts && !measured) {
-      posed = pose_closed_parts(*parts, positions);
+      posed = known && known->of == parts ? *known : pose_closed_parts(*parts, positions);
       measured = true;
     }
     if (parts) light_windings(posed, positions, lights[l].position, winding);
     build_light_buffer(positions, lights[l].position, res, out[l], 0, winding);
   }
+  if (posed_out) *posed_out = measured ? std::move(posed) : PosedParts{};
 }
 
 }  // namespace
 
-void frame_light_buffers(const Scene& scene, const RenderSettings& settings, std::vector<LightBuffer>& out) {
+void frame_light_buffers(const Scene& scene, const RenderSettings& settings, std::vector<LightBuffer>& out,
+                         PosedParts* posed) {
   if (!settings.shadows) {
     out.clear();
+    if (posed) *posed = PosedParts{};
     return;
   }
   light_buffers_for(scene.mesh.positions, scene.lights, scene_shadow_cells(scene, settings),
-                    closed_parts_for(scene, settings), out);
+                    closed_parts_for(scene, settings), out, nullptr, posed);
 }
 
 bool primaries_rasterized(const Scene& scene, const RenderSettings& settings) {
@@ -421,6 +427,7 @@ struct Renderer::Data {
   uint64_t frame = 0;
   uint64_t posed_frame = 0;
   PosedParts posed;
+  bool posed_prebuilt = false;  // `posed` was handed in for the next frame (Renderer::render)
   std::vector<uint8_t> away;  // per triangle: left out of the raster pass being drawn
   std::vector<uint32_t> raster_texels;
   bool raster_started = false;  // by Engine::start_frame, for this frame's trace_primary
@@ -571,6 +578,7 @@ class Renderer::Engine final : public WhittedEngine {
     Data& d = *r_.data_;
     d.raster_started = false;
     ++d.frame;
+    if (std::exchange(d.posed_prebuilt, false)) d.posed_frame = d.frame;  // handed in with this frame
     if (!primaries_rasterized(scene, r_.settings_)) return;
     try {
       // A scene over a limit is refused here, as begin_frame would, before any pass starts.
@@ -817,7 +825,10 @@ void Renderer::build_light_buffers(const FlatKdTree& tree, const Scene& scene, b
     }
     // The scene's closed parts where the tree's triangles are the scene's mesh as posed.
     const bool same = scene.closed_parts && positions == scene.mesh.positions;
-    light_buffers_for(positions, lights, res, same ? closed_parts_for(scene, settings_) : nullptr, buffers);
+    // The frame's pose where the raster pass measured it already (faces_away_from).
+    const PosedParts* known = d.posed_frame == d.frame && d.posed.of == scene.closed_parts.get() ? &d.posed : nullptr;
+    light_buffers_for(positions, lights, res, same ? closed_parts_for(scene, settings_) : nullptr, buffers,
+                      same ? known : nullptr, nullptr);
     d.light_buffers_built += size_t(std::count_if(buffers.begin(), buffers.end(),
                                                   [](const LightBuffer& lb) { return lb.resolution > 0; }));
   }
@@ -1530,11 +1541,12 @@ std::vector<glm::vec3> Renderer::shade_traced_elsewhere(const Scene& scene, cons
 }
 
 Image Renderer::render(const Scene& scene, const Camera& camera, FrameTimings* timings) {
+  data_->posed_prebuilt = false;  // a pose handed in with a frame that never started is not this one's
   return render_whitted(scene, camera, settings_, *engine_, timings);
 }
 
 Image Renderer::render(const Scene& scene, const Camera& camera, FlatKdTree& tree, double build_ms,
-                       FrameTimings* timings, std::vector<LightBuffer>* light_buffers) {
+                       FrameTimings* timings, std::vector<LightBuffer>* light_buffers, PosedParts* posed) {
   Data& d = *data_;
   std::swap(d.tree, tree);
   // Kept as the cache of the triangles the tree was built on, as a tree built here would be; valid
@@ -1546,6 +1558,8 @@ Image Renderer::render(const Scene& scene, const Camera& camera, FlatKdTree& tre
   d.prebuilt_ms = build_ms;
   d.light_buffers_prebuilt = light_buffers != nullptr;
   if (light_buffers) std::swap(d.prebuilt_light_buffers, *light_buffers);
+  d.posed_prebuilt = posed && posed->of == scene.closed_parts.get() && posed->of != nullptr;
+  if (d.posed_prebuilt) std::swap(d.posed, *posed);
   return render_whitted(scene, camera, settings_, *engine_, timings);
 }
 

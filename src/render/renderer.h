@@ -12,6 +12,7 @@
 #include <utility>
 #include <vector>
 
+#include "accel/closed_parts.h"
 #include "accel/kdtree.h"
 #include "accel/light_buffer.h"
 #include "backend/backend.h"
@@ -143,9 +144,11 @@ class Renderer {
   // is `build_ms`, the build's own wall clock. The tree is swapped in: `tree` comes back holding
   // the renderer's previous one, whose arrays the caller's next rebuild_kdtree reuses.
   // light_buffers: the frame's, built with the tree (frame_light_buffers; swapped in as the tree
-  // is), or null: the renderer builds them.
+  // is), or null: the renderer builds them. posed: the closed parts as posed for them (swapped in
+  // when it has any), spared the raster passes' own pose of the frame (faces_away_from).
   Image render(const Scene& scene, const Camera& camera, FlatKdTree& tree, double build_ms,
-               FrameTimings* timings = nullptr, std::vector<LightBuffer>* light_buffers = nullptr);
+               FrameTimings* timings = nullptr, std::vector<LightBuffer>* light_buffers = nullptr,
+               PosedParts* posed = nullptr);
 
   // The traversal pass alone over the given rays (for tests and benchmarks). The tree must have
   // been built from scene.mesh.
@@ -285,7 +288,10 @@ bool shadow_rays_buffered(const Scene& scene, const RenderSettings& settings);
 // shadows), built on all cores: resolution 0 where the light gets none (a directional light,
 // shadow_cells 0, analytic shapes). The renderer packs them into the passes' data, and still
 // leaves out a light whose lists run long (kLightBufferMaxMeanList) or past a texture's reach.
-void frame_light_buffers(const Scene& scene, const RenderSettings& settings, std::vector<LightBuffer>& out);
+// posed (optional): the scene's closed parts as posed for the buffers (pose_closed_parts), handed on
+// to the renderer's raster passes (Renderer::render); none (`of` null) where no buffer posed them.
+void frame_light_buffers(const Scene& scene, const RenderSettings& settings, std::vector<LightBuffer>& out,
+                         PosedParts* posed = nullptr);
 // Whether a frame rasterizes its primary hits: --primary raster, or auto where raster_pays, and a
 // scene of triangles only (analytic shapes have none to draw: their scenes' primaries are traced).
 bool primaries_rasterized(const Scene& scene, const RenderSettings& settings);
