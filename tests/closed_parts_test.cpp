@@ -247,6 +247,14 @@ TEST(ClosedParts, FacesTurnedAwayFromAnEye) {
   faces_turned_away(posed, s.mesh.positions, eye, away, &inside_second);
   EXPECT_EQ(count(away, 0, 12), 6u);
   EXPECT_EQ(count(away, 12, 24), 0u) << "rays that start inside the second box's bounds";
+  // An eye 0.05 outside the first box whose rays start 0.1 along themselves (a near distance):
+  // they may start inside it, so it keeps every face; with no reach its back is left out.
+  const glm::vec3 near_box(0.5f, 0.5f, 1.05f);
+  faces_turned_away(posed, s.mesh.positions, near_box, away, nullptr, 0.1f);
+  EXPECT_EQ(count(away, 0, 12), 0u);
+  EXPECT_EQ(count(away, 12, 24), 8u) << "the second box, far from it: all but its two faces towards it";
+  faces_turned_away(posed, s.mesh.positions, near_box, away, nullptr, 0.0f);
+  EXPECT_EQ(count(away, 0, 12), 10u) << "seen from within its height and width: all but its near face";
   faces_turned_away(pose_closed_parts(parts, std::vector<glm::vec3>(30)), s.mesh.positions, eye, away);
   EXPECT_EQ(count(away, 0, away.size()), 0u) << "a pose of another soup leaves nothing out";
 }

@@ -92,10 +92,6 @@ TEST_P(RasterPrimary, EachPixelHoldsTheTriangleItsPrimaryRayHitsFirst) {
   expect_raster_matches_traversal(*backend, boxes, *boxes.camera, 160, 120);
 }
 
-// A floor that reaches far behind the camera, a metre under it: its nearest visible point is far
-// nearer than any of its vertices in front of the eye, and the near plane must not cut it off (it
-// did when it sat before the nearest vertex in front). Boxes on it, and a camera whose rays start
-// 0.5 along themselves.
 // The faces of closed parts turned away from the eye (faces_turned_away), left out of the primary
 // raster and of the mirrored scene's (Renderer::start_raster, trace_mirrored), change no pixel's
 // triangle but where a pixel's centre lies on a silhouette edge: the toaster's and the marbles'
@@ -163,6 +159,36 @@ TEST_P(RasterPrimary, FacesTurnedAwayLeaveEveryPixelsTriangle) {
   }
 }
 
+// An eye outside a closed box but nearer to it than the camera's near distance: its rays start
+// inside the box and meet the faces turned away from the eye, which the raster must then keep
+// (faces_turned_away's reach): rasterized frames as traced ones, every pixel on the box's inside.
+TEST_P(RasterPrimary, ABoxWithinTheNearDistanceKeepsItsFaces) {
+  Scene scene = test::box_grid_scene();
+  scene.closed_parts = std::make_shared<const ClosedParts>(find_closed_parts(scene.mesh.positions));
+  ASSERT_GT(scene.closed_parts->parts(), 0u);
+  Camera camera;
+  camera.eye = glm::vec3(0.0f, 0.5f, 0.55f);  // 0.05 in front of the box at x, z in [-0.5, 0.5]
+  camera.target = glm::vec3(0.0f, 0.5f, 0.0f);
+  camera.znear = 0.1f;
+  RenderSettings settings;
+  settings.width = 48;
+  settings.height = 32;
+  settings.depth = 0;
+  settings.shadows = false;
+  settings.primary = PrimaryHits::Trace;
+  Renderer traced(*backend, settings);
+  settings.primary = PrimaryHits::Raster;
+  Renderer rasterized(*backend, settings);
+  const Image a = traced.render(scene, camera);
+  const Image b = rasterized.render(scene, camera);
+  const ImageDiff d = compare_images(a, b, 2.0f / 255.0f);
+  EXPECT_LE(d.share_over, 0.005) << "share of pixels that differ by more than 2/255, max error " << d.max_error;
+}
+
+// A floor that reaches far behind the camera, a metre under it: its nearest visible point is far
+// nearer than any of its vertices in front of the eye, and the near plane must not cut it off (it
+// did when it sat before the nearest vertex in front). Boxes on it, and a camera whose rays start
+// 0.5 along themselves.
 TEST_P(RasterPrimary, AFloorReachingBehindTheCameraIsNotClipped) {
   Scene scene = test::base_scene("floor");
   test::add_triangle(scene, {-500, 0, -500}, {-500, 0, 500}, {500, 0, 500}, 0);
@@ -207,8 +233,11 @@ TEST_P(RasterPrimary, LargestIndicesComeBackExact) {
 // with two bounces.
 TEST_P(RasterPrimary, FramesMatchTracedPrimariesOnProjectScenes) {
   for (const char* name : {"default", "toaster", "fish", "marbles"}) {
-    const Scene scene = project_scene(name);
+    Scene scene = project_scene(name);
     ASSERT_TRUE(scene.camera);
+    // Its closed parts, as an animated scene carries them: the raster leaves out their faces
+    // turned away from the eye (faces_turned_away).
+    scene.closed_parts = std::make_shared<const ClosedParts>(find_closed_parts(scene.mesh.positions));
     for (const auto& [depth, shadows] : {std::pair{0, false}, std::pair{0, true}, std::pair{2, true}}) {
       const std::string what = std::string(api_name(GetParam())) + "-" + name + "-depth" + std::to_string(depth) +
                                (shadows ? "" : "-noshadows");

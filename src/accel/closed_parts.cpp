@@ -274,7 +274,7 @@ void light_windings(const PosedParts& posed, std::span<const glm::vec3> position
                     std::vector<int8_t>& winding) {
   const size_t triangles = positions.size() / 3;
   winding.assign(triangles, 0);
-  if (!posed.of || posed.of->triangles != triangles) return;
+  if (!posed.of || posed.of->triangles != triangles || posed.winding.size() != posed.of->parts()) return;
   const ClosedParts& parts = *posed.of;
   // The light outside the part's box by a ten-thousandth of the scene's largest coordinate (the
   // light's included): a segment's last crossing of the part, through a face turned towards the
@@ -297,14 +297,23 @@ void light_windings(const ClosedParts& parts, std::span<const glm::vec3> positio
 }
 
 void faces_turned_away(const PosedParts& posed, std::span<const glm::vec3> positions, glm::vec3 eye,
-                       std::vector<uint8_t>& away, const glm::vec3* rays_from) {
+                       std::vector<uint8_t>& away, const glm::vec3* rays_from, float reach) {
   const size_t triangles = positions.size() / 3;
   away.assign(triangles, 0);
-  if (!posed.of || posed.of->triangles != triangles) return;
+  if (!posed.of || posed.of->triangles != triangles || posed.winding.size() != posed.of->parts()) return;
+  // The parts' boxes grown by the reach: an eye within it of a box counts as inside.
+  const PosedParts* boxes = &posed;
+  PosedParts grown;
+  if (reach > 0.0f) {
+    grown = posed;
+    for (glm::vec3& lo : grown.lo) lo -= glm::vec3(reach);
+    for (glm::vec3& hi : grown.hi) hi += glm::vec3(reach);
+    boxes = &grown;
+  }
   std::vector<int8_t> winding, from;
-  light_windings(posed, positions, eye, winding);
+  light_windings(*boxes, positions, eye, winding);
   if (rays_from) {
-    light_windings(posed, positions, *rays_from, from);
+    light_windings(*boxes, positions, *rays_from, from);
     for (size_t t = 0; t < triangles; ++t) {
       if (from[t] == 0) winding[t] = 0;
     }

@@ -24,7 +24,8 @@
 // the fold) breaks the argument; models do not do that, a bad skin or morph could. And the front
 // faces are then the only blockers: a segment through a shared edge that the float triangle test
 // misses on both sides (Moller-Trumbore's crack, README *Accuracy*) is no longer caught by a back
-// face behind it. The renderer leaves faces out only under highp.
+// face behind it. The renderer leaves faces out of the light buffers only under highp (its raster
+// passes, faces_turned_away, draw watertight and leave them out at any precision).
 #pragma once
 
 #include <glm/glm.hpp>
@@ -92,12 +93,18 @@ inline bool faces_away(const glm::dvec3 (&c)[3], int8_t w) {
 // triangle t of `positions` lies on a closed part, as posed, whose box `eye` is outside of, and
 // faces away from `eye` (light_windings and faces_away, with the eye for the light). A ray from the
 // eye enters such a part through a face turned towards the eye before it meets one turned away
-// (the header's argument), so leaving those out of the draw changes no pixel's nearest triangle.
+// (the header's argument), so leaving those out of the draw changes no pixel's nearest triangle,
+// but at a tie on a silhouette edge, or where two faces towards the eye meet at corners welded
+// within the tolerance yet not bit for bit the same (the raster may leave a crack between them that
+// a face turned away behind it used to fill).
 // `rays_from` (optional): where the rays really come from when it is not `eye`. A mirror's
 // reflected rays are drawn from the eye's mirror image, but start on the mirror, at points the eye
 // sees first: outside every closed part whose box the real eye is outside of, so only those parts
-// count. Sized to the triangle count; all 0 where `posed` is of another soup.
+// count. `reach`: how far from the eye the rays start (a camera's near distance: its primary rays
+// begin there, and the raster's near plane clips there); a part whose box comes within it of the
+// eye (or of `rays_from`) keeps every face, since a ray may start inside it. Sized to the triangle
+// count; all 0 where `posed` is of another soup.
 void faces_turned_away(const PosedParts& posed, std::span<const glm::vec3> positions, glm::vec3 eye,
-                       std::vector<uint8_t>& away, const glm::vec3* rays_from = nullptr);
+                       std::vector<uint8_t>& away, const glm::vec3* rays_from = nullptr, float reach = 0.0f);
 
 }  // namespace mobirt

@@ -62,6 +62,7 @@ enum Command : unsigned { kRender = 1, kAccuracy = 2, kBench = 4, kInfo = 8 };
 
 // What the shared settings set: the renderer's settings, the backend, and the scene's edits.
 struct CommonOptions {
+  CommonOptions() { settings.worker = WorkerPriority::Idle; }  // --worker's default: idle
   RenderSettings settings;
   VulkanOptions backend;  // with Vulkan's own: the pipeline cache (render, bench)
   std::string backend_name = "vulkan";  // --backend

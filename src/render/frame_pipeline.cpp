@@ -47,7 +47,7 @@ void FramePipeline::start_ahead(size_t index) {
     job_ = std::move(job);
   }
   if (!worker_.joinable()) {
-    const WorkerPriority priority = settings_ ? settings_->worker : WorkerPriority::Idle;
+    const WorkerPriority priority = settings_ ? settings_->worker : WorkerPriority::Normal;
     worker_ = std::thread([this, priority] { worker_loop(priority); });
   } else {
     wake_.notify_one();

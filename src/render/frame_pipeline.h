@@ -5,12 +5,13 @@
 // only where a core idles meanwhile: on 2 cores lavapipe's threads already hold both during the
 // passes, and the measured gain is within the noise (README, "Frames pipelined against serial").
 //
-// The worker runs at Linux's SCHED_IDLE (RenderSettings::worker, --worker): lavapipe's rasterizer
-// threads are pinned one per CPU (--pin-threads), and a worker of the normal class that held the
-// CPU of one of them kept it waiting up to a scheduler slice (about 1 ms, perf sched timehist) at
-// every pass, while the other CPU idled. At SCHED_IDLE a woken rasterizer thread takes the CPU at
-// once and the build fills only time nothing else wants (README, "The pipeline's worker at idle
-// priority").
+// The worker can run at Linux's SCHED_IDLE (RenderSettings::worker; --worker idle, the CLI's
+// default): lavapipe's rasterizer threads are pinned one per CPU (--pin-threads), and a worker of
+// the normal class that held the CPU of one of them kept it waiting up to a scheduler slice (about
+// 1 ms, perf sched timehist) at every pass, while the other CPU idled. At SCHED_IDLE a woken
+// rasterizer thread takes the CPU at once and the worker's own share of the build fills only time
+// nothing else wants (TBB's helper threads that run its tasks stay in the normal class; README,
+// "The pipeline's worker at idle priority").
 //
 // Two slots, so that frame N's scene and tree are never written while frame N uses them. The GPU
 // side needs no second copy: the next frame's tree is uploaded by the rendering thread in its
@@ -115,7 +116,7 @@ class FramePipeline {
   // not say), and a tree kept while the triangles stay is built again once the walks outgrow it
   // (more than twice what it was built for). Without, every frame gets a full kd-tree and no
   // light buffer is built ahead. Set before the first step.
-  // Its worker's class (RenderSettings::worker) comes from them too: at idle priority without.
+  // Its worker's class (RenderSettings::worker) comes from them too: the normal class without.
   void set_render_settings(const RenderSettings& settings) { settings_ = settings; }
 
   // Whether the worker runs at SCHED_IDLE (WorkerPriority::Idle, where Linux granted it); false

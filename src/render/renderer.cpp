@@ -974,6 +974,8 @@ TraceResult Renderer::trace(const Scene& scene, const FlatKdTree& tree, const Ra
 TraceResult Renderer::trace_primary(const Scene& scene, const Camera& camera, const FlatKdTree& tree,
                                     const RayBatch& rays) {
   if (!primaries_rasterized(scene, settings_)) return trace(scene, tree, rays);
+  ++data_->frame;  // a frame of its own: the closed parts are posed anew (faces_away_from)
+  data_->posed_prebuilt = false;
   data_->tree_valid = false;  // the GPU now holds this tree, not the cached one
   upload_tree(tree, scene, false);
   GenerationTimings g;
@@ -1026,7 +1028,8 @@ TraceResult Renderer::trace_uploaded(const Scene& scene, const FlatKdTree& tree,
   return result;
 }
 
-const std::vector<uint8_t>& Renderer::faces_away_from(const Scene& scene, glm::vec3 eye, const glm::vec3* rays_from) {
+const std::vector<uint8_t>& Renderer::faces_away_from(const Scene& scene, glm::vec3 eye, const glm::vec3* rays_from,
+                                                      float reach) {
   Data& d = *data_;
   d.away.clear();
   if (!scene.closed_parts || scene.closed_parts->triangles != scene.mesh.triangle_count()) return d.away;
@@ -1034,7 +1037,7 @@ const std::vector<uint8_t>& Renderer::faces_away_from(const Scene& scene, glm::v
     d.posed = pose_closed_parts(*scene.closed_parts, scene.mesh.positions);
     d.posed_frame = d.frame;
   }
-  faces_turned_away(d.posed, scene.mesh.positions, eye, d.away, rays_from);
+  faces_turned_away(d.posed, scene.mesh.positions, eye, d.away, rays_from, reach);
   return d.away;
 }
 
@@ -1048,7 +1051,7 @@ void Renderer::start_raster(const Scene& scene, const Camera& camera, uint32_t w
   const bool visible = raster_view(camera, int(width), int(height), positions, view);
   // The faces of closed parts turned away from the eye are left out: never a pixel's nearest
   // triangle, they cost llvmpipe's setup, which runs on one thread (faces_turned_away).
-  const std::vector<uint8_t>& away = faces_away_from(scene, camera.eye, nullptr);
+  const std::vector<uint8_t>& away = faces_away_from(scene, camera.eye, nullptr, camera.znear);
   constexpr uint32_t kChunk = 4096;
   const uint32_t chunks = chunk_count(triangles, kChunk);
   std::vector<uint32_t> first(size_t(chunks) + 1, 0);  // the triangles drawn before chunk c
@@ -1310,7 +1313,7 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
   // eye and its image are outside of (faces_turned_away).
   const glm::dvec3 mirrored_eye = eye - 2.0 * (glm::dot(plane.normal, eye) - plane.offset) * plane.normal;
   mirrored_raster_vertices(scene.mesh.positions, plane, d.raster_vertices,
-                           faces_away_from(scene, glm::vec3(mirrored_eye), &camera.eye));
+                           faces_away_from(scene, glm::vec3(mirrored_eye), &camera.eye, camera.znear));
   std::vector<glm::vec3> mirrored_positions(d.raster_vertices.size() / 4);
   for (size_t k = 0; k < mirrored_positions.size(); ++k) {
     mirrored_positions[k] = glm::vec3(d.raster_vertices[4 * k], d.raster_vertices[4 * k + 1], d.raster_vertices[4 * k + 2]);

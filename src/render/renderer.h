@@ -110,7 +110,10 @@ struct RenderSettings {
   PrimaryHits primary = PrimaryHits::Auto;
   MirrorHits mirrors = MirrorHits::Auto;
   TreeFit tree = TreeFit::Walks;
-  WorkerPriority worker = WorkerPriority::Idle;  // the pipelined loop's worker (FramePipeline)
+  // The pipelined loop's worker (FramePipeline). Normal here, so that a program or a test running
+  // beside other load never waits on a starved worker; the CLI (render --frames, bench) defaults
+  // to Idle (src/app/options.cpp), the faster on a machine of its own.
+  WorkerPriority worker = WorkerPriority::Normal;
   // --shadow-cells N: point and spot lights' shadow rays test the triangles of one cell of a light
   // buffer of N x N cells per cube face (src/accel/light_buffer.h) instead of walking the kd-tree;
   // 0: they walk it; -1 (auto, the default): kAutoShadowCells up to kAutoShadowCellsTriangles
@@ -257,9 +260,10 @@ class Renderer {
   // on the CPU goes to the generation's upload stage when trace_rasterized finishes it.
   void start_raster(const Scene& scene, const Camera& camera, uint32_t width, uint32_t height);
   // Per triangle: whether a raster pass from `eye` leaves it out (faces_turned_away over the scene's
-  // closed parts as posed this frame; `rays_from` as there); empty where the scene has no closed
-  // parts analysed. Valid until the next call.
-  const std::vector<uint8_t>& faces_away_from(const Scene& scene, glm::vec3 eye, const glm::vec3* rays_from);
+  // closed parts as posed this frame; `rays_from` and `reach` as there); empty where the scene has
+  // no closed parts analysed. Valid until the next call.
+  const std::vector<uint8_t>& faces_away_from(const Scene& scene, glm::vec3 eye, const glm::vec3* rays_from,
+                                              float reach);
 
   Backend& backend_;
   RenderSettings settings_;
