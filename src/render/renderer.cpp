@@ -825,10 +825,10 @@ void Renderer::build_light_buffers(const FlatKdTree& tree, const Scene& scene, b
     }
     // The scene's closed parts where the tree's triangles are the scene's mesh as posed.
     const bool same = scene.closed_parts && positions == scene.mesh.positions;
-    // The frame's pose where the raster pass measured it already (faces_away_from).
-    const PosedParts* known = d.posed_frame == d.frame && d.posed.of == scene.closed_parts.get() ? &d.posed : nullptr;
+    // The frame's pose where the raster pass measured it already (faces_away_from; light_buffers_for
+    // takes it only where it is of these parts).
     light_buffers_for(positions, lights, res, same ? closed_parts_for(scene, settings_) : nullptr, buffers,
-                      same ? known : nullptr, nullptr);
+                      d.posed_frame == d.frame ? &d.posed : nullptr, nullptr);
     d.light_buffers_built += size_t(std::count_if(buffers.begin(), buffers.end(),
                                                   [](const LightBuffer& lb) { return lb.resolution > 0; }));
   }
