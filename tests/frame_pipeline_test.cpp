@@ -165,6 +165,8 @@ TEST_P(PipelinePerBackend, TreesBuiltForTheWalksGiveTheFullTreesImages) {
       animation.evaluate(seconds(i), scene);
       serial.push_back(renderer.render(scene, *scene.camera));
     }
+    // Serially, the renderer looks for the flat mirrors itself, each frame (the toaster moves).
+    EXPECT_EQ(renderer.mirror_plane_searches(), kFrames);
   }
   std::unique_ptr<Backend> backend = make_backend(GetParam());
   Renderer renderer(*backend, settings);
@@ -179,6 +181,10 @@ TEST_P(PipelinePerBackend, TreesBuiltForTheWalksGiveTheFullTreesImages) {
     ASSERT_EQ(walks.size(), i);  // each earlier frame reported its walks
     pipeline.step(i, [&](PreparedFrame& f) {
       ASSERT_TRUE(f.tree_built);
+      // The flat mirrors found with the tree, on the worker: the floor among them.
+      EXPECT_TRUE(f.mirror_planes_found);
+      EXPECT_FALSE(f.mirror_planes.planes.empty());
+      EXPECT_EQ(f.mirror_planes.plane_of.size(), f.scene->mesh.triangle_count());
       const size_t full_nodes = build_kdtree(f.scene->mesh.positions, settings.kd).nodes.size();
       if (i < 2) {
         EXPECT_EQ(f.tree_rays, 0.0);
@@ -201,6 +207,8 @@ TEST_P(PipelinePerBackend, TreesBuiltForTheWalksGiveTheFullTreesImages) {
     for (size_t p = 0; p < image.pixels.size(); ++p) differing += image.pixels[p] != serial[i].pixels[p];
     EXPECT_EQ(differing, 0u) << "pixels that differ from the full trees' frame";
   }
+  // Pipelined with the settings, the renderer used the worker's planes and never looked itself.
+  EXPECT_EQ(renderer.mirror_plane_searches(), 0u);
   for (Backend* b : {serial_backend.get(), backend.get()}) {
     const std::vector<std::string> messages = b->take_debug_messages();
     EXPECT_TRUE(messages.empty()) << test::join(messages);

@@ -7,6 +7,7 @@
 #include <unordered_map>
 
 #include "core/error.h"
+#include "core/parallel.h"
 
 namespace mobirt {
 namespace {
@@ -132,68 +133,90 @@ MirrorPlanes find_mirror_planes(const Scene& scene) {
   return out;
 }
 
-void mirrored_raster_vertices(std::span<const glm::vec3> positions, const MirrorPlane& plane, std::vector<float>& out,
-                              std::span<const uint8_t> skip) {
-  const double margin = 1e-6 * largest_coordinate(positions);
+namespace {
+
+// Triangle t of `positions` mirrored in `plane` (mirrored_raster_vertices), appended to `out`.
+void mirror_triangle(std::span<const glm::vec3> positions, size_t t, const MirrorPlane& plane, double margin,
+                     std::vector<float>& out) {
   const glm::dvec3 n = plane.normal;
-  const size_t triangles = positions.size() / 3;
   auto emit = [&](const glm::dvec3& p, double s, float index) {
     // s = n . p - offset: the mirror image is p - 2 s n.
     const glm::dvec3 q = p - 2.0 * s * n;
     out.insert(out.end(), {float(q.x), float(q.y), float(q.z), index});
   };
+  const glm::vec3* v = &positions[3 * t];
+  if (!finite(v[0]) || !finite(v[1]) || !finite(v[2])) return;
+  const float index = float(t + 1);
+  glm::dvec3 p[3];
+  double s[3];
+  int front = 0;
+  for (int k = 0; k < 3; ++k) {
+    p[k] = glm::dvec3(v[k]);
+    s[k] = glm::dot(n, p[k]) - plane.offset;
+    front += s[k] > margin ? 1 : 0;
+  }
+  if (front == 0) return;  // behind the mirror, in it, or within the margin of it
+  if (front == 3) {
+    for (int k = 0; k < 3; ++k) emit(p[k], s[k], index);
+    return;
+  }
+  // Cut at the margin's plane (Sutherland-Hodgman, one plane): the part in front, 3 or 4 corners.
+  glm::dvec3 poly[4];
+  double ps[4];
+  int count = 0;
+  for (int k = 0; k < 3; ++k) {
+    const int j = (k + 1) % 3;
+    const double sk = s[k] - margin, sj = s[j] - margin;
+    if (sk > 0.0) {
+      poly[count] = p[k];
+      ps[count++] = s[k];
+    }
+    if ((sk > 0.0) != (sj > 0.0)) {
+      // From the edge's lesser end (by coordinates), so that the two triangles sharing the edge
+      // cut it at the same point, bit for bit: no crack between their parts.
+      const bool forward = std::tie(p[k].x, p[k].y, p[k].z) < std::tie(p[j].x, p[j].y, p[j].z);
+      const glm::dvec3& a = forward ? p[k] : p[j];
+      const glm::dvec3& b = forward ? p[j] : p[k];
+      const double sa = forward ? sk : sj, sb = forward ? sj : sk;
+      const double f = sa / (sa - sb);
+      poly[count] = a + f * (b - a);  // on the cut
+      ps[count] = glm::dot(n, poly[count]) - plane.offset;
+      ++count;
+    }
+  }
+  for (int k = 1; k + 1 < count; ++k) {
+    emit(poly[0], ps[0], index);
+    emit(poly[k], ps[k], index);
+    emit(poly[k + 1], ps[k + 1], index);
+  }
+}
+
+}  // namespace
+
+void mirrored_raster_vertices(std::span<const glm::vec3> positions, const MirrorPlane& plane, std::vector<float>& out,
+                              std::span<const uint8_t> skip) {
+  const double margin = 1e-6 * largest_coordinate(positions);
+  const size_t triangles = positions.size() / 3;
   if (!skip.empty() && skip.size() != triangles) {
     throw Error(ErrorKind::Internal, "mirrored_raster_vertices: skip has " + std::to_string(skip.size()) +
                                          " entries for " + std::to_string(triangles) + " triangles");
   }
-  for (size_t t = 0; t < triangles; ++t) {
-    if (!skip.empty() && skip[t]) continue;
-    const glm::vec3* v = &positions[3 * t];
-    if (!finite(v[0]) || !finite(v[1]) || !finite(v[2])) continue;
-    const float index = float(t + 1);
-    glm::dvec3 p[3];
-    double s[3];
-    int front = 0;
-    for (int k = 0; k < 3; ++k) {
-      p[k] = glm::dvec3(v[k]);
-      s[k] = glm::dot(n, p[k]) - plane.offset;
-      front += s[k] > margin ? 1 : 0;
+  // On all cores in chunks of triangles, each into its own array, then joined in order: the same
+  // floats as one pass over the triangles (the toaster's 11,102 took 0.2 ms on one core).
+  constexpr uint32_t kChunk = 2048;
+  const uint32_t chunks = chunk_count(uint32_t(triangles), kChunk);
+  std::vector<std::vector<float>> parts(chunks);
+  parallel_for_chunks(uint32_t(triangles), kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
+    std::vector<float>& part = parts[c];
+    part.reserve(size_t(end - begin) * 12);
+    for (uint32_t t = begin; t < end; ++t) {
+      if (skip.empty() || !skip[t]) mirror_triangle(positions, t, plane, margin, part);
     }
-    if (front == 0) continue;  // behind the mirror, in it, or within the margin of it
-    if (front == 3) {
-      for (int k = 0; k < 3; ++k) emit(p[k], s[k], index);
-      continue;
-    }
-    // Cut at the margin's plane (Sutherland-Hodgman, one plane): the part in front, 3 or 4 corners.
-    glm::dvec3 poly[4];
-    double ps[4];
-    int count = 0;
-    for (int k = 0; k < 3; ++k) {
-      const int j = (k + 1) % 3;
-      const double sk = s[k] - margin, sj = s[j] - margin;
-      if (sk > 0.0) {
-        poly[count] = p[k];
-        ps[count++] = s[k];
-      }
-      if ((sk > 0.0) != (sj > 0.0)) {
-        // From the edge's lesser end (by coordinates), so that the two triangles sharing the edge
-        // cut it at the same point, bit for bit: no crack between their parts.
-        const bool forward = std::tie(p[k].x, p[k].y, p[k].z) < std::tie(p[j].x, p[j].y, p[j].z);
-        const glm::dvec3& a = forward ? p[k] : p[j];
-        const glm::dvec3& b = forward ? p[j] : p[k];
-        const double sa = forward ? sk : sj, sb = forward ? sj : sk;
-        const double f = sa / (sa - sb);
-        poly[count] = a + f * (b - a);  // on the cut
-        ps[count] = glm::dot(n, poly[count]) - plane.offset;
-        ++count;
-      }
-    }
-    for (int k = 1; k + 1 < count; ++k) {
-      emit(poly[0], ps[0], index);
-      emit(poly[k], ps[k], index);
-      emit(poly[k + 1], ps[k + 1], index);
-    }
-  }
+  });
+  std::vector<size_t> first(size_t(chunks) + 1, out.size());
+  for (uint32_t c = 0; c < chunks; ++c) first[c + 1] = first[c] + parts[c].size();
+  out.resize(first[chunks]);
+  parallel_for(chunks, 0, [&](uint32_t c) { std::copy(parts[c].begin(), parts[c].end(), out.begin() + first[c]); }, 1);
 }
 
 }  // namespace mobirt

@@ -24,6 +24,13 @@ void RayBatch::reserve(uint32_t n) {
   weight.reserve(n);
 }
 
+void RayBatch::resize(uint32_t n) {
+  origin.resize(n);
+  direction.resize(n);
+  pixel.resize(n);
+  weight.resize(n);
+}
+
 void RayBatch::clear() {
   origin.clear();
   direction.clear();
@@ -89,10 +96,7 @@ RayBatch primary_rays(const Camera& camera, int width, int height) {
   batch.width = uint32_t(width);
   batch.unique_pixels = true;  // ray i is pixel i
   const uint32_t n = uint32_t(width) * uint32_t(height);
-  batch.origin.resize(n);  // unwritten (RayArray): every ray is written below, on all cores
-  batch.direction.resize(n);
-  batch.pixel.resize(n);
-  batch.weight.resize(n);
+  batch.resize(n);  // unwritten (RayArray): every ray is written below, on all cores
   const CameraBasis basis(camera, width, height);
   static_assert(sizeof(glm::vec4) == 16 && sizeof(glm::vec3) == 12, "primary_rays_x4 stores packed vectors");
   parallel_for(uint32_t(height), 0, [&](uint32_t y) {
@@ -124,10 +128,7 @@ void gather_in_simd_tiles(RayBatch& batch, std::span<const uint32_t> order) {
   RayBatch out;
   out.width = batch.width;
   out.unique_pixels = batch.unique_pixels;  // a permutation of the rays
-  out.origin.resize(n);
-  out.direction.resize(n);
-  out.pixel.resize(n);
-  out.weight.resize(n);
+  out.resize(n);
   parallel_for(n, 0, [&](uint32_t k) {
     const uint32_t from = order.empty() ? k : order[k];
     const uint32_t to = simd_tile_place(k, tiled, batch.width);

@@ -37,6 +37,7 @@ struct RayBatch {
   }
   void push(const Ray& ray, uint32_t pixel_index, const glm::vec3& ray_weight);
   void reserve(uint32_t n);  // room for n rays in every array, none written
+  void resize(uint32_t n);   // n rays in every array, none written: whoever calls it writes them
   void clear();
 };
 

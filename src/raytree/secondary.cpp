@@ -93,10 +93,7 @@ RayBatch next_generation(const Scene& scene, const Aabb& scene_bounds, const Ray
   }
   RayBatch next;
   next.width = rays.width;
-  next.origin.resize(first[chunks]);  // unwritten: every part is copied in below
-  next.direction.resize(first[chunks]);
-  next.pixel.resize(first[chunks]);
-  next.weight.resize(first[chunks]);
+  next.resize(first[chunks]);  // unwritten: every part is copied in below
   parallel_for(chunks, 0, [&](uint32_t c) {
     const RayBatch& part = parts[c].rays;
     std::copy(part.origin.begin(), part.origin.end(), next.origin.begin() + first[c]);

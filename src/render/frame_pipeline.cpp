@@ -90,6 +90,10 @@ double FramePipeline::prepare(size_t index) {
     f.light_buffers.clear();
     f.posed_parts = PosedParts{};
   }
+  // The flat mirrors the frame's first bounce may draw, found here rather than on the rendering
+  // thread (the chrome toaster's 11,102 reflecting triangles: 0.3 ms a frame there).
+  f.mirror_planes_found = f.tree_built && settings_ && frame_may_draw_mirrors(*scene, *settings_);
+  if (f.mirror_planes_found) f.mirror_planes = find_mirror_planes(*scene);
   if (f.tree_built && !walks) {
     flatten_primitives(f.tree, scene->mesh.positions, scene->shapes);
     built_tree_rays_ = 0.0;
@@ -148,7 +152,8 @@ PipelineStep FramePipeline::step(size_t index, const std::function<void(Prepared
 Image render_prepared(Renderer& renderer, PreparedFrame& f, FrameTimings* timings) {
   FrameTimings own;
   FrameTimings* t = timings ? timings : &own;
-  Image image = f.tree_built ? renderer.render(*f.scene, f.camera, f.tree, f.build_ms, t, &f.light_buffers, &f.posed_parts)
+  Image image = f.tree_built ? renderer.render(*f.scene, f.camera, f.tree, f.build_ms, t, &f.light_buffers, &f.posed_parts,
+                                               f.mirror_planes_found ? &f.mirror_planes : nullptr)
                              : renderer.render(*f.scene, f.camera, t);
   f.walks = int64_t(t->sum.walks);
   return image;

@@ -61,6 +61,10 @@ struct PreparedFrame {
   // With them: the closed parts as posed for them (none where no buffer posed them), handed on to
   // the raster passes as the buffers are (Renderer::render).
   PosedParts posed_parts;
+  // With tree_built, where the frame may draw its mirror rays (frame_may_draw_mirrors): its flat
+  // mirrors, found with the tree (mirror_planes_found), handed to the renderer as the tree is.
+  MirrorPlanes mirror_planes;
+  bool mirror_planes_found = false;
   double pose_ms = 0.0;         // posing the scene
   double build_ms = 0.0;        // the kd-tree and light buffers' build, wall clock; pipelined, on
                                 // the worker while the previous frame rendered, so not part of

@@ -286,6 +286,19 @@ bool primaries_rasterized(const Scene& scene, const RenderSettings& settings) {
   return false;
 }
 
+bool frame_may_draw_mirrors(const Scene& scene, const RenderSettings& settings) {
+  if (settings.mirrors == MirrorHits::Trace || settings.depth < 1 || !scene.shapes.empty()) return false;
+  // Auto draws only where the raster pays as --primary auto's does: up to kRasterTrianglesPerPixel
+  // triangles a pixel (llvmpipe sets up every triangle, and the mirror's pass draws every one in
+  // front of the plane).
+  if (settings.mirrors == MirrorHits::Auto &&
+      double(scene.mesh.triangle_count()) > kRasterTrianglesPerPixel * double(settings.width) * double(settings.height)) {
+    return false;
+  }
+  return std::any_of(scene.materials.begin(), scene.materials.end(),
+                     [](const Material& m) { return m.reflectance > 0.0f && m.transmittance == 0.0f; });
+}
+
 bool frame_walks_tree(const Scene& scene, const RenderSettings& settings) {
   return !primaries_rasterized(scene, settings) || rays_walk_tree(scene, settings);
 }
@@ -428,6 +441,11 @@ struct Renderer::Data {
   uint64_t posed_frame = 0;
   PosedParts posed;
   bool posed_prebuilt = false;  // `posed` was handed in for the next frame (Renderer::render)
+  // mirror_planes handed in for the next frame (Renderer::render), and the frame they are for
+  // (start_frame); the cache's keys below are then cleared (they describe no planes held).
+  bool mirror_planes_prebuilt = false;
+  uint64_t mirror_planes_frame = UINT64_MAX;
+  size_t mirror_plane_searches = 0;  // find_mirror_planes calls here (Renderer::mirror_plane_searches)
   std::vector<uint8_t> away;  // per triangle: left out of the raster pass being drawn
   std::vector<uint32_t> raster_texels;
   bool raster_started = false;  // by Engine::start_frame, for this frame's trace_primary
@@ -506,8 +524,10 @@ class Renderer::Engine final : public WhittedEngine {
         flatten_primitives(cache.tree, scene.mesh.positions, scene.shapes);
       }
       cache.tree_walkable = walks;
-      cache.tree_positions = scene.mesh.positions;
-      cache.tree_shapes = scene.shapes;
+      if (!r_.settings_.always_rebuild) {  // else never looked at (Renderer::render)
+        cache.tree_positions = scene.mesh.positions;
+        cache.tree_shapes = scene.shapes;
+      }
       t.build_ms = elapsed_ms(stage);
     }
     // A kept tree whose lights moved needs new light buffers (--shadow-cells); so does one without
@@ -579,6 +599,7 @@ class Renderer::Engine final : public WhittedEngine {
     d.raster_started = false;
     ++d.frame;
     if (std::exchange(d.posed_prebuilt, false)) d.posed_frame = d.frame;  // handed in with this frame
+    if (std::exchange(d.mirror_planes_prebuilt, false)) d.mirror_planes_frame = d.frame;
     if (!primaries_rasterized(scene, r_.settings_)) return;
     try {
       // A scene over a limit is refused here, as begin_frame would, before any pass starts.
@@ -910,6 +931,8 @@ bool Renderer::frame_had_kd_tree() const { return data_->tree_walkable; }
 
 size_t Renderer::light_buffers_built() const { return data_->light_buffers_built; }
 
+size_t Renderer::mirror_plane_searches() const { return data_->mirror_plane_searches; }
+
 double Renderer::upload_tree(const FlatKdTree& tree, const Scene& scene, bool buffers_prebuilt) {
   Data& d = *data_;
   auto start = Clock::now();
@@ -976,6 +999,7 @@ TraceResult Renderer::trace_primary(const Scene& scene, const Camera& camera, co
   if (!primaries_rasterized(scene, settings_)) return trace(scene, tree, rays);
   ++data_->frame;  // a frame of its own: the closed parts are posed anew (faces_away_from)
   data_->posed_prebuilt = false;
+  data_->mirror_planes_prebuilt = false;
   data_->tree_valid = false;  // the GPU now holds this tree, not the cached one
   upload_tree(tree, scene, false);
   GenerationTimings g;
@@ -1138,10 +1162,7 @@ TracedGeneration Renderer::trace_rasterized(const Scene& scene, const Camera& ca
   const uint32_t hit_count = first[chunks];
   hit_rays.width = width;
   hit_rays.unique_pixels = true;
-  hit_rays.origin.resize(hit_count);
-  hit_rays.direction.resize(hit_count);
-  hit_rays.pixel.resize(hit_count);
-  hit_rays.weight.resize(hit_count);
+  hit_rays.resize(hit_count);
   // The k-th hit straight to its place in the tiles (order_in_simd_tiles' layout, without its
   // second pass over the rays and their arrays allocated again).
   const uint32_t tiled = simd_tiled_rays(hit_rays);
@@ -1177,34 +1198,26 @@ void Renderer::trace_part(const Scene& scene, const FlatKdTree& tree, const RayB
 
 bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const FlatKdTree& tree, const RayBatch& rays,
                               GenerationTimings& g, TracedGeneration& out) {
-  if (settings_.mirrors == MirrorHits::Trace || !scene.shapes.empty() || tree.nodes.empty() || rays.count() == 0) {
-    return false;
-  }
+  if (!frame_may_draw_mirrors(scene, settings_) || tree.nodes.empty() || rays.count() == 0) return false;
   const uint32_t width = uint32_t(settings_.width), height = uint32_t(settings_.height);
   const uint32_t pixels = width * height;
-  // Auto draws only where the raster pays as --primary auto's does: up to kRasterTrianglesPerPixel
-  // triangles a pixel (llvmpipe sets up every triangle, and the mirror's pass draws every one in
-  // front of the plane), and only in a scene with a material that reflects without refracting.
-  if (settings_.mirrors == MirrorHits::Auto &&
-      double(scene.mesh.triangle_count()) > kRasterTrianglesPerPixel * double(pixels)) {
-    return false;
-  }
-  if (std::none_of(scene.materials.begin(), scene.materials.end(),
-                   [](const Material& m) { return m.reflectance > 0.0f && m.transmittance == 0.0f; })) {
-    return false;
-  }
   Data& d = *data_;
   const auto stage = Clock::now();
-  std::vector<glm::vec2> materials(scene.materials.size());
-  for (size_t m = 0; m < materials.size(); ++m) {
-    materials[m] = glm::vec2(scene.materials[m].reflectance, scene.materials[m].transmittance);
-  }
-  if (d.mirror_positions != scene.mesh.positions || d.mirror_material_ids != scene.mesh.material_ids ||
-      d.mirror_materials != materials || d.mirror_planes.plane_of.size() != scene.mesh.triangle_count()) {
-    d.mirror_planes = find_mirror_planes(scene);
-    d.mirror_positions = scene.mesh.positions;
-    d.mirror_material_ids = scene.mesh.material_ids;
-    d.mirror_materials = std::move(materials);
+  // The planes handed in with the frame (found on the pipeline's worker), else those of the last
+  // frame that looked, while its triangles and materials are the same.
+  if (d.mirror_planes_frame != d.frame || d.mirror_planes.plane_of.size() != scene.mesh.triangle_count()) {
+    std::vector<glm::vec2> materials(scene.materials.size());
+    for (size_t m = 0; m < materials.size(); ++m) {
+      materials[m] = glm::vec2(scene.materials[m].reflectance, scene.materials[m].transmittance);
+    }
+    if (d.mirror_positions != scene.mesh.positions || d.mirror_material_ids != scene.mesh.material_ids ||
+        d.mirror_materials != materials || d.mirror_planes.plane_of.size() != scene.mesh.triangle_count()) {
+      d.mirror_planes = find_mirror_planes(scene);
+      ++d.mirror_plane_searches;
+      d.mirror_positions = scene.mesh.positions;
+      d.mirror_material_ids = scene.mesh.material_ids;
+      d.mirror_materials = std::move(materials);
+    }
   }
   const MirrorPlanes& planes = d.mirror_planes;
   if (planes.planes.empty()) {
@@ -1342,36 +1355,59 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
   hit_rays.clear();
   hit_rays.width = rays.width;
   hit_rays.unique_pixels = false;
-  // Ray i of the generation into the pass, its direction's w the hit's index + 1 or
-  // MOBIRT_HIT_UNKNOWN.
-  const auto add = [&](uint32_t i, float w) {
-    hit_rays.origin.push_back(rays.origin[i]);
-    hit_rays.direction.push_back(glm::vec4(glm::vec3(rays.direction[i]), w));
-    hit_rays.pixel.push_back(i);  // the ray it stands for
-    hit_rays.weight.push_back(glm::vec3(0.0f));
-  };
-  std::vector<uint32_t> rest;  // the other rays, in the same order
-  rest.reserve(n - mirrored);
   // In the generation's coherent order (the k-th ray of the order sits at simd_tile_place(k)), so
-  // that each part, laid out in tiles again, keeps neighbouring rays in one SIMD group.
+  // that each part, laid out in tiles again, keeps neighbouring rays in one SIMD group. One pass
+  // for both parts (a pass has a fixed cost: the toaster's 983 other rays took 0.9-1.3 ms in a
+  // pass of their own): the other rays after the mirror hits, their w MOBIRT_HIT_UNKNOWN, so that
+  // they walk (trace_main.glsl); each part keeps its tiles, so a SIMD group mixes the two only
+  // where the first part ends. Counted per chunk, then each ray written straight to its tile place
+  // (order_in_simd_tiles' layout) on all cores: one thread's push_back and a second pass to tile
+  // them were 0.3 ms of the toaster's frame.
   const uint32_t tiled = simd_tiled_rays(rays);
-  for (uint32_t k = 0; k < n; ++k) {
-    const uint32_t i = simd_tile_place(k, tiled, rays.width);
-    if (plane_of[i] != uint8_t(best)) {
-      rest.push_back(i);
-      continue;
+  std::vector<uint32_t> hits_before(size_t(chunks) + 1, 0), rest_before(size_t(chunks) + 1, 0);
+  const auto mirror_hit = [&](uint32_t i) { return (d.raster_texels[rays.pixel[i]] & 0xFFFFFFu) != 0; };
+  parallel_for_chunks(n, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
+    uint32_t hits = 0, rest = 0;
+    for (uint32_t k = begin; k < end; ++k) {
+      const uint32_t i = simd_tile_place(k, tiled, rays.width);
+      if (plane_of[i] != uint8_t(best)) {
+        ++rest;
+      } else if (mirror_hit(i)) {  // else the mirror shows nothing there: a miss
+        ++hits;
+      }
     }
-    const uint32_t index_plus_one = d.raster_texels[rays.pixel[i]] & 0xFFFFFFu;
-    if (index_plus_one == 0) continue;  // the mirror shows nothing there: a miss
-    add(i, float(index_plus_one));
+    hits_before[c + 1] = hits;
+    rest_before[c + 1] = rest;
+  });
+  for (uint32_t c = 0; c < chunks; ++c) {
+    hits_before[c + 1] += hits_before[c];
+    rest_before[c + 1] += rest_before[c];
   }
-  // One pass for both parts (a pass has a fixed cost: the toaster's 983 other rays took 0.9-1.3 ms
-  // in a pass of their own): the other rays after the mirror hits, their w MOBIRT_HIT_UNKNOWN, so
-  // that they walk (trace_main.glsl); each part keeps its tiles, so a SIMD group mixes the two only
-  // where the first part ends.
-  const size_t rest_count = rest.size();
-  for (const uint32_t i : rest) add(i, float(MOBIRT_HIT_UNKNOWN));
-  order_in_simd_tiles(hit_rays);
+  const uint32_t hit_count = hits_before[chunks];
+  const size_t rest_count = rest_before[chunks];
+  const uint32_t total = hit_count + uint32_t(rest_count);
+  hit_rays.resize(total);
+  const uint32_t tiled_out = simd_tiled_rays(hit_rays);
+  parallel_for_chunks(n, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
+    uint32_t next_hit = hits_before[c], next_rest = hit_count + rest_before[c];
+    // Ray i of the generation as the j-th of the pass, its direction's w the hit's index + 1 or
+    // MOBIRT_HIT_UNKNOWN.
+    const auto put = [&](uint32_t j, uint32_t i, float w) {
+      const uint32_t to = simd_tile_place(j, tiled_out, hit_rays.width);
+      hit_rays.origin[to] = rays.origin[i];
+      hit_rays.direction[to] = glm::vec4(glm::vec3(rays.direction[i]), w);
+      hit_rays.pixel[to] = i;  // the ray it stands for
+      hit_rays.weight[to] = glm::vec3(0.0f);
+    };
+    for (uint32_t k = begin; k < end; ++k) {
+      const uint32_t i = simd_tile_place(k, tiled, rays.width);
+      if (plane_of[i] != uint8_t(best)) {
+        put(next_rest++, i, float(MOBIRT_HIT_UNKNOWN));
+      } else if (mirror_hit(i)) {
+        put(next_hit++, i, float(d.raster_texels[rays.pixel[i]] & 0xFFFFFFu));
+      }
+    }
+  });
   g.upload_ms += elapsed_ms(split);
   g.mirrored += mirrored;
   out = TracedGeneration{};
@@ -1545,17 +1581,22 @@ std::vector<glm::vec3> Renderer::shade_traced_elsewhere(const Scene& scene, cons
 
 Image Renderer::render(const Scene& scene, const Camera& camera, FrameTimings* timings) {
   data_->posed_prebuilt = false;  // a pose handed in with a frame that never started is not this one's
+  data_->mirror_planes_prebuilt = false;
   return render_whitted(scene, camera, settings_, *engine_, timings);
 }
 
 Image Renderer::render(const Scene& scene, const Camera& camera, FlatKdTree& tree, double build_ms,
-                       FrameTimings* timings, std::vector<LightBuffer>* light_buffers, PosedParts* posed) {
+                       FrameTimings* timings, std::vector<LightBuffer>* light_buffers, PosedParts* posed,
+                       MirrorPlanes* mirror_planes) {
   Data& d = *data_;
   std::swap(d.tree, tree);
   // Kept as the cache of the triangles the tree was built on, as a tree built here would be; valid
-  // once begin_frame has uploaded it (a frame refused before that leaves no cache).
-  d.tree_positions = scene.mesh.positions;
-  d.tree_shapes = scene.shapes;
+  // once begin_frame has uploaded it (a frame refused before that leaves no cache). Not where every
+  // frame builds its own (always_rebuild: the cache is never looked at; the copy was 0.1 ms a frame).
+  if (!settings_.always_rebuild) {
+    d.tree_positions = scene.mesh.positions;
+    d.tree_shapes = scene.shapes;
+  }
   d.tree_valid = false;
   d.tree_prebuilt = true;
   d.prebuilt_ms = build_ms;
@@ -1563,6 +1604,13 @@ Image Renderer::render(const Scene& scene, const Camera& camera, FlatKdTree& tre
   if (light_buffers) std::swap(d.prebuilt_light_buffers, *light_buffers);
   d.posed_prebuilt = posed && posed->of == scene.closed_parts.get() && posed->of != nullptr;
   if (d.posed_prebuilt) std::swap(d.posed, *posed);
+  d.mirror_planes_prebuilt = mirror_planes != nullptr;
+  if (mirror_planes) {
+    std::swap(d.mirror_planes, *mirror_planes);
+    d.mirror_positions.clear();  // the cache holds the handed planes now, not those of its keys
+    d.mirror_material_ids.clear();
+    d.mirror_materials.clear();
+  }
   return render_whitted(scene, camera, settings_, *engine_, timings);
 }
 

@@ -17,6 +17,7 @@
 #include "accel/light_buffer.h"
 #include "backend/backend.h"
 #include "core/camera.h"
+#include "raytree/mirror_planes.h"
 #include "core/image.h"
 #include "raytree/hits.h"
 #include "raytree/packing.h"
@@ -149,9 +150,11 @@ class Renderer {
   // light_buffers: the frame's, built with the tree (frame_light_buffers; swapped in as the tree
   // is), or null: the renderer builds them. posed: the closed parts as posed for them (swapped in
   // when it has any), spared the raster passes' own pose of the frame (faces_away_from).
+  // mirror_planes: the frame's flat mirrors (find_mirror_planes over scene as it is now; swapped
+  // in), or null: the renderer finds them where a frame may draw them (frame_may_draw_mirrors).
   Image render(const Scene& scene, const Camera& camera, FlatKdTree& tree, double build_ms,
                FrameTimings* timings = nullptr, std::vector<LightBuffer>* light_buffers = nullptr,
-               PosedParts* posed = nullptr);
+               PosedParts* posed = nullptr, MirrorPlanes* mirror_planes = nullptr);
 
   // The traversal pass alone over the given rays (for tests and benchmarks). The tree must have
   // been built from scene.mesh.
@@ -222,6 +225,9 @@ class Renderer {
   // The light buffers this renderer built itself since it was made, on the rendering thread: none
   // for frames handed their buffers with their tree (the frame pipeline's worker builds them).
   size_t light_buffers_built() const;
+  // The times this renderer looked for a frame's flat mirrors itself (find_mirror_planes), on the
+  // rendering thread: never for frames handed their planes (the frame pipeline's worker finds them).
+  size_t mirror_plane_searches() const;
 
  private:
   // The textures laid out in rows of the rays' width (rays and shading inputs), made again when
@@ -296,6 +302,11 @@ bool shadow_rays_buffered(const Scene& scene, const RenderSettings& settings);
 // to the renderer's raster passes (Renderer::render); none (`of` null) where no buffer posed them.
 void frame_light_buffers(const Scene& scene, const RenderSettings& settings, std::vector<LightBuffer>& out,
                          PosedParts* posed = nullptr);
+// Whether a frame of `scene` may draw its first bounce's mirror rays (--mirrors raster, or auto up
+// to kRasterTrianglesPerPixel triangles a pixel): bounces, a scene of triangles only, a material
+// that reflects without refracting. Such a frame looks for its flat mirrors (find_mirror_planes);
+// the frame pipeline's worker finds them with the kd-tree, off the rendering thread.
+bool frame_may_draw_mirrors(const Scene& scene, const RenderSettings& settings);
 // Whether a frame rasterizes its primary hits: --primary raster, or auto where raster_pays, and a
 // scene of triangles only (analytic shapes have none to draw: their scenes' primaries are traced).
 bool primaries_rasterized(const Scene& scene, const RenderSettings& settings);
