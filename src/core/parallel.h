@@ -16,8 +16,8 @@
 namespace mobirt {
 
 namespace detail {
-// The arena of loops on `threads` threads (>= 2), made at first use and kept: at most `threads`
-// threads, the caller included, run a loop's chunks.
+// The calling thread's arena of loops on `threads` threads (>= 2), made at its first use and kept
+// while the thread lives: at most `threads` threads, the caller included, run a loop's chunks.
 tbb::task_arena& parallel_arena(unsigned threads);
 }  // namespace detail
 
