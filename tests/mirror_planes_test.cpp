@@ -180,6 +180,67 @@ TEST(MirrorPlanes, MirroredTrianglesGiveTheMirrorRaysHits) {
   EXPECT_GE(agree, rays - rays / 1000) << agree << " of " << rays;
 }
 
+// mirrored_raster_vertices makes its triangles in chunks on all cores: over 6,000 triangles (three
+// chunks and more), some skipped, some cut by the plane, some behind it, the output is each source
+// triangle's part in front, in source order, appended after what `out` held: a triangle wholly in
+// front is its mirror image exactly (p - 2 s n, s = n . p - offset, in double), one cut by the
+// plane one or two triangles (one or two corners in front), each with its source index + 1.
+TEST(MirrorPlanes, MirroredTrianglesComeInSourceOrderFromEveryChunk) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(-10.0f, 10.0f), h(-3.0f, 8.0f), e(-0.8f, 0.8f);
+  std::vector<glm::vec3> positions;
+  for (int i = 0; i < 6200; ++i) {
+    const glm::vec3 c(u(rng), h(rng), u(rng));
+    for (int k = 0; k < 3; ++k) positions.push_back(c + glm::vec3(e(rng), e(rng), e(rng)));
+  }
+  const size_t triangles = positions.size() / 3;
+  std::vector<uint8_t> skip(triangles, 0);
+  for (size_t t = 0; t < triangles; t += 7) skip[t] = 1;
+  MirrorPlane plane;
+  plane.normal = glm::normalize(glm::dvec3(0.1, 1.0, -0.05));
+  plane.offset = 0.25;
+  std::vector<float> out = {1.0f, 2.0f, 3.0f, 4.0f};  // kept in front of what is appended
+  mirrored_raster_vertices(positions, plane, out, skip);
+  ASSERT_EQ(out.size() % 4, 0u);
+  EXPECT_EQ(out[0], 1.0f);
+  EXPECT_EQ(out[3], 4.0f);
+  double largest = 0.0;
+  for (const glm::vec3& p : positions) largest = std::max({largest, double(std::abs(p.x)), double(std::abs(p.y)), double(std::abs(p.z))});
+  const double margin = 1e-6 * largest;
+  size_t at = 4, whole = 0, cut = 0;
+  for (size_t t = 0; t < triangles; ++t) {
+    if (skip[t]) continue;
+    double side[3];
+    int front = 0;
+    for (int k = 0; k < 3; ++k) {
+      side[k] = glm::dot(plane.normal, glm::dvec3(positions[3 * t + size_t(k)])) - plane.offset;
+      front += side[k] > margin ? 1 : 0;
+    }
+    if (front == 0) continue;
+    const size_t emitted = front == 3 ? 1 : size_t(front);  // a corner in front: one, two: two
+    ASSERT_LE(at + emitted * 12, out.size()) << "triangle " << t;
+    for (size_t v = 0; v < 3 * emitted; ++v) {
+      ASSERT_EQ(out[at + 4 * v + 3], float(t + 1)) << "triangle " << t << ": its index, in source order";
+    }
+    if (front == 3) {
+      for (int k = 0; k < 3; ++k) {
+        const glm::dvec3 p(positions[3 * t + size_t(k)]);
+        const glm::dvec3 q = p - 2.0 * side[k] * plane.normal;
+        EXPECT_EQ(out[at + 4 * size_t(k)], float(q.x));
+        EXPECT_EQ(out[at + 4 * size_t(k) + 1], float(q.y));
+        EXPECT_EQ(out[at + 4 * size_t(k) + 2], float(q.z));
+      }
+      ++whole;
+    } else {
+      ++cut;
+    }
+    at += emitted * 12;
+  }
+  EXPECT_EQ(at, out.size()) << "nothing but the triangles' parts in front";
+  EXPECT_GT(whole, 2048u);  // past the first chunk
+  EXPECT_GT(cut, 100u);
+}
+
 // The project's scenes: the toaster's and the marbles' floors are found as one mirror plane each,
 // holding every reflective triangle of the floor's material.
 TEST(MirrorPlanes, TheProjectScenesFloorsAreMirrorPlanes) {

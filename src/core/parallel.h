@@ -19,6 +19,15 @@ namespace detail {
 // The calling thread's arena of loops on `threads` threads (>= 2), made at its first use and kept
 // while the thread lives: at most `threads` threads, the caller included, run a loop's chunks.
 tbb::task_arena& parallel_arena(unsigned threads);
+// How many of parallel_for's chunks the calling thread is running, one inside another: a loop
+// started inside a chunk runs in the arena that runs the chunk.
+inline thread_local int chunk_depth = 0;
+struct InChunk {
+  InChunk() { ++chunk_depth; }
+  ~InChunk() { --chunk_depth; }
+  InChunk(const InChunk&) = delete;
+  InChunk& operator=(const InChunk&) = delete;
+};
 }  // namespace detail
 
 // Runs f(i) for every i in [0, n) on `threads` threads (0 = all cores), the calling thread
@@ -42,21 +51,28 @@ void parallel_for(uint32_t n, unsigned threads, F&& f, uint32_t chunk = 64) {
     for (uint32_t i = 0; i < n; ++i) f(i);
     return;
   }
-  // One arena per requested thread count (not per count of chunks): the partitioner already makes
-  // no more tasks than chunks.
-  detail::parallel_arena(threads).execute([&] {
-    // Isolated: a loop inside f(i) waits for its own chunks only, never by running another chunk
-    // of this loop on the stack of a suspended f(i).
+  // Isolated: a loop inside f(i) waits for its own chunks only, never by running another chunk of
+  // this loop on the stack of a suspended f(i).
+  const auto loop = [&] {
     tbb::this_task_arena::isolate([&] {
       // simple_partitioner: ranges split down to chunk indices or fewer, each a task to steal.
       tbb::parallel_for(
           tbb::blocked_range<uint32_t>(0, n, chunk),
           [&](const tbb::blocked_range<uint32_t>& r) {
+            const detail::InChunk in_chunk;
             for (uint32_t i = r.begin(); i < r.end(); ++i) f(i);
           },
           tbb::simple_partitioner());
     });
-  });
+  };
+  // A loop inside a chunk (on the caller or on a TBB worker) runs in the arena that runs the chunk;
+  // any other in the calling thread's own arena for the thread count (not per count of chunks:
+  // the partitioner already makes no more tasks than chunks).
+  if (detail::chunk_depth > 0) {
+    loop();
+  } else {
+    detail::parallel_arena(threads).execute(loop);
+  }
 }
 
 // How many chunks of `chunk` indices cover [0, n).

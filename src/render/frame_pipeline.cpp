@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <string>
+#include <utility>
 
 #include "core/cpu_time.h"
 #include "core/error.h"
@@ -90,9 +91,11 @@ double FramePipeline::prepare(size_t index) {
     f.light_buffers.clear();
     f.posed_parts = PosedParts{};
   }
-  // The flat mirrors the frame's first bounce may draw, found here rather than on the rendering
-  // thread (the chrome toaster's 11,102 reflecting triangles: 0.3 ms a frame there).
-  f.mirror_planes_found = f.tree_built && settings_ && frame_may_draw_mirrors(*scene, *settings_);
+  // The flat mirrors the frame's first bounce may draw, found on the worker rather than on the
+  // rendering thread (the chrome toaster's 11,102 reflecting triangles: 0.3 ms a frame there).
+  // Serially this is the rendering thread: the renderer's own search keeps its planes while the
+  // triangles stay (a still mesh rebuilt every frame looks once).
+  f.mirror_planes_found = pipelined_ && f.tree_built && settings_ && frame_may_draw_mirrors(*scene, *settings_);
   if (f.mirror_planes_found) f.mirror_planes = find_mirror_planes(*scene);
   if (f.tree_built && !walks) {
     flatten_primitives(f.tree, scene->mesh.positions, scene->shapes);
@@ -152,8 +155,10 @@ PipelineStep FramePipeline::step(size_t index, const std::function<void(Prepared
 Image render_prepared(Renderer& renderer, PreparedFrame& f, FrameTimings* timings) {
   FrameTimings own;
   FrameTimings* t = timings ? timings : &own;
+  // The planes are swapped in: the slot then holds the renderer's older ones, no longer this frame's.
+  MirrorPlanes* planes = std::exchange(f.mirror_planes_found, false) ? &f.mirror_planes : nullptr;
   Image image = f.tree_built ? renderer.render(*f.scene, f.camera, f.tree, f.build_ms, t, &f.light_buffers, &f.posed_parts,
-                                               f.mirror_planes_found ? &f.mirror_planes : nullptr)
+                                               planes)
                              : renderer.render(*f.scene, f.camera, t);
   f.walks = int64_t(t->sum.walks);
   return image;

@@ -61,14 +61,16 @@ struct PreparedFrame {
   // With them: the closed parts as posed for them (none where no buffer posed them), handed on to
   // the raster passes as the buffers are (Renderer::render).
   PosedParts posed_parts;
-  // With tree_built, where the frame may draw its mirror rays (frame_may_draw_mirrors): its flat
-  // mirrors, found with the tree (mirror_planes_found), handed to the renderer as the tree is.
+  // Pipelined, with tree_built, where the frame may draw its mirror rays (frame_may_draw_mirrors):
+  // its flat mirrors, found on the worker with the tree (mirror_planes_found), handed to the
+  // renderer as the tree is (render_prepared; mirror_planes_found is false once handed over).
+  // Serially the renderer finds them itself, keeping them while the triangles stay.
   MirrorPlanes mirror_planes;
   bool mirror_planes_found = false;
   double pose_ms = 0.0;         // posing the scene
-  double build_ms = 0.0;        // the kd-tree and light buffers' build, wall clock; pipelined, on
-                                // the worker while the previous frame rendered, so not part of
-                                // this frame's time
+  double build_ms = 0.0;        // the kd-tree's, light buffers' and mirror planes' making, wall
+                                // clock; pipelined, on the worker while the previous frame
+                                // rendered, so not part of this frame's time
   double tree_rays = 0.0;       // the rays its kd-tree was built for (KdBuildOptions::rays; 0: a full
                                 // tree, or none: tree_built false or only the primitives' texels)
   // Set by render_prepared: the frame's walks of the kd-tree (GenerationTimings::walks, all
@@ -118,8 +120,9 @@ class FramePipeline {
   // the walks frame N - 2 reported (the latest frame rendered before it is built, pipelined or
   // not, so that both loops build the same trees; the full tree where it walked nothing or did
   // not say), and a tree kept while the triangles stay is built again once the walks outgrow it
-  // (more than twice what it was built for). Without, every frame gets a full kd-tree and no
-  // light buffer is built ahead. Set before the first step.
+  // (more than twice what it was built for); pipelined, the worker also finds the flat mirrors
+  // of a frame that may draw its mirror rays (PreparedFrame::mirror_planes). Without, every frame
+  // gets a full kd-tree and no light buffer is built ahead. Set before the first step.
   // Its worker's class (RenderSettings::worker) comes from them too: the normal class without.
   void set_render_settings(const RenderSettings& settings) { settings_ = settings; }
 

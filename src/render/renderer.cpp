@@ -451,11 +451,13 @@ struct Renderer::Data {
   bool raster_started = false;  // by Engine::start_frame, for this frame's trace_primary
   double raster_start_ms = 0.0;  // start_raster's CPU time, for the generation's upload stage
   RayBatch hit_rays;
-  // find_mirror_planes of the last frame that looked for them, with the triangles and materials it
-  // saw: a mesh that did not move (the bench rebuilds the Utah toasters' still tray every frame)
-  // keeps them.
+  // find_mirror_planes of the last frame that looked for them here, with the triangles, normals
+  // and materials it saw: a mesh that did not move (the serial bench rebuilds the Utah toasters'
+  // still tray every frame) keeps them. Planes handed in with a frame (Renderer::render) replace
+  // them and clear these keys.
   MirrorPlanes mirror_planes;
   std::vector<glm::vec3> mirror_positions;
+  std::vector<glm::vec3> mirror_normals;  // find_mirror_planes reads them (a flat mirror's normals)
   std::vector<uint32_t> mirror_material_ids;
   std::vector<glm::vec2> mirror_materials;  // reflectance, transmittance
   // --shadow-cells: per shadow light the head of its light buffer (MOBIRT_TP_LIGHT_BUFFERS; z = 0
@@ -1210,11 +1212,13 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
     for (size_t m = 0; m < materials.size(); ++m) {
       materials[m] = glm::vec2(scene.materials[m].reflectance, scene.materials[m].transmittance);
     }
-    if (d.mirror_positions != scene.mesh.positions || d.mirror_material_ids != scene.mesh.material_ids ||
-        d.mirror_materials != materials || d.mirror_planes.plane_of.size() != scene.mesh.triangle_count()) {
+    if (d.mirror_positions != scene.mesh.positions || d.mirror_normals != scene.mesh.normals ||
+        d.mirror_material_ids != scene.mesh.material_ids || d.mirror_materials != materials ||
+        d.mirror_planes.plane_of.size() != scene.mesh.triangle_count()) {
       d.mirror_planes = find_mirror_planes(scene);
       ++d.mirror_plane_searches;
       d.mirror_positions = scene.mesh.positions;
+      d.mirror_normals = scene.mesh.normals;
       d.mirror_material_ids = scene.mesh.material_ids;
       d.mirror_materials = std::move(materials);
     }
@@ -1608,6 +1612,7 @@ Image Renderer::render(const Scene& scene, const Camera& camera, FlatKdTree& tre
   if (mirror_planes) {
     std::swap(d.mirror_planes, *mirror_planes);
     d.mirror_positions.clear();  // the cache holds the handed planes now, not those of its keys
+    d.mirror_normals.clear();
     d.mirror_material_ids.clear();
     d.mirror_materials.clear();
   }
