@@ -226,7 +226,7 @@ class Renderer {
   // for frames handed their buffers with their tree (the frame pipeline's worker builds them).
   size_t light_buffers_built() const;
   // The times this renderer looked for a frame's flat mirrors itself (find_mirror_planes), on the
-  // rendering thread: never for frames handed their planes (the frame pipeline's worker finds them).
+  // rendering thread: never for frames handed their planes (the pipelined loop's worker finds them).
   size_t mirror_plane_searches() const;
 
  private:
@@ -305,7 +305,7 @@ void frame_light_buffers(const Scene& scene, const RenderSettings& settings, std
 // Whether a frame of `scene` may draw its first bounce's mirror rays (--mirrors raster, or auto up
 // to kRasterTrianglesPerPixel triangles a pixel): bounces, a scene of triangles only, a material
 // that reflects without refracting. Such a frame looks for its flat mirrors (find_mirror_planes);
-// the frame pipeline's worker finds them with the kd-tree, off the rendering thread.
+// in the pipelined frame loop its worker finds them with the kd-tree, off the rendering thread.
 bool frame_may_draw_mirrors(const Scene& scene, const RenderSettings& settings);
 // Whether a frame rasterizes its primary hits: --primary raster, or auto where raster_pays, and a
 // scene of triangles only (analytic shapes have none to draw: their scenes' primaries are traced).
