@@ -269,6 +269,27 @@ using test::api_name;
 
 class MirrorRaster : public test::PerBackendTest {};
 
+// The light, view and frame of the mirror tile scenes below: a floor at y = 0 seen from above.
+Light tile_light() {
+  Light light;
+  light.position = glm::vec3(0, 10, 5);
+  light.intensity = 100.0f;
+  return light;
+}
+Camera tile_view() {
+  Camera view;
+  view.eye = glm::vec3(0, 8, 14);
+  view.target = glm::vec3(0, 0, 0);
+  return view;
+}
+RenderSettings tile_settings() {
+  RenderSettings settings;
+  settings.width = 80;
+  settings.height = 48;
+  settings.depth = 1;
+  return settings;
+}
+
 // Frames with the floor's mirror rays rasterized against the same frames with every ray traced:
 // the toaster and the marbles (their floors mirror 54 and 84 % of the pixels at the bench's view),
 // one and two bounces, primaries rasterized and traced. Pixels may differ where a mirror ray's
@@ -303,6 +324,10 @@ TEST_P(MirrorRaster, FramesMatchTracedMirrorRays) {
       EXPECT_EQ(ta.generations[1].mirrored, 0u);
       EXPECT_GT(tb.generations[1].mirrored, tb.generations[1].rays / 2) << "the floor's mirror rays rasterized";
       EXPECT_EQ(ta.generations[1].rays, tb.generations[1].rays);
+      // The floor's raster started ahead, once the primary hits were shaded, and taken.
+      EXPECT_EQ(traced.mirror_rasters_ahead().started, 0u);
+      EXPECT_EQ(rasterized.mirror_rasters_ahead().started, 1u);
+      EXPECT_EQ(rasterized.mirror_rasters_ahead().taken, 1u);
       const ImageDiff d = compare_images(a, b, 2.0f / 255.0f);
       EXPECT_GE(d.psnr, 40.0) << "share over 2/255 " << d.share_over << ", max error " << d.max_error;
       EXPECT_LE(d.share_over, 0.005) << "share of pixels that differ by more than 2/255";
@@ -323,17 +348,9 @@ TEST_P(MirrorRaster, FramesMatchTracedMirrorRays) {
   test::add_triangle(tile, {-4, -2, -4}, {4, -2, 4}, {-4, -2, 4}, 1);
   test::add_triangle(tile, {-4, -2, -4}, {4, -2, -4}, {4, -2, 4}, 1);
   ASSERT_GT(find_mirror_planes(tile).planes.size(), 1u);
-  Light light;
-  light.position = glm::vec3(0, 10, 5);
-  light.intensity = 100.0f;
-  tile.lights.push_back(light);
-  Camera view;
-  view.eye = glm::vec3(0, 8, 14);
-  view.target = glm::vec3(0, 0, 0);
-  RenderSettings settings;
-  settings.width = 80;
-  settings.height = 48;
-  settings.depth = 1;
+  tile.lights.push_back(tile_light());
+  const Camera view = tile_view();
+  RenderSettings settings = tile_settings();
   Renderer automatic(*backend, settings);
   FrameTimings t;
   automatic.render(tile, view, &t);
@@ -366,6 +383,60 @@ TEST_P(MirrorRaster, FramesMatchTracedMirrorRays) {
   small_marbles.render(marbles, *marbles.camera, &small);
   ASSERT_GT(small.generations.size(), 1u);
   EXPECT_EQ(small.generations[1].mirrored, 0u) << "8,000 triangles over 3,840 pixels: the raster does not pay";
+}
+
+// The mirror raster started ahead is the plane most primary hits lie on; where the mirror rays
+// then choose another (a floor too faint to send any: its reflectance under --min-weight), it is
+// dropped and the rays' own plane drawn, the image that of the traced mirror rays; where no mirror
+// ray follows at all, it is dropped before the next frame, and the frames are those of --mirrors
+// trace bit for bit.
+TEST_P(MirrorRaster, StartedAheadAndDroppedWhereTheRaysChooseOtherwise) {
+  Scene scene = materials_scene();
+  Material faint;
+  faint.name = "faint";
+  faint.reflectance = 0.001f;  // under the default min_weight (1/512): no mirror ray
+  scene.materials.push_back(faint);
+  const uint32_t kFaint = 3;
+  test::add_triangle(scene, {-10, 0, -10}, {-10, 0, 10}, {10, 0, 10}, kFaint);
+  test::add_triangle(scene, {-10, 0, -10}, {10, 0, 10}, {10, 0, -10}, kFaint);
+  test::add_box(scene, {2, 0, -1}, {3, 3, 1}, 0);
+  scene.lights.push_back(tile_light());
+  const Camera view = tile_view();
+  RenderSettings settings = tile_settings();
+
+  // Only the faint floor: a raster started ahead each frame, no mirror ray to take it.
+  settings.mirrors = MirrorHits::Raster;
+  Renderer drawn(*backend, settings);
+  settings.mirrors = MirrorHits::Trace;
+  Renderer walked(*backend, settings);
+  for (int frame = 0; frame < 2; ++frame) {
+    FrameTimings t;
+    const Image a = drawn.render(scene, view, &t);
+    const Image b = walked.render(scene, view);
+    ASSERT_GT(t.generations.size(), 0u);
+    EXPECT_TRUE(t.generations.size() == 1 || t.generations[1].rays == 0u) << "the faint floor sends no mirror ray";
+    EXPECT_EQ(compare_images(a, b, 0.0f).share_over, 0.0) << "frame " << frame;
+  }
+  EXPECT_EQ(drawn.mirror_rasters_ahead().started, 2u);
+  EXPECT_EQ(drawn.mirror_rasters_ahead().taken, 0u);
+
+  // A mirror tile above the floor: fewer primary hits than the floor, yet the only mirror rays.
+  test::add_triangle(scene, {-1, 0.5f, -1}, {-1, 0.5f, 1}, {1, 0.5f, 1}, 1);
+  test::add_triangle(scene, {-1, 0.5f, -1}, {1, 0.5f, 1}, {1, 0.5f, -1}, 1);
+  ASSERT_EQ(find_mirror_planes(scene).planes.size(), 2u);
+  settings.mirrors = MirrorHits::Raster;
+  Renderer tile(*backend, settings);
+  FrameTimings t;
+  const Image a = tile.render(scene, view, &t);
+  ASSERT_GT(t.generations.size(), 1u);
+  EXPECT_GT(t.generations[1].rays, 0u) << "the tile reflects";
+  EXPECT_EQ(t.generations[1].mirrored, t.generations[1].rays) << "the tile's plane drawn, not the floor's";
+  EXPECT_EQ(tile.mirror_rasters_ahead().started, 1u);
+  EXPECT_EQ(tile.mirror_rasters_ahead().taken, 0u) << "the floor's raster started ahead and dropped";
+  settings.mirrors = MirrorHits::Trace;
+  Renderer traced(*backend, settings);
+  const ImageDiff d = compare_images(traced.render(scene, view), a, 2.0f / 255.0f);
+  EXPECT_LE(d.share_over, 0.005) << "max error " << d.max_error;
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, MirrorRaster, ::testing::Values(Api::Vulkan, Api::Gles), test::api_param_name);

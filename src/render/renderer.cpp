@@ -460,6 +460,14 @@ struct Renderer::Data {
   std::vector<glm::vec3> mirror_normals;  // find_mirror_planes reads them (a flat mirror's normals)
   std::vector<uint32_t> mirror_material_ids;
   std::vector<glm::vec2> mirror_materials;  // reflectance, transmittance
+  uint64_t mirror_planes_checked = UINT64_MAX;  // the frame whose planes mirror_planes holds, checked
+  // A mirror raster started ahead (start_mirror_raster_ahead, once the primary hits are shaded) for
+  // the plane the primary hits predict; trace_mirrored finishes it where the rays choose that
+  // plane, settle_mirror_raster before any other pass or raster.
+  bool mirror_raster_pending = false;
+  MirrorPlane mirror_raster_plane;
+  std::vector<uint32_t> dropped_texels;  // a pending raster nobody wanted, finished into here
+  MirrorRastersAhead mirror_rasters_ahead;  // Renderer::mirror_rasters_ahead
   // --shadow-cells: per shadow light the head of its light buffer (MOBIRT_TP_LIGHT_BUFFERS; z = 0
   // where it has none) and the lights' positions they were built for.
   std::vector<glm::vec4> light_buffer_heads;
@@ -573,6 +581,15 @@ class Renderer::Engine final : public WhittedEngine {
     return elapsed_ms(start);
   }
 
+  void shaded(const Scene& scene, const Camera& camera, int generation, const RayBatch& rays, const SurfaceHits& hits,
+              GenerationTimings& g) override {
+    if (generation == 0) r_.start_mirror_raster_ahead(scene, camera, rays, hits, g);
+  }
+
+  // A raster started ahead of mirror rays that never came is dropped within its frame: another
+  // renderer on the same backend would drop it unseen (Backend::start_raster).
+  void end_frame() override { r_.settle_mirror_raster(); }
+
   TracedGeneration trace_secondary(const Scene& scene, const Camera& camera, int generation, const RayBatch& rays,
                                    GenerationTimings& g) override {
     TracedGeneration traced;
@@ -598,6 +615,7 @@ class Renderer::Engine final : public WhittedEngine {
   // idle: docs/performance-history.md, *Session 30*).
   void start_frame(const Scene& scene, const Camera& camera, const RenderSettings&) override {
     Data& d = *r_.data_;
+    r_.settle_mirror_raster();  // none left by an earlier frame (end_frame), but never two at once
     d.raster_started = false;
     ++d.frame;
     if (std::exchange(d.posed_prebuilt, false)) d.posed_frame = d.frame;  // handed in with this frame
@@ -935,6 +953,8 @@ size_t Renderer::light_buffers_built() const { return data_->light_buffers_built
 
 size_t Renderer::mirror_plane_searches() const { return data_->mirror_plane_searches; }
 
+Renderer::MirrorRastersAhead Renderer::mirror_rasters_ahead() const { return data_->mirror_rasters_ahead; }
+
 double Renderer::upload_tree(const FlatKdTree& tree, const Scene& scene, bool buffers_prebuilt) {
   Data& d = *data_;
   auto start = Clock::now();
@@ -1021,6 +1041,7 @@ TraceResult Renderer::trace_primary(const Scene& scene, const Camera& camera, co
 
 TraceResult Renderer::trace_uploaded(const Scene& scene, const FlatKdTree& tree, const RayBatch& rays,
                                      int primary_hits) {
+  settle_mirror_raster();  // no pass runs while a raster is in flight (Backend::start_raster)
   TraceResult result;
   // Without shadows the pass is specialised to no lights: it casts no shadow rays at all.
   const int lights = pass_lights(int(shadow_lights(scene).size()));
@@ -1068,6 +1089,7 @@ const std::vector<uint8_t>& Renderer::faces_away_from(const Scene& scene, glm::v
 }
 
 void Renderer::start_raster(const Scene& scene, const Camera& camera, uint32_t width, uint32_t height) {
+  settle_mirror_raster();  // its vertices are about to be written over
   Data& d = *data_;
   // The vertices: each triangle's three, with its index + 1 (an exact float below 2^24), on all cores.
   const auto stage = Clock::now();
@@ -1198,13 +1220,27 @@ void Renderer::trace_part(const Scene& scene, const FlatKdTree& tree, const RayB
   parallel_for(part.count(), 0, [&](uint32_t k) { out.texels[part.pixel[k]] = result.texels[k]; }, 4096);
 }
 
-bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const FlatKdTree& tree, const RayBatch& rays,
-                              GenerationTimings& g, TracedGeneration& out) {
-  if (!frame_may_draw_mirrors(scene, settings_) || tree.nodes.empty() || rays.count() == 0) return false;
-  const uint32_t width = uint32_t(settings_.width), height = uint32_t(settings_.height);
-  const uint32_t pixels = width * height;
+namespace {
+// Of `planes` planes counted per chunk (counts[c * planes + p], `chunks` chunks), the one with the
+// largest total, the first on a tie, and that total.
+std::pair<size_t, uint32_t> busiest_plane(const std::vector<uint32_t>& counts, uint32_t chunks, size_t planes) {
+  size_t best = 0;
+  uint32_t most = 0;
+  for (size_t p = 0; p < planes; ++p) {
+    uint32_t total = 0;
+    for (uint32_t c = 0; c < chunks; ++c) total += counts[size_t(c) * planes + p];
+    if (total > most) {
+      most = total;
+      best = p;
+    }
+  }
+  return {best, most};
+}
+}  // namespace
+
+const MirrorPlanes& Renderer::frame_mirror_planes(const Scene& scene) {
   Data& d = *data_;
-  const auto stage = Clock::now();
+  if (d.mirror_planes_checked == d.frame) return d.mirror_planes;
   // The planes handed in with the frame (found on the pipeline's worker), else those of the last
   // frame that looked, while its triangles and materials are the same.
   if (d.mirror_planes_frame != d.frame || d.mirror_planes.plane_of.size() != scene.mesh.triangle_count()) {
@@ -1223,21 +1259,17 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
       d.mirror_materials = std::move(materials);
     }
   }
-  const MirrorPlanes& planes = d.mirror_planes;
-  if (planes.planes.empty()) {
-    g.upload_ms += elapsed_ms(stage);
-    return false;
-  }
+  d.mirror_planes_checked = d.frame;
+  return d.mirror_planes;
+}
+
+std::vector<MirrorPlane> Renderer::mirror_candidates(const Camera& camera, const FlatKdTree& tree,
+                                                     std::vector<int>* candidate_of) const {
+  const MirrorPlanes& planes = data_->mirror_planes;
+  if (candidate_of) candidate_of->assign(planes.planes.size(), -1);
   // The planes facing the eye (up to the 8 largest), each turned to face it.
   const glm::dvec3 eye(camera.eye);
-  const auto largest = [](const glm::dvec3& v) { return std::max({std::abs(v.x), std::abs(v.y), std::abs(v.z)}); };
-  const double scale = std::max(largest(glm::dvec3(tree.bounds.lo)), largest(glm::dvec3(tree.bounds.hi)));
-  // A mirror ray's origin is its hit point offset along the normal (secondary.cpp, offset_origin):
-  // by the absolute offset, at least a few ulps of the point, or (normal-ulp) up to 256 ulps of
-  // each coordinate. Twice that, and no more, counts as on the plane.
-  const double absolute = double(absolute_offset(tree.bounds, settings_.secondary.offset));
-  const double ulps = (settings_.secondary.offset.mode == OffsetMode::NormalUlp ? 300.0 : 8.0) * scale * 0x1p-23;
-  const double on_plane = 2.0 * std::max(absolute, ulps);
+  const double on_plane = mirror_on_plane(tree);
   std::vector<MirrorPlane> candidates;
   for (size_t p = 0; p < planes.planes.size() && candidates.size() < 8; ++p) {
     MirrorPlane plane = planes.planes[p];
@@ -1247,8 +1279,124 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
       plane.normal = -plane.normal;
       plane.offset = -plane.offset;
     }
+    if (candidate_of) (*candidate_of)[p] = int(candidates.size());
     candidates.push_back(plane);
   }
+  return candidates;
+}
+
+// A mirror ray's origin is its hit point offset along the normal (secondary.cpp, offset_origin): by
+// the absolute offset, at least a few ulps of the point, or (normal-ulp) up to 256 ulps of each
+// coordinate. Twice that, and no more, counts as on the plane.
+double Renderer::mirror_on_plane(const FlatKdTree& tree) const {
+  const auto largest = [](const glm::dvec3& v) { return std::max({std::abs(v.x), std::abs(v.y), std::abs(v.z)}); };
+  const double scale = std::max(largest(glm::dvec3(tree.bounds.lo)), largest(glm::dvec3(tree.bounds.hi)));
+  const double absolute = double(absolute_offset(tree.bounds, settings_.secondary.offset));
+  const double ulps = (settings_.secondary.offset.mode == OffsetMode::NormalUlp ? 300.0 : 8.0) * scale * 0x1p-23;
+  return 2.0 * std::max(absolute, ulps);
+}
+
+bool Renderer::start_mirror_raster(const Scene& scene, const Camera& camera, const MirrorPlane& plane) {
+  Data& d = *data_;
+  const uint32_t width = uint32_t(settings_.width), height = uint32_t(settings_.height);
+  // The raster pass of the mirrored scene, clipped to the plane's front side.
+  d.raster_vertices.clear();
+  // The faces turned away from the eye's mirror image are left out, of the closed parts both the
+  // eye and its image are outside of (faces_turned_away).
+  const glm::dvec3 eye(camera.eye);
+  const glm::dvec3 mirrored_eye = eye - 2.0 * (glm::dot(plane.normal, eye) - plane.offset) * plane.normal;
+  mirrored_raster_vertices(scene.mesh.positions, plane, d.raster_vertices,
+                           faces_away_from(scene, glm::vec3(mirrored_eye), &camera.eye, camera.znear));
+  std::vector<glm::vec3> mirrored_positions(d.raster_vertices.size() / 4);
+  for (size_t k = 0; k < mirrored_positions.size(); ++k) {
+    mirrored_positions[k] = glm::vec3(d.raster_vertices[4 * k], d.raster_vertices[4 * k + 1], d.raster_vertices[4 * k + 2]);
+  }
+  RasterView view{};
+  if (!raster_view(camera, int(width), int(height), mirrored_positions, view)) d.raster_vertices.clear();
+  try {
+    backend_.start_raster(d.raster_vertices, view, width, height);
+  } catch (const Error& e) {
+    // A raster pass over the device's limits (the frame's size): auto traces the mirror rays as
+    // every other ray; --mirrors raster says which option to change.
+    if (settings_.mirrors == MirrorHits::Auto && (e.kind() == ErrorKind::BadInput || e.kind() == ErrorKind::Unsupported)) {
+      return false;
+    }
+    throw Error(e.kind(), std::string("--mirrors raster: ") + e.what() + " (or --mirrors trace)");
+  }
+  return true;
+}
+
+void Renderer::settle_mirror_raster() {
+  Data& d = *data_;
+  if (!std::exchange(d.mirror_raster_pending, false)) return;
+  d.dropped_texels.resize(size_t(settings_.width) * size_t(settings_.height));
+  backend_.finish_raster(d.dropped_texels);
+}
+
+void Renderer::start_mirror_raster_ahead(const Scene& scene, const Camera& camera, const RayBatch& rays,
+                                         const SurfaceHits& hits, GenerationTimings& g) {
+  Data& d = *data_;
+  settle_mirror_raster();
+  const FlatKdTree& tree = d.tree;
+  if (!d.tree_walkable || !frame_may_draw_mirrors(scene, settings_) || tree.nodes.empty() || rays.count() == 0 ||
+      settings_.depth < 1) {
+    return;
+  }
+  const uint32_t pixels = uint32_t(settings_.width) * uint32_t(settings_.height);
+  if (rays.count() != pixels || hits.size() != rays.count()) return;  // not the primaries of a whole image
+  const auto stage = Clock::now();
+  const MirrorPlanes& planes = frame_mirror_planes(scene);
+  std::vector<int> candidate_of;
+  const std::vector<MirrorPlane> candidates = planes.planes.empty() ? std::vector<MirrorPlane>()
+                                                                     : mirror_candidates(camera, tree, &candidate_of);
+  if (candidates.empty()) {
+    g.upload_ms += elapsed_ms(stage);
+    return;
+  }
+  // The primary hits on each candidate's reflective triangles: the mirror rays it will send, near
+  // enough to pick the plane trace_mirrored picks from the rays themselves (where they differ, it
+  // draws its own and this raster is thrown away).
+  const size_t k = candidates.size();
+  constexpr uint32_t kChunk = 8192;
+  const uint32_t chunks = chunk_count(rays.count(), kChunk);
+  std::vector<uint32_t> counts(size_t(chunks) * k, 0);
+  const std::vector<int32_t>& plane_of = planes.plane_of;
+  parallel_for_chunks(rays.count(), kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
+    for (uint32_t i = begin; i < end; ++i) {
+      if (!hits[i].valid()) continue;
+      const int32_t prim = hits[i].prim;
+      if (prim < 0 || size_t(prim) >= plane_of.size() || plane_of[size_t(prim)] < 0) continue;
+      const int candidate = candidate_of[size_t(plane_of[size_t(prim)])];
+      if (candidate >= 0) ++counts[size_t(c) * k + size_t(candidate)];
+    }
+  });
+  const auto [best, most] = busiest_plane(counts, chunks, k);
+  if (most == 0 || (settings_.mirrors == MirrorHits::Auto && double(most) < kMirrorRasterMinShare * pixels)) {
+    g.upload_ms += elapsed_ms(stage);
+    return;
+  }
+  if (start_mirror_raster(scene, camera, candidates[best])) {
+    d.mirror_raster_pending = true;
+    d.mirror_raster_plane = candidates[best];
+    ++d.mirror_rasters_ahead.started;
+  }
+  g.upload_ms += elapsed_ms(stage);
+}
+
+bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const FlatKdTree& tree, const RayBatch& rays,
+                              GenerationTimings& g, TracedGeneration& out) {
+  if (!frame_may_draw_mirrors(scene, settings_) || tree.nodes.empty() || rays.count() == 0) return false;
+  const uint32_t width = uint32_t(settings_.width), height = uint32_t(settings_.height);
+  const uint32_t pixels = width * height;
+  Data& d = *data_;
+  const auto stage = Clock::now();
+  const MirrorPlanes& planes = frame_mirror_planes(scene);
+  if (planes.planes.empty()) {
+    g.upload_ms += elapsed_ms(stage);
+    return false;
+  }
+  const std::vector<MirrorPlane> candidates = mirror_candidates(camera, tree, nullptr);
+  const double on_plane = mirror_on_plane(tree);
   // Each ray's plane where it is a mirror ray off one: starting on it, leaving it on the eye's
   // side, the mirror image of its pixel's primary ray (the ray through the pixel centre, which the
   // raster pass samples). The plane that sends the most is drawn.
@@ -1309,44 +1457,22 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
       ++counts[size_t(c) * planes_tried + p];
     }
   });
-  size_t best = 0;
-  uint32_t mirrored = 0;
-  for (size_t p = 0; p < planes_tried; ++p) {
-    uint32_t total = 0;
-    for (uint32_t c = 0; c < chunks; ++c) total += counts[size_t(c) * planes_tried + p];
-    if (total > mirrored) {
-      mirrored = total;
-      best = p;
-    }
-  }
+  const auto [best, mirrored] = busiest_plane(counts, chunks, planes_tried);
   if (mirrored == 0 || (settings_.mirrors == MirrorHits::Auto && double(mirrored) < kMirrorRasterMinShare * pixels)) {
     g.upload_ms += elapsed_ms(stage);
     return false;
   }
   const MirrorPlane& plane = candidates[best];
-  // The raster pass of the mirrored scene, clipped to the plane's front side.
-  d.raster_vertices.clear();
-  // The faces turned away from the eye's mirror image are left out, of the closed parts both the
-  // eye and its image are outside of (faces_turned_away).
-  const glm::dvec3 mirrored_eye = eye - 2.0 * (glm::dot(plane.normal, eye) - plane.offset) * plane.normal;
-  mirrored_raster_vertices(scene.mesh.positions, plane, d.raster_vertices,
-                           faces_away_from(scene, glm::vec3(mirrored_eye), &camera.eye, camera.znear));
-  std::vector<glm::vec3> mirrored_positions(d.raster_vertices.size() / 4);
-  for (size_t k = 0; k < mirrored_positions.size(); ++k) {
-    mirrored_positions[k] = glm::vec3(d.raster_vertices[4 * k], d.raster_vertices[4 * k + 1], d.raster_vertices[4 * k + 2]);
-  }
-  RasterView view{};
-  if (!raster_view(camera, int(width), int(height), mirrored_positions, view)) d.raster_vertices.clear();
-  g.upload_ms += elapsed_ms(stage);
-  try {
-    backend_.start_raster(d.raster_vertices, view, width, height);
-  } catch (const Error& e) {
-    // A raster pass over the device's limits (the frame's size): auto traces the mirror rays as
-    // every other ray; --mirrors raster says which option to change.
-    if (settings_.mirrors == MirrorHits::Auto && (e.kind() == ErrorKind::BadInput || e.kind() == ErrorKind::Unsupported)) {
-      return false;
-    }
-    throw Error(e.kind(), std::string("--mirrors raster: ") + e.what() + " (or --mirrors trace)");
+  const MirrorPlane& ahead = d.mirror_raster_plane;
+  if (d.mirror_raster_pending && ahead.normal == plane.normal && ahead.offset == plane.offset) {
+    d.mirror_raster_pending = false;  // started ahead for this plane: its vertices are this one's
+    ++d.mirror_rasters_ahead.taken;
+    g.upload_ms += elapsed_ms(stage);
+  } else {
+    settle_mirror_raster();
+    const bool started = start_mirror_raster(scene, camera, plane);
+    g.upload_ms += elapsed_ms(stage);
+    if (!started) return false;
   }
   d.raster_texels.resize(pixels);
   add_pass(g, backend_.finish_raster(d.raster_texels));
@@ -1448,6 +1574,7 @@ void Renderer::upload_materials(const Scene& scene) {
 
 std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
                                        const SurfaceHits& hits, GenerationTimings& timings) {
+  settle_mirror_raster();  // no pass runs while a raster is in flight (Backend::start_raster)
   // The shading pass shades the hits only, compacted, and one miss: a miss's colour is the
   // background's, the same for every miss (glsl/shade_main.glsl), so the one texel the pass writes
   // for it serves them all, bit for bit. A pass over every ray ran the whole Phong code for groups

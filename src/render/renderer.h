@@ -228,6 +228,14 @@ class Renderer {
   // The times this renderer looked for a frame's flat mirrors itself (find_mirror_planes), on the
   // rendering thread: never for frames handed their planes (the pipelined loop's worker finds them).
   size_t mirror_plane_searches() const;
+  // Mirror rasters started ahead (once the primary hits were shaded, for the plane they predict)
+  // and, of them, those whose plane the mirror rays then chose (the others were dropped), since the
+  // renderer was made.
+  struct MirrorRastersAhead {
+    size_t started = 0;
+    size_t taken = 0;
+  };
+  MirrorRastersAhead mirror_rasters_ahead() const;
 
  private:
   // The textures laid out in rows of the rays' width (rays and shading inputs), made again when
@@ -256,6 +264,27 @@ class Renderer {
   // say to trace them all. Edge misses of the raster walk `tree`.
   bool trace_mirrored(const Scene& scene, const Camera& camera, const FlatKdTree& tree, const RayBatch& rays,
                       GenerationTimings& g, TracedGeneration& out);
+  // The frame's flat mirrors: handed in with it, else the last frame's while its triangles,
+  // normals and materials are the same, else found now (find_mirror_planes); checked once a frame.
+  const MirrorPlanes& frame_mirror_planes(const Scene& scene);
+  // Of frame_mirror_planes' planes, those facing the eye through `camera` (up to the 8 largest),
+  // each turned to face it; candidate_of (when given): per plane its index among them, or -1.
+  std::vector<MirrorPlane> mirror_candidates(const Camera& camera, const FlatKdTree& tree,
+                                             std::vector<int>* candidate_of) const;
+  // How far from a plane a mirror ray's origin may lie and count as on it.
+  double mirror_on_plane(const FlatKdTree& tree) const;
+  // The raster pass of the scene mirrored in `plane`, seen through `camera`, started
+  // (Backend::start_raster into raster_vertices); false where --mirrors auto declines a raster
+  // over the device's limits (--mirrors raster throws).
+  bool start_mirror_raster(const Scene& scene, const Camera& camera, const MirrorPlane& plane);
+  // Once the primary hits are shaded, before their mirror rays are made: the raster of the plane
+  // whose reflective triangles the most primary hits lie on, started ahead (where --mirrors and the
+  // hits say a raster will be drawn), so that the driver sets it up while this thread makes the
+  // next generation; trace_mirrored finishes it where the rays choose the same plane.
+  void start_mirror_raster_ahead(const Scene& scene, const Camera& camera, const RayBatch& rays,
+                                 const SurfaceHits& hits, GenerationTimings& g);
+  // A raster started ahead and not taken finished and dropped: before any pass, raster or frame.
+  void settle_mirror_raster();
   // One pass over `part`, a part of a generation whose rays each hold in `pixel` the index of the
   // ray they stand for (trace_uploaded with primary_hits), its texels written there in out.texels
   // (sized to the generation, out.packing set).

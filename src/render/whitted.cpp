@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <exception>
 #include <span>
 #include <utility>
 
@@ -124,6 +125,18 @@ Image render_whitted(const Scene& scene, const Camera& camera, const RenderSetti
                      WhittedEngine& engine, FrameTimings* timings) {
   FrameTimings t;
   const std::chrono::steady_clock::time_point frame_start = std::chrono::steady_clock::now();
+  // A frame that throws still ends (WhittedEngine::end_frame), its own error the one that counts.
+  struct EndOnThrow {
+    WhittedEngine& engine;
+    int exceptions = std::uncaught_exceptions();
+    ~EndOnThrow() {
+      if (std::uncaught_exceptions() <= exceptions) return;
+      try {
+        engine.end_frame();
+      } catch (...) {
+      }
+    }
+  } end_on_throw{engine};
   engine.start_frame(scene, camera, settings);
   engine.begin_frame(scene, settings, t);
   const FlatKdTree& tree = engine.tree();
@@ -146,6 +159,7 @@ Image render_whitted(const Scene& scene, const Camera& camera, const RenderSetti
     g.decode_ms += elapsed_ms(stage);
 
     const std::vector<glm::vec3> colors = engine.shade(scene, rays, hits, g);
+    if (generation < depth) engine.shaded(scene, camera, generation, rays, hits, g);
 
     stage = std::chrono::steady_clock::now();
     accumulate(image, rays, colors);
@@ -159,6 +173,7 @@ Image render_whitted(const Scene& scene, const Camera& camera, const RenderSetti
     }
     t.add(g);
   }
+  engine.end_frame();
   t.total_ms = elapsed_ms(frame_start);
   if (timings) *timings = t;
   return image;
