@@ -315,7 +315,7 @@ TEST_P(RasterPrimary, NothingInFrontOfTheCamera) {
 
 // start_raster + finish_raster (the frame starts the draw before its uploads) read back what
 // run_raster does, with textures created, uploaded and destroyed in between; a second start drops
-// the first, and a finish without a start is refused.
+// the first, a finish without a start is refused, and so is one after drop_raster.
 TEST_P(RasterPrimary, AStartedRasterFinishesAsRunRasterDoes) {
   const Scene toaster = project_scene("toaster");
   const Scene boxes = test::box_grid_scene();
@@ -348,6 +348,17 @@ TEST_P(RasterPrimary, AStartedRasterFinishesAsRunRasterDoes) {
   } catch (const Error& e) {
     EXPECT_EQ(e.kind(), ErrorKind::Internal);
   }
+  // A started raster dropped unread (Renderer's mirror raster started ahead and not taken): nothing
+  // is left to finish, a dropped nothing is nothing, and the next start and finish read back as
+  // run_raster does.
+  backend->start_raster(boxes_vertices, boxes_view, uint32_t(width), uint32_t(height));
+  backend->drop_raster();
+  backend->drop_raster();
+  EXPECT_THROW(backend->finish_raster(got), Error);
+  backend->start_raster(toaster_vertices, toaster_view, uint32_t(width), uint32_t(height));
+  std::fill(got.begin(), got.end(), 0xFFFFFFFFu);
+  backend->finish_raster(got);
+  EXPECT_EQ(got, expected);
   const std::vector<std::string> messages = backend->take_debug_messages();
   EXPECT_TRUE(messages.empty()) << test::join(messages);
 }

@@ -90,6 +90,8 @@ void Backend::start_raster(std::span<const float> vertices, const RasterView& vi
   pending_raster_ = {vertices, view, width, height, true};
 }
 
+void Backend::drop_raster() { pending_raster_ = PendingRaster{}; }
+
 PassTiming Backend::finish_raster(std::span<uint32_t> out) {
   if (!pending_raster_.started) throw Error(ErrorKind::Internal, "finish_raster without start_raster");
   const PendingRaster r = std::exchange(pending_raster_, PendingRaster{});

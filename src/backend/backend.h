@@ -199,6 +199,9 @@ class Backend {
   // start_raster keeps the arguments and finish_raster runs run_raster (no overlap).
   virtual void start_raster(std::span<const float> vertices, const RasterView& view, uint32_t width, uint32_t height);
   virtual PassTiming finish_raster(std::span<uint32_t> out);
+  // The raster in flight (start_raster) dropped unread: waited for where it runs already, never
+  // drawn where it does not (the default keeps only the arguments). Nothing where none is.
+  virtual void drop_raster();
 
   // Every validation/debug message received since the last call (tests assert there are none).
   virtual std::vector<std::string> take_debug_messages() = 0;

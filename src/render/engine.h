@@ -144,14 +144,14 @@ class WhittedEngine {
 
   // After a generation is shaded, before its colours are added and the next generation is made
   // (only where one follows): an engine may start work for the next generation here that runs
-  // beside that (the fragment passes: the mirror raster of the primary hits' flat mirror). Nothing
-  // by default.
+  // beside that (the fragment passes: the mirror raster of the primary hits' flat mirror; its CPU
+  // time goes to this generation's stages, its pass to the next's). Nothing by default.
   virtual void shaded(const Scene&, const Camera&, int /*generation*/, const RayBatch& /*rays*/,
                       const SurfaceHits& /*hits*/, GenerationTimings& /*g*/) {}
 
-  // Once per frame, last of all (also when the frame throws): an engine ends what it started for a
-  // generation that never came (a mirror raster started ahead of mirror rays that were not made).
-  // Nothing by default.
+  // Once per frame, after its last generation (also when the frame throws): an engine ends what it
+  // started for a generation that never came (a mirror raster started ahead of mirror rays that
+  // were not made). Nothing by default.
   virtual void end_frame() {}
 
   // The order of a new generation's rays that suits the engine (the fragment passes: neighbouring

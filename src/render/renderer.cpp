@@ -466,7 +466,6 @@ struct Renderer::Data {
   // plane, settle_mirror_raster before any other pass or raster.
   bool mirror_raster_pending = false;
   MirrorPlane mirror_raster_plane;
-  std::vector<uint32_t> dropped_texels;  // a pending raster nobody wanted, finished into here
   MirrorRastersAhead mirror_rasters_ahead;  // Renderer::mirror_rasters_ahead
   // --shadow-cells: per shadow light the head of its light buffer (MOBIRT_TP_LIGHT_BUFFERS; z = 0
   // where it has none) and the lights' positions they were built for.
@@ -1296,7 +1295,9 @@ double Renderer::mirror_on_plane(const FlatKdTree& tree) const {
   return 2.0 * std::max(absolute, ulps);
 }
 
-bool Renderer::start_mirror_raster(const Scene& scene, const Camera& camera, const MirrorPlane& plane) {
+bool Renderer::start_mirror_raster(const Scene& scene, const Camera& camera, const MirrorPlane& plane,
+                                   double& prepare_ms) {
+  const auto stage = Clock::now();
   Data& d = *data_;
   const uint32_t width = uint32_t(settings_.width), height = uint32_t(settings_.height);
   // The raster pass of the mirrored scene, clipped to the plane's front side.
@@ -1313,6 +1314,7 @@ bool Renderer::start_mirror_raster(const Scene& scene, const Camera& camera, con
   }
   RasterView view{};
   if (!raster_view(camera, int(width), int(height), mirrored_positions, view)) d.raster_vertices.clear();
+  prepare_ms = elapsed_ms(stage);  // the backend counts its own copy of the vertices
   try {
     backend_.start_raster(d.raster_vertices, view, width, height);
   } catch (const Error& e) {
@@ -1327,10 +1329,7 @@ bool Renderer::start_mirror_raster(const Scene& scene, const Camera& camera, con
 }
 
 void Renderer::settle_mirror_raster() {
-  Data& d = *data_;
-  if (!std::exchange(d.mirror_raster_pending, false)) return;
-  d.dropped_texels.resize(size_t(settings_.width) * size_t(settings_.height));
-  backend_.finish_raster(d.dropped_texels);
+  if (std::exchange(data_->mirror_raster_pending, false)) backend_.drop_raster();
 }
 
 void Renderer::start_mirror_raster_ahead(const Scene& scene, const Camera& camera, const RayBatch& rays,
@@ -1375,12 +1374,21 @@ void Renderer::start_mirror_raster_ahead(const Scene& scene, const Camera& camer
     g.upload_ms += elapsed_ms(stage);
     return;
   }
-  if (start_mirror_raster(scene, camera, candidates[best])) {
-    d.mirror_raster_pending = true;
-    d.mirror_raster_plane = candidates[best];
-    ++d.mirror_rasters_ahead.started;
-  }
   g.upload_ms += elapsed_ms(stage);
+  double prepare_ms = 0.0;
+  try {
+    if (start_mirror_raster(scene, camera, candidates[best], prepare_ms)) {
+      d.mirror_raster_pending = true;
+      d.mirror_raster_plane = candidates[best];
+      ++d.mirror_rasters_ahead.started;
+    }
+  } catch (const Error&) {
+    // A raster the device refuses (--mirrors raster): not drawn ahead, nothing left in flight;
+    // trace_mirrored reports it where the rays ask for that plane's raster, as it did before
+    // rasters were started ahead.
+    backend_.drop_raster();
+  }
+  g.upload_ms += prepare_ms;
 }
 
 bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const FlatKdTree& tree, const RayBatch& rays,
@@ -1470,8 +1478,10 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
     g.upload_ms += elapsed_ms(stage);
   } else {
     settle_mirror_raster();
-    const bool started = start_mirror_raster(scene, camera, plane);
     g.upload_ms += elapsed_ms(stage);
+    double prepare_ms = 0.0;
+    const bool started = start_mirror_raster(scene, camera, plane, prepare_ms);
+    g.upload_ms += prepare_ms;
     if (!started) return false;
   }
   d.raster_texels.resize(pixels);

@@ -227,6 +227,8 @@ class Renderer {
   size_t light_buffers_built() const;
   // The times this renderer looked for a frame's flat mirrors itself (find_mirror_planes), on the
   // rendering thread: never for frames handed their planes (the pipelined loop's worker finds them).
+  // A frame that may draw mirrors looks once its primary hits are shaded (to start the raster
+  // ahead), also where no mirror ray follows.
   size_t mirror_plane_searches() const;
   // Mirror rasters started ahead (once the primary hits were shaded, for the plane they predict)
   // and, of them, those whose plane the mirror rays then chose (the others were dropped), since the
@@ -275,15 +277,17 @@ class Renderer {
   double mirror_on_plane(const FlatKdTree& tree) const;
   // The raster pass of the scene mirrored in `plane`, seen through `camera`, started
   // (Backend::start_raster into raster_vertices); false where --mirrors auto declines a raster
-  // over the device's limits (--mirrors raster throws).
-  bool start_mirror_raster(const Scene& scene, const Camera& camera, const MirrorPlane& plane);
+  // over the device's limits (--mirrors raster throws). prepare_ms: its CPU time up to the
+  // backend's start (the backend counts its own copy of the vertices in the pass's upload).
+  bool start_mirror_raster(const Scene& scene, const Camera& camera, const MirrorPlane& plane, double& prepare_ms);
   // Once the primary hits are shaded, before their mirror rays are made: the raster of the plane
   // whose reflective triangles the most primary hits lie on, started ahead (where --mirrors and the
   // hits say a raster will be drawn), so that the driver sets it up while this thread makes the
   // next generation; trace_mirrored finishes it where the rays choose the same plane.
   void start_mirror_raster_ahead(const Scene& scene, const Camera& camera, const RayBatch& rays,
                                  const SurfaceHits& hits, GenerationTimings& g);
-  // A raster started ahead and not taken finished and dropped: before any pass, raster or frame.
+  // A raster started ahead and not taken dropped unread (Backend::drop_raster): before any pass,
+  // raster or frame.
   void settle_mirror_raster();
   // One pass over `part`, a part of a generation whose rays each hold in `pixel` the index of the
   // ray they stand for (trace_uploaded with primary_hits), its texels written there in out.texels

@@ -77,6 +77,7 @@ class Impl {
                         std::span<uint32_t> out);
   void start_raster(std::span<const float> vertices, const RasterView& view, uint32_t width, uint32_t height);
   PassTiming finish_raster(std::span<uint32_t> out);
+  void drop_raster() { drop_raster_in_flight(); }
   std::vector<std::string> take_debug_messages() { return device_.take_debug_messages(); }
   void save_pipeline_cache() const { pipelines_.save_cache(); }
 
@@ -869,6 +870,7 @@ class VulkanBackend final : public Backend {
     impl_->start_raster(vertices, view, width, height);
   }
   PassTiming finish_raster(std::span<uint32_t> out) override { return impl_->finish_raster(out); }
+  void drop_raster() override { impl_->drop_raster(); }
   std::vector<std::string> take_debug_messages() override { return impl_->take_debug_messages(); }
   bool reads_target_in_place() const { return impl_->reads_target_in_place(); }
 
