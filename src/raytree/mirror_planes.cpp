@@ -9,6 +9,11 @@
 #include "core/error.h"
 #include "core/parallel.h"
 
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define MOBIRT_MIRROR_AVX2 1
+#include <immintrin.h>
+#endif
+
 namespace mobirt {
 namespace {
 
@@ -217,6 +222,136 @@ void mirrored_raster_vertices(std::span<const glm::vec3> positions, const Mirror
   for (uint32_t c = 0; c < chunks; ++c) first[c + 1] = first[c] + parts[c].size();
   out.resize(first[chunks]);
   parallel_for(chunks, 0, [&](uint32_t c) { std::copy(parts[c].begin(), parts[c].end(), out.begin() + first[c]); }, 1);
+}
+
+uint8_t mirror_ray_plane(const MirrorRayTest& test, const RayBatch& rays, uint32_t i) {
+  const uint32_t width = test.width;
+  const uint32_t pixel = rays.pixel[i];
+  if (pixel >= width * test.height) return kNoMirrorPlane;
+  const CameraBasis& basis = test.basis;
+  const glm::dvec3 forward(basis.forward), right(basis.right), up(basis.up);
+  const double sx_scale = double(basis.tan_half) * double(basis.aspect);
+  const glm::dvec3 o(rays.origin[i]), dir(rays.direction[i]);
+  const double on_plane = test.on_plane;
+  for (size_t p = 0; p < test.planes.size(); ++p) {
+    const MirrorPlane& plane = test.planes[p];
+    const double above = glm::dot(plane.normal, o) - plane.offset;
+    if (!(above >= -on_plane && above <= on_plane)) continue;
+    const double dn = glm::dot(dir, plane.normal);
+    if (!(dn > 0.0)) continue;
+    const glm::dvec3 back = dir - 2.0 * dn * plane.normal;  // the primary ray's direction, if a mirror ray
+    const double f = glm::dot(back, forward);
+    if (!(f > 0.0)) continue;
+    const double sx = (2.0 * (double(pixel % width) + 0.5) / double(width) - 1.0) * sx_scale;
+    const double sy = double(basis.row_offset(float(pixel / width) + 0.5f));
+    if (std::abs(glm::dot(back, right) - sx * f) > 1e-5 * f || std::abs(glm::dot(back, up) - sy * f) > 1e-5 * f) {
+      continue;
+    }
+    return uint8_t(p);
+  }
+  return kNoMirrorPlane;
+}
+
+#if defined(MOBIRT_MIRROR_AVX2)
+namespace {
+// Four doubles of glm's dot product, (a.x b.x + a.y b.y) + a.z b.z.
+__attribute__((target("avx2"))) inline __m256d dot4(__m256d ax, __m256d ay, __m256d az, __m256d bx, __m256d by,
+                                                    __m256d bz) {
+  return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ax, bx), _mm256_mul_pd(ay, by)), _mm256_mul_pd(az, bz));
+}
+
+// mirror_ray_plane of rays [i, i + 4), every operation mirror_ray_plane's (the target enables no
+// FMA, so no product is fused into a sum).
+__attribute__((target("avx2"))) void mirror_ray_planes_x4(const MirrorRayTest& test, const RayBatch& rays, uint32_t i,
+                                                          uint8_t* plane_of) {
+  const uint32_t width = test.width, pixels = test.width * test.height;
+  const CameraBasis& basis = test.basis;
+  // The rays' origins and directions, transposed into x, y and z of the four, widened to double.
+  __m128 o0 = _mm_loadu_ps(&rays.origin[i].x), o1 = _mm_loadu_ps(&rays.origin[i + 1].x);
+  __m128 o2 = _mm_loadu_ps(&rays.origin[i + 2].x), o3 = _mm_loadu_ps(&rays.origin[i + 3].x);
+  _MM_TRANSPOSE4_PS(o0, o1, o2, o3);
+  __m128 d0 = _mm_loadu_ps(&rays.direction[i].x), d1 = _mm_loadu_ps(&rays.direction[i + 1].x);
+  __m128 d2 = _mm_loadu_ps(&rays.direction[i + 2].x), d3 = _mm_loadu_ps(&rays.direction[i + 3].x);
+  _MM_TRANSPOSE4_PS(d0, d1, d2, d3);
+  const __m256d ox = _mm256_cvtps_pd(o0), oy = _mm256_cvtps_pd(o1), oz = _mm256_cvtps_pd(o2);
+  const __m256d dx = _mm256_cvtps_pd(d0), dy = _mm256_cvtps_pd(d1), dz = _mm256_cvtps_pd(d2);
+  // Each lane's pixel column and row; sx in double and sy in float, as mirror_ray_plane makes them.
+  alignas(32) double column[4];
+  alignas(16) float row[4];
+  alignas(32) int64_t inside[4];
+  for (int k = 0; k < 4; ++k) {
+    const uint32_t pixel = rays.pixel[i + uint32_t(k)];
+    const bool in = pixel < pixels;
+    column[k] = in ? double(pixel % width) : 0.0;
+    row[k] = in ? float(pixel / width) : 0.0f;
+    inside[k] = in ? -1 : 0;  // all bits set where the pixel is in the image
+  }
+  const __m256d sx_scale = _mm256_set1_pd(double(basis.tan_half) * double(basis.aspect));
+  const __m256d sx = _mm256_mul_pd(
+      _mm256_sub_pd(_mm256_div_pd(_mm256_mul_pd(_mm256_set1_pd(2.0), _mm256_add_pd(_mm256_load_pd(column), _mm256_set1_pd(0.5))),
+                                  _mm256_set1_pd(double(width))),
+                    _mm256_set1_pd(1.0)),
+      sx_scale);
+  // CameraBasis::row_offset(y + 0.5f): (1 - 2 y / height) tan_half, in float.
+  const __m128 y = _mm_add_ps(_mm_load_ps(row), _mm_set1_ps(0.5f));
+  const __m128 sy_f = _mm_mul_ps(
+      _mm_sub_ps(_mm_set1_ps(1.0f), _mm_div_ps(_mm_mul_ps(_mm_set1_ps(2.0f), y), _mm_set1_ps(basis.height))),
+      _mm_set1_ps(basis.tan_half));
+  const __m256d sy = _mm256_cvtps_pd(sy_f);
+  const __m256d fx = _mm256_set1_pd(double(basis.forward.x)), fy = _mm256_set1_pd(double(basis.forward.y)),
+                fz = _mm256_set1_pd(double(basis.forward.z));
+  const __m256d rx = _mm256_set1_pd(double(basis.right.x)), ry = _mm256_set1_pd(double(basis.right.y)),
+                rz = _mm256_set1_pd(double(basis.right.z));
+  const __m256d ux = _mm256_set1_pd(double(basis.up.x)), uy = _mm256_set1_pd(double(basis.up.y)),
+                uz = _mm256_set1_pd(double(basis.up.z));
+  const __m256d on = _mm256_set1_pd(test.on_plane), minus_on = _mm256_set1_pd(-test.on_plane);
+  const __m256d zero = _mm256_setzero_pd(), two = _mm256_set1_pd(2.0), tolerance = _mm256_set1_pd(1e-5);
+  const __m256d abs_mask = _mm256_castsi256_pd(_mm256_set1_epi64x(0x7fffffffffffffffLL));
+  __m256d open = _mm256_castsi256_pd(_mm256_load_si256(reinterpret_cast<const __m256i*>(inside)));  // without a plane yet
+  alignas(32) double chosen[4] = {double(kNoMirrorPlane), double(kNoMirrorPlane), double(kNoMirrorPlane),
+                                  double(kNoMirrorPlane)};
+  __m256d result = _mm256_load_pd(chosen);
+  for (size_t p = 0; p < test.planes.size() && _mm256_movemask_pd(open) != 0; ++p) {
+    const MirrorPlane& plane = test.planes[p];
+    const __m256d nx = _mm256_set1_pd(plane.normal.x), ny = _mm256_set1_pd(plane.normal.y),
+                  nz = _mm256_set1_pd(plane.normal.z);
+    const __m256d above = _mm256_sub_pd(dot4(nx, ny, nz, ox, oy, oz), _mm256_set1_pd(plane.offset));
+    __m256d pass = _mm256_and_pd(_mm256_cmp_pd(above, minus_on, _CMP_GE_OQ), _mm256_cmp_pd(above, on, _CMP_LE_OQ));
+    const __m256d dn = dot4(dx, dy, dz, nx, ny, nz);
+    pass = _mm256_and_pd(pass, _mm256_cmp_pd(dn, zero, _CMP_GT_OQ));
+    const __m256d twice = _mm256_mul_pd(two, dn);
+    const __m256d bx = _mm256_sub_pd(dx, _mm256_mul_pd(twice, nx)), by = _mm256_sub_pd(dy, _mm256_mul_pd(twice, ny)),
+                  bz = _mm256_sub_pd(dz, _mm256_mul_pd(twice, nz));
+    const __m256d f = dot4(bx, by, bz, fx, fy, fz);
+    pass = _mm256_and_pd(pass, _mm256_cmp_pd(f, zero, _CMP_GT_OQ));
+    const __m256d bound = _mm256_mul_pd(tolerance, f);
+    const __m256d off_x = _mm256_and_pd(_mm256_sub_pd(dot4(bx, by, bz, rx, ry, rz), _mm256_mul_pd(sx, f)), abs_mask);
+    const __m256d off_y = _mm256_and_pd(_mm256_sub_pd(dot4(bx, by, bz, ux, uy, uz), _mm256_mul_pd(sy, f)), abs_mask);
+    // !(off > bound): a NaN passes, as the reference's `>` lets it.
+    pass = _mm256_and_pd(pass, _mm256_cmp_pd(off_x, bound, _CMP_NGT_UQ));
+    pass = _mm256_and_pd(pass, _mm256_cmp_pd(off_y, bound, _CMP_NGT_UQ));
+    pass = _mm256_and_pd(pass, open);
+    result = _mm256_blendv_pd(result, _mm256_set1_pd(double(p)), pass);
+    open = _mm256_andnot_pd(pass, open);
+  }
+  _mm256_store_pd(chosen, result);
+  for (int k = 0; k < 4; ++k) plane_of[i + uint32_t(k)] = uint8_t(chosen[k]);
+}
+}  // namespace
+#endif
+
+void mirror_ray_planes(const MirrorRayTest& test, const RayBatch& rays, uint32_t begin, uint32_t end, uint8_t* plane_of) {
+  if (test.planes.size() >= kNoMirrorPlane) {
+    throw Error(ErrorKind::Internal, "mirror_ray_planes: " + std::to_string(test.planes.size()) + " planes");
+  }
+  uint32_t i = begin;
+#if defined(MOBIRT_MIRROR_AVX2)
+  static const bool avx2 = __builtin_cpu_supports("avx2");
+  if (avx2) {
+    for (; i + 4 <= end; i += 4) mirror_ray_planes_x4(test, rays, i, plane_of);
+  }
+#endif
+  for (; i < end; ++i) plane_of[i] = mirror_ray_plane(test, rays, i);
 }
 
 }  // namespace mobirt

@@ -24,6 +24,8 @@
 #include <span>
 #include <vector>
 
+#include "core/camera.h"
+#include "raytree/rays.h"
 #include "scene/scene.h"
 
 namespace mobirt {
@@ -52,5 +54,25 @@ MirrorPlanes find_mirror_planes(const Scene& scene);
 // triangle t with skip[t] set is left out (skip empty: none is).
 void mirrored_raster_vertices(std::span<const glm::vec3> positions, const MirrorPlane& plane, std::vector<float>& out,
                               std::span<const uint8_t> skip = {});
+
+// Which of a frame's mirror planes sent each ray of its first secondary generation, as
+// Renderer::trace_mirrored needs it: ray i is a mirror ray off plane p when it starts on p (its
+// origin within on_plane of it), leaves it on its front side, and its reflection in p is the
+// primary ray through the centre of its pixel (rays.pixel[i] of a width x height image through
+// `basis`: on the image plane within 1e-5 of the pixel's coordinates), the pixel the raster pass
+// of the scene mirrored in p samples. The planes are tried in order, the first that passes wins.
+struct MirrorRayTest {
+  std::span<const MirrorPlane> planes;  // each turned to face the eye; at most 254
+  CameraBasis basis;
+  uint32_t width = 0, height = 0;
+  double on_plane = 0.0;
+};
+constexpr uint8_t kNoMirrorPlane = 0xFF;
+// The index of ray i's plane, or kNoMirrorPlane: the reference, one ray at a time.
+uint8_t mirror_ray_plane(const MirrorRayTest& test, const RayBatch& rays, uint32_t i);
+// mirror_ray_plane of rays [begin, end) into plane_of[begin, end): the same answers, four rays at
+// a time in double-precision vector lanes on AVX2 CPUs (the same operations in the same order,
+// no fused multiply-add), one at a time elsewhere.
+void mirror_ray_planes(const MirrorRayTest& test, const RayBatch& rays, uint32_t begin, uint32_t end, uint8_t* plane_of);
 
 }  // namespace mobirt

@@ -1407,62 +1407,36 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
   const double on_plane = mirror_on_plane(tree);
   // Each ray's plane where it is a mirror ray off one: starting on it, leaving it on the eye's
   // side, the mirror image of its pixel's primary ray (the ray through the pixel centre, which the
-  // raster pass samples). The plane that sends the most is drawn.
-  const CameraBasis basis(camera, int(width), int(height));
+  // raster pass samples; mirror_ray_plane). The plane that sends the most is drawn.
+  const MirrorRayTest test{candidates, CameraBasis(camera, int(width), int(height)), width, height, on_plane};
   const uint32_t n = rays.count();
-  constexpr uint8_t kNone = 0xFF;
+  constexpr uint8_t kNone = kNoMirrorPlane;
   std::vector<uint8_t> plane_of(n, kNone);
   constexpr uint32_t kChunk = 4096;
   const uint32_t chunks = chunk_count(n, kChunk);
   const size_t planes_tried = candidates.size();
-  // Ray i's plane, or planes_tried where it is no mirror ray off any. Its reflection in the plane
-  // must point through its pixel's centre: on the image plane (forward + sx right + sy up, as
-  // CameraBasis::ray makes the primary ray), within 1e-5 of the pixel's (sx, sy), about 1e-5
-  // radians; no square root, no primary ray made (this ran at 30 ns a ray with them: 1.5 ms of
-  // CPU a frame on the toaster's 53,000 rays).
-  const glm::dvec3 forward(basis.forward), right(basis.right), up(basis.up);
-  const double sx_scale = double(basis.tan_half) * double(basis.aspect);
-  const auto plane_of_ray = [&](uint32_t i) -> size_t {
-    const uint32_t pixel = rays.pixel[i];
-    if (pixel >= pixels) return planes_tried;
-    const glm::dvec3 o(rays.origin[i]), dir(rays.direction[i]);
-    for (size_t p = 0; p < planes_tried; ++p) {
-      const MirrorPlane& plane = candidates[p];
-      const double above = glm::dot(plane.normal, o) - plane.offset;
-      if (!(above >= -on_plane && above <= on_plane)) continue;
-      const double dn = glm::dot(dir, plane.normal);
-      if (!(dn > 0.0)) continue;
-      const glm::dvec3 back = dir - 2.0 * dn * plane.normal;  // the primary ray's direction, if a mirror ray
-      const double f = glm::dot(back, forward);
-      if (!(f > 0.0)) continue;
-      const double sx = (2.0 * (double(pixel % width) + 0.5) / double(width) - 1.0) * sx_scale;
-      const double sy = double(basis.row_offset(float(pixel / width) + 0.5f));
-      if (std::abs(glm::dot(back, right) - sx * f) > 1e-5 * f || std::abs(glm::dot(back, up) - sy * f) > 1e-5 * f) {
-        continue;
-      }
-      return p;
-    }
-    return planes_tried;
-  };
   if (settings_.mirrors == MirrorHits::Auto) {
     // One ray in 16 first: a frame whose planes are far from auto's share is declined for a
     // sixteenth of the work (the Utah toasters' tray, under session 36's share of half: 0.7 ms a
     // frame for all its rays).
     std::vector<uint32_t> sampled(planes_tried + 1, 0);
-    for (uint32_t i = 0; i < n; i += 16) ++sampled[plane_of_ray(i)];
+    for (uint32_t i = 0; i < n; i += 16) {
+      const uint8_t p = mirror_ray_plane(test, rays, i);
+      ++sampled[p == kNone ? planes_tried : size_t(p)];
+    }
     const uint32_t most = planes_tried == 0 ? 0 : *std::max_element(sampled.begin(), sampled.end() - 1);
     if (16.0 * most < 0.75 * kMirrorRasterMinShare * pixels) {
       g.upload_ms += elapsed_ms(stage);
       return false;
     }
   }
+  // Every ray, four at a time in vector lanes where the CPU has AVX2 (mirror_ray_planes: the
+  // scalar test took 0.6-0.8 ms of the rendering thread's frame on the toaster and the marbles).
   std::vector<uint32_t> counts(size_t(chunks) * planes_tried, 0);
   parallel_for_chunks(n, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
+    mirror_ray_planes(test, rays, begin, end, plane_of.data());
     for (uint32_t i = begin; i < end; ++i) {
-      const size_t p = plane_of_ray(i);
-      if (p == planes_tried) continue;
-      plane_of[i] = uint8_t(p);
-      ++counts[size_t(c) * planes_tried + p];
+      if (plane_of[i] != kNone) ++counts[size_t(c) * planes_tried + plane_of[i]];
     }
   });
   const auto [best, mirrored] = busiest_plane(counts, chunks, planes_tried);
