@@ -225,6 +225,9 @@ void mirrored_raster_vertices(std::span<const glm::vec3> positions, const Mirror
 }
 
 uint8_t mirror_ray_plane(const MirrorRayTest& test, const RayBatch& rays, uint32_t i) {
+  if (test.planes.size() >= kNoMirrorPlane) {
+    throw Error(ErrorKind::Internal, "mirror_ray_plane: " + std::to_string(test.planes.size()) + " planes");
+  }
   const uint32_t width = test.width;
   const uint32_t pixel = rays.pixel[i];
   if (pixel >= width * test.height) return kNoMirrorPlane;
@@ -340,14 +343,22 @@ __attribute__((target("avx2"))) void mirror_ray_planes_x4(const MirrorRayTest& t
 }  // namespace
 #endif
 
+bool mirror_ray_lanes() {
+#if defined(MOBIRT_MIRROR_AVX2)
+  static const bool avx2 = __builtin_cpu_supports("avx2");
+  return avx2;
+#else
+  return false;
+#endif
+}
+
 void mirror_ray_planes(const MirrorRayTest& test, const RayBatch& rays, uint32_t begin, uint32_t end, uint8_t* plane_of) {
   if (test.planes.size() >= kNoMirrorPlane) {
     throw Error(ErrorKind::Internal, "mirror_ray_planes: " + std::to_string(test.planes.size()) + " planes");
   }
   uint32_t i = begin;
 #if defined(MOBIRT_MIRROR_AVX2)
-  static const bool avx2 = __builtin_cpu_supports("avx2");
-  if (avx2) {
+  if (mirror_ray_lanes()) {
     for (; i + 4 <= end; i += 4) mirror_ray_planes_x4(test, rays, i, plane_of);
   }
 #endif

@@ -71,8 +71,11 @@ constexpr uint8_t kNoMirrorPlane = 0xFF;
 // The index of ray i's plane, or kNoMirrorPlane: the reference, one ray at a time.
 uint8_t mirror_ray_plane(const MirrorRayTest& test, const RayBatch& rays, uint32_t i);
 // mirror_ray_plane of rays [begin, end) into plane_of[begin, end): the same answers, four rays at
-// a time in double-precision vector lanes on AVX2 CPUs (the same operations in the same order,
-// no fused multiply-add), one at a time elsewhere.
+// a time in double-precision vector lanes on AVX2 CPUs (the same operations in the same order;
+// the file is built with -ffp-contract=off, so no product is fused into a sum in either), one at
+// a time elsewhere.
 void mirror_ray_planes(const MirrorRayTest& test, const RayBatch& rays, uint32_t begin, uint32_t end, uint8_t* plane_of);
+// Whether mirror_ray_planes runs vector lanes on this CPU (AVX2), or the reference one ray at a time.
+bool mirror_ray_lanes();
 
 }  // namespace mobirt
