@@ -263,8 +263,8 @@ __attribute__((target("avx2"))) inline __m256d dot4(__m256d ax, __m256d ay, __m2
   return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ax, bx), _mm256_mul_pd(ay, by)), _mm256_mul_pd(az, bz));
 }
 
-// mirror_ray_plane of rays [i, i + 4), every operation mirror_ray_plane's (the target enables no
-// FMA, so no product is fused into a sum).
+// mirror_ray_plane of rays [i, i + 4), every operation mirror_ray_plane's (the file is built with
+// -ffp-contract=off: no product is fused into a sum here or there).
 __attribute__((target("avx2"))) void mirror_ray_planes_x4(const MirrorRayTest& test, const RayBatch& rays, uint32_t i,
                                                           uint8_t* plane_of) {
   const uint32_t width = test.width, pixels = test.width * test.height;

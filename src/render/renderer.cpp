@@ -1262,13 +1262,12 @@ const MirrorPlanes& Renderer::frame_mirror_planes(const Scene& scene) {
   return d.mirror_planes;
 }
 
-std::vector<MirrorPlane> Renderer::mirror_candidates(const Camera& camera, const FlatKdTree& tree,
+std::vector<MirrorPlane> Renderer::mirror_candidates(const Camera& camera, double on_plane,
                                                      std::vector<int>* candidate_of) const {
   const MirrorPlanes& planes = data_->mirror_planes;
   if (candidate_of) candidate_of->assign(planes.planes.size(), -1);
   // The planes facing the eye (up to the 8 largest), each turned to face it.
   const glm::dvec3 eye(camera.eye);
-  const double on_plane = mirror_on_plane(tree);
   std::vector<MirrorPlane> candidates;
   for (size_t p = 0; p < planes.planes.size() && candidates.size() < 8; ++p) {
     MirrorPlane plane = planes.planes[p];
@@ -1298,6 +1297,7 @@ double Renderer::mirror_on_plane(const FlatKdTree& tree) const {
 bool Renderer::start_mirror_raster(const Scene& scene, const Camera& camera, const MirrorPlane& plane,
                                    double& prepare_ms) {
   const auto stage = Clock::now();
+  settle_mirror_raster();  // its vertices are about to be written over
   Data& d = *data_;
   const uint32_t width = uint32_t(settings_.width), height = uint32_t(settings_.height);
   // The raster pass of the mirrored scene, clipped to the plane's front side.
@@ -1335,7 +1335,6 @@ void Renderer::settle_mirror_raster() {
 void Renderer::start_mirror_raster_ahead(const Scene& scene, const Camera& camera, const RayBatch& rays,
                                          const SurfaceHits& hits, GenerationTimings& g) {
   Data& d = *data_;
-  settle_mirror_raster();
   const FlatKdTree& tree = d.tree;
   if (!d.tree_walkable || !frame_may_draw_mirrors(scene, settings_) || tree.nodes.empty() || rays.count() == 0 ||
       settings_.depth < 1) {
@@ -1346,8 +1345,7 @@ void Renderer::start_mirror_raster_ahead(const Scene& scene, const Camera& camer
   const auto stage = Clock::now();
   const MirrorPlanes& planes = frame_mirror_planes(scene);
   std::vector<int> candidate_of;
-  const std::vector<MirrorPlane> candidates = planes.planes.empty() ? std::vector<MirrorPlane>()
-                                                                     : mirror_candidates(camera, tree, &candidate_of);
+  const std::vector<MirrorPlane> candidates = mirror_candidates(camera, mirror_on_plane(tree), &candidate_of);
   if (candidates.empty()) {
     g.upload_ms += elapsed_ms(stage);
     return;
@@ -1370,11 +1368,8 @@ void Renderer::start_mirror_raster_ahead(const Scene& scene, const Camera& camer
     }
   });
   const auto [best, most] = busiest_plane(counts, chunks, k);
-  if (most == 0 || (settings_.mirrors == MirrorHits::Auto && double(most) < kMirrorRasterMinShare * pixels)) {
-    g.upload_ms += elapsed_ms(stage);
-    return;
-  }
   g.upload_ms += elapsed_ms(stage);
+  if (most == 0 || (settings_.mirrors == MirrorHits::Auto && double(most) < kMirrorRasterMinShare * pixels)) return;
   double prepare_ms = 0.0;
   try {
     if (start_mirror_raster(scene, camera, candidates[best], prepare_ms)) {
@@ -1403,8 +1398,8 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
     g.upload_ms += elapsed_ms(stage);
     return false;
   }
-  const std::vector<MirrorPlane> candidates = mirror_candidates(camera, tree, nullptr);
   const double on_plane = mirror_on_plane(tree);
+  const std::vector<MirrorPlane> candidates = mirror_candidates(camera, on_plane, nullptr);
   // Each ray's plane where it is a mirror ray off one: starting on it, leaving it on the eye's
   // side, the mirror image of its pixel's primary ray (the ray through the pixel centre, which the
   // raster pass samples; mirror_ray_plane). The plane that sends the most is drawn.
@@ -1451,9 +1446,8 @@ bool Renderer::trace_mirrored(const Scene& scene, const Camera& camera, const Fl
     ++d.mirror_rasters_ahead.taken;
     g.upload_ms += elapsed_ms(stage);
   } else {
-    settle_mirror_raster();
     g.upload_ms += elapsed_ms(stage);
-    double prepare_ms = 0.0;
+    double prepare_ms = 0.0;  // the raster started ahead for another plane, if any, dropped first
     const bool started = start_mirror_raster(scene, camera, plane, prepare_ms);
     g.upload_ms += prepare_ms;
     if (!started) return false;

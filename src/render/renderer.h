@@ -269,14 +269,15 @@ class Renderer {
   // The frame's flat mirrors: handed in with it, else the last frame's while its triangles,
   // normals and materials are the same, else found now (find_mirror_planes); checked once a frame.
   const MirrorPlanes& frame_mirror_planes(const Scene& scene);
-  // Of frame_mirror_planes' planes, those facing the eye through `camera` (up to the 8 largest),
-  // each turned to face it; candidate_of (when given): per plane its index among them, or -1.
-  std::vector<MirrorPlane> mirror_candidates(const Camera& camera, const FlatKdTree& tree,
+  // Of frame_mirror_planes' planes, those facing the eye through `camera` (up to the 8 largest; the
+  // eye within on_plane of one sees it edge-on), each turned to face it; candidate_of (when given):
+  // per plane its index among them, or -1.
+  std::vector<MirrorPlane> mirror_candidates(const Camera& camera, double on_plane,
                                              std::vector<int>* candidate_of) const;
   // How far from a plane a mirror ray's origin may lie and count as on it.
   double mirror_on_plane(const FlatKdTree& tree) const;
   // The raster pass of the scene mirrored in `plane`, seen through `camera`, started
-  // (Backend::start_raster into raster_vertices); false where --mirrors auto declines a raster
+  // (Backend::start_raster into raster_vertices, a raster started ahead dropped first); false where --mirrors auto declines a raster
   // over the device's limits (--mirrors raster throws). prepare_ms: its CPU time up to the
   // backend's start (the backend counts its own copy of the vertices in the pass's upload).
   bool start_mirror_raster(const Scene& scene, const Camera& camera, const MirrorPlane& plane, double& prepare_ms);
