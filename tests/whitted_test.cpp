@@ -200,5 +200,62 @@ TEST_F(WhittedFrame, ShadingPassShadesTheHitsAndOneMiss) {
   }
 }
 
+// One shading pass a frame (ShadingPasses::Frame, the default) against one a generation: the same
+// image bit for bit, on both APIs, 8- and 16-bit colour, the fish's three generations (mirror and
+// glass). A new renderer's first frame opens the inputs' textures with room for the primary hits
+// alone, so its later generations do not fit: the generations queued so far are shaded by a pass
+// of their own first; the next frames open with the last frame's room (one pass).
+class FrameShading : public test::PerBackendTest {};
+
+TEST_P(FrameShading, OnePassAFrameDrawsWhatAPassAGenerationDraws) {
+  const Scene fish = load_scene(MOBIRT_SOURCE_DIR "/scenes/fish.gltf");
+  for (const ColourDepth colour : {ColourDepth::Bits8, ColourDepth::Bits16}) {
+    SCOPED_TRACE(std::to_string(int(colour)) + "-bit colour");
+    RenderSettings settings;
+    settings.width = 96;
+    settings.height = 64;
+    settings.depth = 2;
+    settings.colour = colour;
+    RenderSettings per_generation = settings;
+    per_generation.shading = ShadingPasses::Generation;
+    Renderer at_end(*backend, settings);
+    Renderer each(*backend, per_generation);
+    for (int frame = 0; frame < 3; ++frame) {
+      SCOPED_TRACE("frame " + std::to_string(frame));
+      FrameTimings t_end, t_each;
+      const size_t passes_end = at_end.shading_passes(), passes_each = each.shading_passes();
+      const Image a = at_end.render(fish, *fish.camera, &t_end);
+      const Image b = each.render(fish, *fish.camera, &t_each);
+      EXPECT_EQ(compare_images(a, b).max_error, 0.0f);
+      ASSERT_EQ(t_end.generations.size(), 3u) << "the fish has three generations";
+      ASSERT_EQ(t_each.generations.size(), 3u);
+      EXPECT_EQ(each.shading_passes() - passes_each, 3u);
+      const size_t passes = at_end.shading_passes() - passes_end;
+      if (frame == 0) {
+        EXPECT_GE(passes, 2u) << "the first frame's later generations did not fit: shaded early";
+      } else {
+        EXPECT_EQ(passes, 1u);
+      }
+      // Every generation's hits shaded, and one miss a pass for all the misses before it.
+      uint32_t hits = 0, rays = 0;
+      for (size_t k = 0; k < 3; ++k) {
+        EXPECT_EQ(t_end.generations[k].hits, t_each.generations[k].hits);
+        EXPECT_GE(t_end.generations[k].shaded, t_end.generations[k].hits);
+        EXPECT_GT(t_end.generations[k].shade_ms, 0.0) << "a share of the pass that shaded it";
+        hits += t_end.generations[k].hits;
+        rays += t_end.generations[k].rays;
+      }
+      ASSERT_LT(hits, rays) << "the fish's rays miss too";
+      EXPECT_GE(t_end.sum.shaded, hits + 1);
+      EXPECT_LE(t_end.sum.shaded, hits + passes) << "a miss texel a pass at most";
+      EXPECT_EQ(t_end.sum.bytes_read - t_each.sum.bytes_read,
+                uint64_t(colour == ColourDepth::Bits16 ? 8 : 4) * (int64_t(t_end.sum.shaded) - int64_t(t_each.sum.shaded)));
+    }
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Backends, FrameShading, ::testing::Values(test::Api::Vulkan, test::Api::Gles),
+                         test::api_param_name);
+
 }  // namespace
 }  // namespace mobirt

@@ -219,6 +219,16 @@ const Setting kSettings[] = {
        static constexpr std::pair<const char*, TreeFit> fits[] = {{"walks", TreeFit::Walks}, {"full", TreeFit::Full}};
        o.settings.tree = v.choice(fits);
      }},
+    {"--shading", "PASSES", kFrames,
+     "how a frame's hits are shaded: frame (one shading pass over every\n"
+     "generation's hits after the last, its fixed cost paid once a frame)\n"
+     "or generation (one pass per generation as it is decoded); the same\n"
+     "image either way (default frame)",
+     [](CommonOptions& o, const Value& v) {
+       static constexpr std::pair<const char*, ShadingPasses> passes[] = {{"frame", ShadingPasses::Frame},
+                                                                         {"generation", ShadingPasses::Generation}};
+       o.settings.shading = v.choice(passes);
+     }},
     {"--worker", "idle|normal", kFrames,
      "scheduling class of the pipelined frame loop's worker (render --frames,\n"
      "bench), which poses the next frame and builds its kd-tree: idle\n"

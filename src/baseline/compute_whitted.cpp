@@ -70,11 +70,6 @@ TracedGeneration ComputeWhittedEngine::trace(const Scene& scene, const RayBatch&
   return traced;
 }
 
-std::vector<glm::vec3> ComputeWhittedEngine::shade(const Scene& scene, const RayBatch& rays,
-                                                   const SurfaceHits& hits, GenerationTimings& g) {
-  return shading_.shade_traced_elsewhere(scene, rays, hits, g);
-}
-
 void ComputeWhittedEngine::order_rays(RayBatch& rays) const { order_for_traversal(rays, tree_.bounds); }
 
 }  // namespace mobirt

@@ -16,10 +16,10 @@
 
 namespace mobirt {
 
-class ComputeWhittedEngine final : public WhittedEngine {
+class ComputeWhittedEngine final : public ShadedByRenderer {
  public:
   // compute traces; shading's passes shade (a Renderer made with the frame's settings). Neither is owned.
-  ComputeWhittedEngine(ComputeEngine& compute, Renderer& shading) : compute_(compute), shading_(shading) {}
+  ComputeWhittedEngine(ComputeEngine& compute, Renderer& shading) : ShadedByRenderer(shading), compute_(compute) {}
   const char* name() const override { return compute_.name(); }
 
   // The kd-tree built (or kept while no triangle moves, unless settings.always_rebuild) and
@@ -28,14 +28,11 @@ class ComputeWhittedEngine final : public WhittedEngine {
   const FlatKdTree& tree() const override { return tree_; }
   // The compute pass: one hit record per ray, handed on as hits and masks.
   TracedGeneration trace(const Scene& scene, const RayBatch& rays, GenerationTimings& g) override;
-  std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, const SurfaceHits& hits,
-                               GenerationTimings& g) override;
   // As mobirt's passes order them: neighbouring rays walk the same nodes in one SIMD group.
   void order_rays(RayBatch& rays) const override;
 
  private:
   ComputeEngine& compute_;
-  Renderer& shading_;
   RenderSettings settings_;
   FlatKdTree tree_;
   std::vector<glm::vec3> tree_positions_;  // what tree_ was built on

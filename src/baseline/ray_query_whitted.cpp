@@ -29,11 +29,6 @@ TracedGeneration RayQueryWhittedEngine::trace(const Scene& scene, const RayBatch
   return traced;
 }
 
-std::vector<glm::vec3> RayQueryWhittedEngine::shade(const Scene& scene, const RayBatch& rays,
-                                                    const SurfaceHits& hits, GenerationTimings& g) {
-  return shading_.shade_traced_elsewhere(scene, rays, hits, g);
-}
-
 void RayQueryWhittedEngine::order_rays(RayBatch& rays) const { order_for_traversal(rays, rq_.triangles().bounds); }
 
 }  // namespace mobirt

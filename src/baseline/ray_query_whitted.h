@@ -11,11 +11,11 @@
 
 namespace mobirt {
 
-class RayQueryWhittedEngine final : public WhittedEngine {
+class RayQueryWhittedEngine final : public ShadedByRenderer {
  public:
   // rq traces; shading's passes shade (a Renderer on a Vulkan backend, made with the frame's
   // settings: its colour depth and specialisation are the frame's). Neither is owned.
-  RayQueryWhittedEngine(RayQueryEngine& rq, Renderer& shading) : rq_(rq), shading_(shading) {}
+  RayQueryWhittedEngine(RayQueryEngine& rq, Renderer& shading) : ShadedByRenderer(shading), rq_(rq) {}
   const char* name() const override { return rq_.name(); }
 
   // The driver's BLAS + TLAS, built every frame (frame.build_ms: the whole build() call, vertex
@@ -24,8 +24,6 @@ class RayQueryWhittedEngine final : public WhittedEngine {
   const FlatKdTree& tree() const override { return rq_.triangles(); }
   // The ray-query pass: one packed texel per ray, as mobirt's traversal pass writes it.
   TracedGeneration trace(const Scene& scene, const RayBatch& rays, GenerationTimings& g) override;
-  std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, const SurfaceHits& hits,
-                               GenerationTimings& g) override;
   // As mobirt's passes order them: neighbouring rays in one SIMD group suit a fragment pass either way.
   void order_rays(RayBatch& rays) const override;
 
@@ -34,7 +32,6 @@ class RayQueryWhittedEngine final : public WhittedEngine {
 
  private:
   RayQueryEngine& rq_;
-  Renderer& shading_;
   bool shadows_ = true;
   ShadowSettings shadow_rays_;
   AsBuildTimings build_;

@@ -142,7 +142,25 @@ class WhittedEngine {
   virtual std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays,
                                        const SurfaceHits& hits, GenerationTimings& g) = 0;
 
-  // After a generation is shaded, before its colours are added and the next generation is made
+  // Whether the engine shades a frame's generations all at once after its last (queue_shade for
+  // each, then shade_queued) instead of one at a time (shade()): the fragment passes then run one
+  // shading pass a frame instead of one a generation, and pay a pass's fixed cost (its submission,
+  // the driver's threads woken, the wait, the read-back) once. The colours are the same either way,
+  // and the frame adds them to the image in the same order. False by default.
+  virtual bool shades_at_end() const { return false; }
+
+  // shades_at_end(): a generation's decoded hits kept for the frame's shading (the fragment passes:
+  // its inputs written where the pass reads them). Fills the stages it runs in g.
+  virtual void queue_shade(const Scene& scene, const RayBatch& rays, const SurfaceHits& hits, GenerationTimings& g);
+
+  // shades_at_end(): the colours of the generations queued since the last call, one array per
+  // generation in the order queued, each as shade() would return it; fills the stages it runs in
+  // g[k] for the k-th of them (a pass shared by several split among them by the rays each had
+  // shaded). Empties the queue.
+  virtual std::vector<std::vector<glm::vec3>> shade_queued(const Scene& scene, std::span<GenerationTimings> g);
+
+  // After a generation is shaded (queued, where the engine shades at the end), before its colours
+  // are added and the next generation is made
   // (only where one follows): an engine may start work for the next generation here that runs
   // beside that (the fragment passes: the mirror raster of the primary hits' flat mirror; its CPU
   // time goes to this generation's stages, its pass to the next's). Nothing by default.

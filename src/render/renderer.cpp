@@ -173,6 +173,7 @@ const char* mirror_hits_name(MirrorHits mirrors) {
 }
 
 const char* tree_fit_name(TreeFit fit) { return fit == TreeFit::Walks ? "walks" : "full"; }
+const char* shading_passes_name(ShadingPasses passes) { return passes == ShadingPasses::Frame ? "frame" : "generation"; }
 const char* worker_priority_name(WorkerPriority priority) { return priority == WorkerPriority::Idle ? "idle" : "normal"; }
 
 const char* primary_hits_name(PrimaryHits primary) {
@@ -489,6 +490,33 @@ struct Renderer::Data {
   // (TexelWriter: in place, or where the backend has no such memory into an array it uploads): that
   // pass's upload, as the backend counts an upload's own copy.
   double written_ms = 0.0;
+  // The frame's generations queued for shading (Renderer::queue_shade), in order, until
+  // shade_queued hands their colours over.
+  struct QueuedShade {
+    uint32_t rays = 0;
+    std::vector<uint8_t> hit;     // per ray: 1 where it hit (its colour is a shaded texel's)
+    std::vector<uint32_t> first;  // per chunk of kShadeChunk rays: its first hit's input texel
+    uint32_t hits = 0;
+    bool shaded = false;          // a pass ran for it: `colors` holds its colours
+    std::vector<glm::vec3> colors;
+    GenerationTimings pass;       // its share of that pass (upload, shade, read-back, bytes, shaded)
+  };
+  std::vector<QueuedShade> shade_queue;
+  uint32_t shade_texels = 0;    // input texels of the queued generations no pass has shaded yet
+  bool shade_miss = false;      // one of those has a miss (one texel at shade_texels shades them all)
+  // The inputs' textures while open (open_shade_inputs): their texels in the backend's memory
+  // (begin_write) or, where it has none, in the own_ arrays, uploaded when closed.
+  struct ShadeInput {
+    Texture* texture = nullptr;
+    glm::vec4* data = nullptr;
+    bool mapped = false;
+    std::vector<glm::vec4> own;  // kept from frame to frame: their memory reused
+  };
+  std::array<ShadeInput, 4> shade_inputs;  // position, normal, direction, texture coordinates
+  bool shade_inputs_open = false;
+  uint32_t shade_capacity = 0;      // texels each open input holds
+  uint32_t shade_texels_hint = 0;   // the last frame's inputs: the room the next frame opens with
+  size_t shading_passes = 0;
   // (lights, packing, analytic, wide, primary hits, light buffers)
   std::map<std::tuple<int, int, int, bool, int, bool>, PassHandle> trace_passes;
   std::map<std::tuple<int, int, int, int, bool>, PassHandle> shade_passes;  // (lights, textures, pages, colour, wide)
@@ -496,9 +524,10 @@ struct Renderer::Data {
 
 // The frame loop's view of the passes: the tree built or kept once per frame, one traversal and one
 // shading pass (two for 16-bit colour) per generation.
-class Renderer::Engine final : public WhittedEngine {
+// Its shading (shade(), or at the frame's end) is ShadedByRenderer's on the renderer itself.
+class Renderer::Engine final : public ShadedByRenderer {
  public:
-  explicit Engine(Renderer& renderer) : r_(renderer) {}
+  explicit Engine(Renderer& renderer) : ShadedByRenderer(renderer), r_(renderer) {}
   const char* name() const override { return "mobirt fragment passes"; }
 
   void begin_frame(const Scene& scene, const RenderSettings&, FrameTimings& t) override {
@@ -587,7 +616,11 @@ class Renderer::Engine final : public WhittedEngine {
 
   // A raster started ahead of mirror rays that never came is dropped within its frame: another
   // renderer on the same backend would drop it unseen (Backend::start_raster).
-  void end_frame() override { r_.settle_mirror_raster(); }
+  // So is a queue of generations a frame that ended early never shaded.
+  void end_frame() override {
+    r_.settle_mirror_raster();
+    ShadedByRenderer::end_frame();
+  }
 
   TracedGeneration trace_secondary(const Scene& scene, const Camera& camera, int generation, const RayBatch& rays,
                                    GenerationTimings& g) override {
@@ -653,11 +686,6 @@ class Renderer::Engine final : public WhittedEngine {
       }
     }
     return traced;
-  }
-
-  std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, const SurfaceHits& hits,
-                               GenerationTimings& g) override {
-    return r_.shade(scene, rays, hits, g);
   }
 
   void order_rays(RayBatch& rays) const override {
@@ -992,6 +1020,9 @@ double Renderer::upload_tree(const FlatKdTree& tree, const Scene& scene, bool bu
 void Renderer::fit_ray_layout(uint32_t width) {
   Data& d = *data_;
   if (d.ray_width == width) return;
+  if (d.shade_inputs_open) {
+    throw Error(ErrorKind::Internal, "the rays' layout changed while shading inputs were queued in it");
+  }
   for (Data::Texture* t : d.ray_layout()) {
     if (t->handle) backend_.destroy(t->handle);
     *t = {};
@@ -1550,63 +1581,79 @@ void Renderer::upload_materials(const Scene& scene) {
   backend_.upload(d.materials.handle, materials.data(), materials.size() * sizeof(MaterialTexels));
 }
 
+namespace {
+constexpr uint32_t kShadeChunk = 1024;  // rays a chunk of the shading inputs' loops takes
+}  // namespace
+
 std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
                                        const SurfaceHits& hits, GenerationTimings& timings) {
-  settle_mirror_raster();  // no pass runs while a raster is in flight (Backend::start_raster)
+  if (!data_->shade_queue.empty()) {
+    throw Error(ErrorKind::Internal, "Renderer::shade: generations are queued for the frame's shading");
+  }
+  queue_shade(scene, rays, hits, timings);
+  std::vector<std::vector<glm::vec3>> colors = shade_queued(scene, std::span<GenerationTimings>(&timings, 1));
+  return std::move(colors.front());
+}
+
+void Renderer::queue_shade(const Scene& scene, const RayBatch& rays, const SurfaceHits& hits,
+                           GenerationTimings& timings) {
   // The shading pass shades the hits only, compacted, and one miss: a miss's colour is the
   // background's, the same for every miss (glsl/shade_main.glsl), so the one texel the pass writes
-  // for it serves them all, bit for bit. A pass over every ray ran the whole Phong code for groups
-  // of 8 fragments that all missed (the shader has no branch around it; llvmpipe skips an `if`
-  // only when no lane of a group takes it, and a group with one hit runs it for all 8) and
-  // uploaded, read back and decoded a texel per miss: the Utah wood doll's rays mostly miss.
+  // for it serves them all, bit for bit, in every generation the pass shades. A pass over every ray
+  // ran the whole Phong code for groups of 8 fragments that all missed (the shader has no branch
+  // around it; llvmpipe skips an `if` only when no lane of a group takes it, and a group with one
+  // hit runs it for all 8) and uploaded, read back and decoded a texel per miss: the Utah wood
+  // doll's rays mostly miss.
   //
   // Its inputs, one texel per shaded ray: position and material, normal and shadow bits, the ray's
   // direction, and texture coordinates where the scene has textures (the CPU computed them in
   // decoding). On all cores in chunks, into arrays not zeroed first: every texel is written below.
   Data& d = *data_;
   const uint32_t n = rays.count();
-  if (n == 0) return {};
-  if (rays.width == 0) throw Error(ErrorKind::Internal, "Renderer::shade: a batch of rays with rows of width 0");
+  if (rays.width == 0 && n > 0) {
+    throw Error(ErrorKind::Internal, "Renderer::shade: a batch of rays with rows of width 0");
+  }
   if (hits.size() != n) throw Error(ErrorKind::Internal, "Renderer::shade: not one surface record per ray");
+  Data::QueuedShade q;
+  q.rays = n;
+  if (n == 0) {
+    q.shaded = true;  // nothing to shade: no pass, no colour
+    d.shade_queue.push_back(std::move(q));
+    return;
+  }
+  // One ray layout for every generation a pass shades (a frame's generations share it).
+  if (d.shade_inputs_open && rays.width != d.ray_width) shade_pending(scene);
   fit_ray_layout(rays.width);
   prepare_atlas(scene);  // says whether the scene has textures
   auto stage = Clock::now();
-  constexpr uint32_t kChunk = 1024;
-  const uint32_t chunks = chunk_count(n, kChunk);
+  const uint32_t chunks = chunk_count(n, kShadeChunk);
   // first[c + 1]: the hits of chunk c, counted from the records' hit bytes (SurfaceHits), never
   // from the records, which exist for the hits only; chunks without a hit are skipped below.
   const uint8_t* hit = hits.hit_flags();
-  std::vector<uint32_t> first(size_t(chunks) + 1, 0);
-  parallel_for_chunks(n, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
+  q.first.assign(size_t(chunks) + 1, 0);
+  parallel_for_chunks(n, kShadeChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
     uint32_t count = 0;
     for (uint32_t i = begin; i < end; ++i) count += hit[i] != 0 ? 1u : 0u;
-    first[c + 1] = count;
+    q.first[c + 1] = count;
   });
-  for (uint32_t c = 0; c < chunks; ++c) first[c + 1] += first[c];
-  const uint32_t hit_count = first[chunks];
-  const bool any_miss = hit_count < n;
-  const uint32_t shaded = hit_count + (any_miss ? 1u : 0u);  // the miss last
-  // Written where the pass reads them (TexelWriter: in place on Vulkan's buffers); the textures
-  // made or grown outside the stage's time.
+  for (uint32_t c = 0; c < chunks; ++c) q.first[c + 1] += q.first[c];
+  q.hits = q.first[chunks];
+  const bool any_miss = q.hits < n;
+  q.hit.assign(hit, hit + n);
   timings.decode_ms += elapsed_ms(stage);
-  const uint32_t rows = (shaded + rays.width - 1) / rays.width;
-  ensure_texture(d.hit_position.handle, d.hit_position.rows, rays.width, rows, TexelFormat::RGBA32F, data_kind_);
-  ensure_texture(d.hit_normal.handle, d.hit_normal.rows, rays.width, rows, TexelFormat::RGBA32F, data_kind_);
-  ensure_texture(d.shade_direction.handle, d.shade_direction.rows, rays.width, rows, TexelFormat::RGBA32F,
-                 data_kind_);
-  if (d.has_atlas) {
-    ensure_texture(d.hit_texcoord.handle, d.hit_texcoord.rows, rays.width, rows, TexelFormat::RGBA32F, data_kind_);
-  }
+  // Room for these hits and a miss after those queued; where there is none, those are shaded first.
+  if (d.shade_inputs_open && uint64_t(d.shade_texels) + q.hits + 1 > d.shade_capacity) shade_pending(scene);
+  if (!d.shade_inputs_open) open_shade_inputs(std::max(q.hits + 1, d.shade_texels_hint));
   stage = Clock::now();
-  TexelWriter<HitPositionTexel> position(backend_, d.hit_position.handle, shaded);
-  TexelWriter<HitNormalTexel> normal(backend_, d.hit_normal.handle, shaded);
-  TexelWriter<glm::vec4> direction(backend_, d.shade_direction.handle, shaded);
-  std::optional<TexelWriter<HitTexcoordTexel>> texcoords_out;
-  if (d.has_atlas) texcoords_out.emplace(backend_, d.hit_texcoord.handle, shaded);
-  HitTexcoordTexel* const uv = texcoords_out ? texcoords_out->data() : nullptr;
-  parallel_for_chunks(n, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
-    if (first[c + 1] == first[c]) return;
-    uint32_t k = first[c];
+  const uint32_t base = d.shade_texels;
+  for (uint32_t c = 0; c <= chunks; ++c) q.first[c] += base;
+  auto* position = reinterpret_cast<HitPositionTexel*>(d.shade_inputs[0].data);
+  auto* normal = reinterpret_cast<HitNormalTexel*>(d.shade_inputs[1].data);
+  glm::vec4* direction = d.shade_inputs[2].data;
+  auto* uv = d.has_atlas ? reinterpret_cast<HitTexcoordTexel*>(d.shade_inputs[3].data) : nullptr;
+  parallel_for_chunks(n, kShadeChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
+    if (q.first[c + 1] == q.first[c]) return;
+    uint32_t k = q.first[c];
     for (uint32_t i = begin; i < end; ++i) {
       if (!hit[i]) continue;
       const SurfaceHit& h = hits[i];
@@ -1617,19 +1664,77 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
       ++k;
     }
   });
-  if (any_miss) {
-    position[hit_count] = HitPositionTexel::miss();
-    normal[hit_count] = HitNormalTexel{glm::vec3(0.0f), 0.0f};
-    direction[hit_count] = glm::vec4(0.0f, 0.0f, -1.0f, 0.0f);  // not read for a miss
-    if (uv) uv[hit_count] = HitTexcoordTexel{glm::vec2(0.0f), glm::vec2(0.0f)};
-  }
+  d.shade_texels += q.hits;
+  d.shade_miss = d.shade_miss || any_miss;
   timings.decode_ms += elapsed_ms(stage);
-  position.done();  // an upload where not written in place: the backend counts it in the pass's upload
-  normal.done();
-  direction.done();
-  if (texcoords_out) texcoords_out->done();
-  const TextureHandle texcoords = uv ? d.hit_texcoord.handle : d.hit_position.handle;
+  d.shade_queue.push_back(std::move(q));
+}
 
+void Renderer::open_shade_inputs(uint32_t texels) {
+  Data& d = *data_;
+  const uint32_t width = d.ray_width;
+  const uint32_t rows = uint32_t((uint64_t(texels) + width - 1) / width);
+  Data::Texture* textures[] = {&d.hit_position, &d.hit_normal, &d.shade_direction, &d.hit_texcoord};
+  const int used = d.has_atlas ? 4 : 3;
+  uint32_t capacity_rows = UINT32_MAX;
+  for (int i = 0; i < used; ++i) {
+    ensure_texture(textures[i]->handle, textures[i]->rows, width, rows, TexelFormat::RGBA32F, data_kind_);
+    capacity_rows = std::min(capacity_rows, textures[i]->rows);
+  }
+  d.shade_capacity = uint32_t(std::min<uint64_t>(uint64_t(capacity_rows) * width, UINT32_MAX));
+  for (int i = 0; i < 4; ++i) {
+    Data::ShadeInput& in = d.shade_inputs[size_t(i)];
+    in = Data::ShadeInput{textures[i], nullptr, false, std::move(in.own)};
+    if (i >= used) continue;
+    in.data = static_cast<glm::vec4*>(backend_.begin_write(textures[i]->handle, size_t(d.shade_capacity) * sizeof(glm::vec4)));
+    in.mapped = in.data != nullptr;
+    if (!in.mapped) {
+      if (in.own.size() < d.shade_capacity) in.own.resize(d.shade_capacity);
+      in.data = in.own.data();
+    }
+  }
+  d.shade_inputs_open = true;
+}
+
+void Renderer::close_shade_inputs(uint32_t texels) {
+  Data& d = *data_;
+  if (!d.shade_inputs_open) return;
+  d.shade_inputs_open = false;
+  for (Data::ShadeInput& in : d.shade_inputs) {
+    if (!in.data) continue;
+    // An upload where not written in place: the backend counts it in the pass's upload.
+    if (in.mapped) {
+      backend_.end_write(in.texture->handle);
+    } else if (texels > 0) {
+      backend_.upload(in.texture->handle, in.data, size_t(texels) * sizeof(glm::vec4));
+    }
+    in.data = nullptr;
+  }
+}
+
+void Renderer::shade_pending(const Scene& scene) {
+  Data& d = *data_;
+  settle_mirror_raster();  // no pass runs while a raster is in flight (Backend::start_raster)
+  const uint32_t hit_count = d.shade_texels;
+  const bool any_miss = d.shade_miss;
+  const uint32_t shaded = hit_count + (any_miss ? 1u : 0u);  // the miss last
+  if (any_miss) {
+    reinterpret_cast<HitPositionTexel*>(d.shade_inputs[0].data)[hit_count] = HitPositionTexel::miss();
+    reinterpret_cast<HitNormalTexel*>(d.shade_inputs[1].data)[hit_count] = HitNormalTexel{glm::vec3(0.0f), 0.0f};
+    d.shade_inputs[2].data[hit_count] = glm::vec4(0.0f, 0.0f, -1.0f, 0.0f);  // not read for a miss
+    if (d.has_atlas) {
+      reinterpret_cast<HitTexcoordTexel*>(d.shade_inputs[3].data)[hit_count] =
+          HitTexcoordTexel{glm::vec2(0.0f), glm::vec2(0.0f)};
+    }
+  }
+  close_shade_inputs(shaded);
+  d.shade_texels = 0;
+  d.shade_miss = false;
+  if (shaded == 0) return;  // nothing queued but generations without rays
+
+  const uint32_t width = d.ray_width;
+  const bool textured = d.has_atlas;
+  const TextureHandle texcoords = textured ? d.hit_texcoord.handle : d.hit_position.handle;
   // A general pass is sized for the most lights, textures and pages, not for this scene.
   const int texture_count = settings_.specialize ? int(d.atlas_data.tiles.size()) : MOBIRT_ATLAS_MAX_TEXTURES;
   const int pages = settings_.specialize ? d.atlas_data.page_count() : MOBIRT_ATLAS_MAX_PAGES;
@@ -1642,36 +1747,93 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   const auto page = [&](size_t i) { return d.atlas_pages[std::min(i, d.atlas_pages.size() - 1)]; };
   const TextureHandle textures[] = {d.hit_position.handle, d.hit_normal.handle, d.materials.handle,
                                     d.shade_direction.handle, texcoords, page(0), page(1), page(2)};
-  const bool wide = wide_indices({{d.hit_position.rows, rays.width}, {d.hit_normal.rows, rays.width},
-                                  {d.materials.rows, kDataWidth}, {d.shade_direction.rows, rays.width},
-                                  {uv ? d.hit_texcoord.rows : 0u, rays.width}});
+  const bool wide = wide_indices({{d.hit_position.rows, width}, {d.hit_normal.rows, width},
+                                  {d.materials.rows, kDataWidth}, {d.shade_direction.rows, width},
+                                  {textured ? d.hit_texcoord.rows : 0u, width}});
   // 16-bit colour: the same shading twice, the high bytes, then the low bytes of each channel.
   const bool deep = settings_.colour == ColourDepth::Bits16;
   std::vector<uint32_t> texels[2];
+  PassTiming total;
   for (int half = 0; half < (deep ? 2 : 1); ++half) {
     const int colour = !deep ? MOBIRT_COLOUR_8 : half == 0 ? MOBIRT_COLOUR_16_HIGH : MOBIRT_COLOUR_16_LOW;
     texels[half].resize(shaded);
     const PassTiming pass = backend_.run_pass(shade_pass(lights, texture_count, pages, colour, wide), textures, uniforms,
-                                              rays.width, shaded, texels[half]);
-    timings.upload_ms += pass.upload_ms;
-    timings.shade_ms += pass.gpu_ms;
-    timings.shade_readback_ms += pass.readback_ms;
-    timings.bytes_read += pass.bytes_read;
+                                              width, shaded, texels[half]);
+    total.upload_ms += pass.upload_ms;
+    total.gpu_ms += pass.gpu_ms;
+    total.readback_ms += pass.readback_ms;
+    total.bytes_read += pass.bytes_read;
   }
-  timings.shaded += shaded;
-  stage = Clock::now();
+  ++d.shading_passes;
   const auto decoded = [&](uint32_t k) {
     return deep ? decode_colour(texels[0][k], texels[1][k]) : decode_colour(texels[0][k]);
   };
   const glm::vec3 miss_colour = any_miss ? decoded(hit_count) : glm::vec3(0.0f);
-  std::vector<glm::vec3> colors(n);
-  parallel_for_chunks(n, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
-    uint32_t k = first[c];
-    for (uint32_t i = begin; i < end; ++i) colors[i] = hit[i] ? decoded(k++) : miss_colour;
-  });
-  timings.accumulate_ms += elapsed_ms(stage);
+  // The pass's cost shared among the generations it shaded by their shaded texels (the miss's
+  // goes to the first with a miss).
+  bool miss_counted = !any_miss;
+  for (Data::QueuedShade& q : d.shade_queue) {
+    if (q.shaded) continue;
+    q.shaded = true;
+    const uint32_t own = q.hits + (!miss_counted && q.hits < q.rays ? 1u : 0u);
+    miss_counted = miss_counted || own > q.hits;
+    const double share = double(own) / double(shaded);
+    q.pass.upload_ms = total.upload_ms * share;
+    q.pass.shade_ms = total.gpu_ms * share;
+    q.pass.shade_readback_ms = total.readback_ms * share;
+    q.pass.bytes_read = uint64_t(double(total.bytes_read) * share + 0.5);
+    q.pass.shaded = own;
+    const auto stage = Clock::now();
+    q.colors.resize(q.rays);
+    parallel_for_chunks(q.rays, kShadeChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
+      uint32_t k = q.first[c];
+      for (uint32_t i = begin; i < end; ++i) q.colors[i] = q.hit[i] ? decoded(k++) : miss_colour;
+    });
+    q.pass.accumulate_ms = elapsed_ms(stage);
+    std::vector<uint8_t>().swap(q.hit);
+  }
+}
+
+std::vector<std::vector<glm::vec3>> Renderer::shade_queued(const Scene& scene, std::span<GenerationTimings> timings) {
+  Data& d = *data_;
+  if (timings.size() != d.shade_queue.size()) {
+    throw Error(ErrorKind::Internal, "Renderer::shade_queued: " + std::to_string(timings.size()) +
+                                         " generations' timings for " + std::to_string(d.shade_queue.size()) +
+                                         " queued");
+  }
+  if (d.shade_inputs_open || std::any_of(d.shade_queue.begin(), d.shade_queue.end(),
+                                         [](const Data::QueuedShade& q) { return !q.shaded; })) {
+    shade_pending(scene);
+  }
+  uint32_t frame_texels = 1;  // the room the next frame opens with: this one's hits and a miss
+  for (const Data::QueuedShade& q : d.shade_queue) frame_texels += q.hits;
+  d.shade_texels_hint = frame_texels;
+  std::vector<std::vector<glm::vec3>> colors;
+  colors.reserve(d.shade_queue.size());
+  for (size_t k = 0; k < d.shade_queue.size(); ++k) {
+    Data::QueuedShade& q = d.shade_queue[k];
+    GenerationTimings& g = timings[k];
+    g.upload_ms += q.pass.upload_ms;
+    g.shade_ms += q.pass.shade_ms;
+    g.shade_readback_ms += q.pass.shade_readback_ms;
+    g.bytes_read += q.pass.bytes_read;
+    g.shaded += q.pass.shaded;
+    g.accumulate_ms += q.pass.accumulate_ms;
+    colors.push_back(std::move(q.colors));
+  }
+  d.shade_queue.clear();
   return colors;
 }
+
+void Renderer::drop_shade_queue() {
+  Data& d = *data_;
+  close_shade_inputs(0);
+  d.shade_texels = 0;
+  d.shade_miss = false;
+  d.shade_queue.clear();
+}
+
+size_t Renderer::shading_passes() const { return data_->shading_passes; }
 
 void Renderer::check_shades_like(const RenderSettings& frame, const char* who) const {
   if (settings_.colour != frame.colour || settings_.specialize != frame.specialize) {

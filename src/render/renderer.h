@@ -77,6 +77,13 @@ inline constexpr double kMirrorRasterMinShare = 0.25;
 enum class TreeFit { Full, Walks };
 const char* tree_fit_name(TreeFit fit);
 
+// How a frame's hits are shaded: Frame, one shading pass over every generation's hits after the
+// last generation (two for 16-bit colour), the pass's fixed cost paid once a frame
+// (WhittedEngine::shades_at_end); Generation, one pass per generation as it is decoded. The same
+// colours and image either way.
+enum class ShadingPasses { Frame, Generation };
+const char* shading_passes_name(ShadingPasses passes);
+
 // The pipelined frame loop's worker (FramePipeline: posing frame N + 1 and building its kd-tree
 // while frame N renders). Idle: at Linux's SCHED_IDLE (core/thread_priority.h), so that it only
 // fills CPU time nothing else wants; lavapipe's rasterizer threads are pinned one per CPU
@@ -111,6 +118,7 @@ struct RenderSettings {
   PrimaryHits primary = PrimaryHits::Auto;
   MirrorHits mirrors = MirrorHits::Auto;
   TreeFit tree = TreeFit::Walks;
+  ShadingPasses shading = ShadingPasses::Frame;
   // The pipelined loop's worker (FramePipeline). Normal here, so that a program or a test running
   // beside other load never waits on a starved worker; the CLI (render --frames, bench) defaults
   // to Idle (src/app/options.cpp), the faster on a machine of its own.
@@ -181,6 +189,20 @@ class Renderer {
   std::vector<glm::vec3> shade_traced_elsewhere(const Scene& scene, const RayBatch& rays,
                                                 const SurfaceHits& hits, GenerationTimings& timings);
 
+  // The frame's shading at its end (settings().shading == ShadingPasses::Frame; for the engines
+  // that shade with this renderer, WhittedEngine::shades_at_end). queue_shade writes a generation's
+  // inputs where the pass reads them, after those queued before; where the textures cannot hold
+  // them too, the generations queued so far are shaded first, by a pass of their own, and their
+  // colours kept. shade_queued shades the rest in one pass and returns every queued generation's
+  // colours in order, each as shade() would return it (WhittedEngine::shade_queued);
+  // drop_shade_queue forgets the queue (a frame that ended early). shade() is a queue of one.
+  bool shades_at_end() const { return settings_.shading == ShadingPasses::Frame; }
+  void queue_shade(const Scene& scene, const RayBatch& rays, const SurfaceHits& hits, GenerationTimings& timings);
+  std::vector<std::vector<glm::vec3>> shade_queued(const Scene& scene, std::span<GenerationTimings> timings);
+  void drop_shade_queue();
+  // Shading passes run since the renderer was made (16-bit colour's two halves counted as one).
+  size_t shading_passes() const;
+
   const RenderSettings& settings() const { return settings_; }
   // For an engine that shades with this renderer: throws Error(Internal) naming `who` unless the
   // frame's colour depth and specialisation are the ones this renderer's passes were made for.
@@ -243,6 +265,12 @@ class Renderer {
   // The textures laid out in rows of the rays' width (rays and shading inputs), made again when
   // the width changes.
   void fit_ray_layout(uint32_t width);
+  // The shading inputs' textures opened for writing with room for at least `texels` (queue_shade);
+  // closed, their first `texels` made visible to the pass (written in place, or uploaded).
+  void open_shade_inputs(uint32_t texels);
+  void close_shade_inputs(uint32_t texels);
+  // The shading pass over the queued generations not shaded yet: their colours kept in the queue.
+  void shade_pending(const Scene& scene);
   // The lights the traversal pass casts shadow rays to: the scene's, or none without shadows.
   std::span<const Light> shadow_lights(const Scene& scene) const;
   // The light count a pass is built for: the scene's, or the packing's maximum when general.
@@ -312,6 +340,30 @@ class Renderer {
   TextureKind data_kind_ = TextureKind::Image2D;
   std::unique_ptr<Data> data_;
   std::unique_ptr<Engine> engine_;
+};
+
+// The shading of an engine that traces elsewhere and shades with a Renderer's passes (the
+// ray-query and compute peers, src/baseline/*_whitted.h): shade() and the frame's shading at its
+// end (Renderer::shades_at_end, as mobirt's own frames) forwarded to `shading`, not owned.
+class ShadedByRenderer : public WhittedEngine {
+ public:
+  explicit ShadedByRenderer(Renderer& shading) : shading_(shading) {}
+  std::vector<glm::vec3> shade(const Scene& scene, const RayBatch& rays, const SurfaceHits& hits,
+                               GenerationTimings& g) override {
+    return shading_.shade_traced_elsewhere(scene, rays, hits, g);
+  }
+  bool shades_at_end() const override { return shading_.shades_at_end(); }
+  void queue_shade(const Scene& scene, const RayBatch& rays, const SurfaceHits& hits, GenerationTimings& g) override {
+    shading_.queue_shade(scene, rays, hits, g);
+  }
+  std::vector<std::vector<glm::vec3>> shade_queued(const Scene& scene, std::span<GenerationTimings> g) override {
+    return shading_.shade_queued(scene, g);
+  }
+  // A queue a frame that ended early left behind is forgotten.
+  void end_frame() override { shading_.drop_shade_queue(); }
+
+ protected:
+  Renderer& shading_;
 };
 
 // Whether a frame of `scene` with `settings` walks a kd-tree: every frame does, but one whose

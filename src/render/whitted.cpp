@@ -5,7 +5,9 @@
 #include <chrono>
 #include <exception>
 #include <span>
+#include <string>
 #include <utility>
+#include <vector>
 
 #include "core/error.h"
 #include "core/parallel.h"
@@ -32,6 +34,14 @@ GenerationTimings& GenerationTimings::operator+=(const GenerationTimings& g) {
   shaded += g.shaded;
   bytes_read += g.bytes_read;
   return *this;
+}
+
+void WhittedEngine::queue_shade(const Scene&, const RayBatch&, const SurfaceHits&, GenerationTimings&) {
+  throw Error(ErrorKind::Internal, std::string(name()) + ": queue_shade on an engine that shades each generation");
+}
+
+std::vector<std::vector<glm::vec3>> WhittedEngine::shade_queued(const Scene&, std::span<GenerationTimings>) {
+  throw Error(ErrorKind::Internal, std::string(name()) + ": shade_queued on an engine that shades each generation");
 }
 
 void FrameTimings::add(const GenerationTimings& g) {
@@ -148,6 +158,12 @@ Image render_whitted(const Scene& scene, const Camera& camera, const RenderSetti
   // Work a scene does not need is never done: no second generation without mirrors or glass.
   const int depth = scene_has_secondary_rays(scene) ? settings.depth : 0;
   Image image(settings.width, settings.height);
+  // An engine that shades at the end keeps each generation's rays (their pixels and weights) and
+  // timings until its colours come; the image gets them in the same order as when each generation
+  // is shaded at once, so the same sums, bit for bit.
+  const bool at_end = engine.shades_at_end();
+  std::vector<RayBatch> queued_rays;
+  std::vector<GenerationTimings> queued;
   for (int generation = 0; generation <= depth && rays.count() > 0; ++generation) {
     GenerationTimings g;
     g.rays = rays.count();
@@ -158,20 +174,48 @@ Image render_whitted(const Scene& scene, const Camera& camera, const RenderSetti
     const SurfaceHits hits = decode_generation(scene, settings, tree, rays, std::move(traced), g);
     g.decode_ms += elapsed_ms(stage);
 
-    const std::vector<glm::vec3> colors = engine.shade(scene, rays, hits, g);
+    std::vector<glm::vec3> colors;
+    if (at_end) {
+      engine.queue_shade(scene, rays, hits, g);
+    } else {
+      colors = engine.shade(scene, rays, hits, g);
+    }
     if (generation < depth) engine.shaded(scene, camera, generation, rays, hits, g);
 
-    stage = std::chrono::steady_clock::now();
-    accumulate(image, rays, colors);
-    g.accumulate_ms += elapsed_ms(stage);
+    if (!at_end) {
+      stage = std::chrono::steady_clock::now();
+      accumulate(image, rays, colors);
+      g.accumulate_ms += elapsed_ms(stage);
+    }
 
+    RayBatch next;
     if (generation < depth) {
       stage = std::chrono::steady_clock::now();
-      rays = next_generation(scene, tree.bounds, rays, hits, settings.secondary);
-      engine.order_rays(rays);
+      next = next_generation(scene, tree.bounds, rays, hits, settings.secondary);
+      engine.order_rays(next);
       g.secondary_ms += elapsed_ms(stage);
     }
-    t.add(g);
+    if (at_end) {
+      queued_rays.push_back(std::move(rays));
+      queued.push_back(g);
+    } else {
+      t.add(g);
+    }
+    rays = std::move(next);
+  }
+  if (at_end && !queued.empty()) {
+    const std::vector<std::vector<glm::vec3>> colors = engine.shade_queued(scene, queued);
+    if (colors.size() != queued.size()) {
+      throw Error(ErrorKind::Internal, std::string(engine.name()) + ": shade_queued returned " +
+                                           std::to_string(colors.size()) + " generations of " +
+                                           std::to_string(queued.size()));
+    }
+    for (size_t k = 0; k < queued.size(); ++k) {
+      stage = std::chrono::steady_clock::now();
+      accumulate(image, queued_rays[k], colors[k]);
+      queued[k].accumulate_ms += elapsed_ms(stage);
+      t.add(queued[k]);
+    }
   }
   engine.end_frame();
   t.total_ms = elapsed_ms(frame_start);
