@@ -1154,7 +1154,8 @@ TEST(KdTree, DeepLevelsSplitOnlyLargeNodesPastTheDepthLimit) {
 }
 
 // The plane sweeps (SSE2, and AVX2 where the CPU has it; the sparse sweep of small nodes, which
-// SSE2 takes for more of them) choose the same planes: the same tree on any CPU.
+// SSE2 takes for more of them) choose the same planes, and the binning (SSE2, or a reference in
+// one AVX2 register) counts the same bins: the same tree on any CPU.
 TEST(KdTree, SameTreeForEverySweep) {
   const std::vector<NamedScene> scenes = {{"soup 3000", random_soup(3000, 42)}, {"terrain", terrain(40)},
                                           {"grid_boxes", grid_with_boxes()},    {"duplicates", duplicates(43)},

@@ -38,9 +38,9 @@ enum class KdBuildMode { Quality, Fast };
 const char* kd_build_mode_name(KdBuildMode mode);
 bool parse_kd_build_mode(std::string_view text, KdBuildMode& mode);
 
-// The widest SIMD the build's plane sweep may use: the best the CPU has (Auto: AVX2 or SSE2), or
-// at most SSE2. Both choose the same planes, so the tree is the same byte for byte (tested); the
-// cap is for that test.
+// The widest SIMD the build's binning and plane sweep may use: the best the CPU has (Auto: AVX2 or
+// SSE2), or at most SSE2. Both count the same bins and choose the same planes, so the tree is the
+// same byte for byte (tested); the cap is for that test.
 enum class KdSweepSimd { Auto, Sse2 };
 
 // SAH parameters, named as in pbrt's KdTreeAggregate.
@@ -110,7 +110,7 @@ struct KdBuildOptions {
   // box that its bounding box overlaps. Off: references keep the triangle's bounding box (clipping
   // only the box to the child box would build the very same tree, since the binning clamps to the
   // node box anyway).
-  KdSweepSimd sweep_simd = KdSweepSimd::Auto;  // the widest plane sweep (the same tree for each)
+  KdSweepSimd sweep_simd = KdSweepSimd::Auto;  // the widest binning and plane sweep (the same tree for each)
   int threads = 0;               // build threads: 0 = all hardware threads, 1 = serial. The tree
                                  // is the same, byte for byte, for any count.
 };

@@ -381,6 +381,35 @@ class Histogram {
     tracked_ = false;
   }
 
+#if defined(MOBIRT_KD_AVX2)
+  // add() for refs[0..n) on AVX2 CPUs: a reference's 8 floats (lo xyz, hi xyz, the primitive's bits
+  // and the padding) binned in one register, Binner::bin's operations per lane in its order (sub,
+  // mul, max with 0, min with the last bin, truncate), so the same bins; the last two lanes have
+  // origin and scale 0 and are not counted. Half the instructions of add() a reference (the six
+  // counts are the rest).
+  __attribute__((target("avx2"))) void add_all_avx2(const Binner& binner, const Ref* refs, size_t n) {
+    const __m256 origin = _mm256_loadu_ps(binner.origin);
+    const __m256 scale = _mm256_loadu_ps(binner.scale);
+    const __m256 zero = _mm256_setzero_ps();
+    const __m256 last = _mm256_set1_ps(binner.top);
+    const __m256i offsets = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(offsets_));
+    uint32_t* c = counts_.data();
+    for (size_t i = 0; i < n; ++i) {
+      const __m256 f = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(refs[i].lo), origin), scale);
+      const __m256i b = _mm256_add_epi32(_mm256_cvttps_epi32(_mm256_min_ps(_mm256_max_ps(f, zero), last)), offsets);
+      const __m128i b0 = _mm256_castsi256_si128(b);
+      const __m128i b1 = _mm256_extracti128_si256(b, 1);
+      ++c[_mm_cvtsi128_si32(b0)];
+      ++c[_mm_extract_epi32(b0, 1)];
+      ++c[_mm_extract_epi32(b0, 2)];
+      ++c[_mm_extract_epi32(b0, 3)];
+      ++c[_mm_cvtsi128_si32(b1)];
+      ++c[_mm_extract_epi32(b1, 1)];
+    }
+    tracked_ = false;
+  }
+#endif
+
   // add() for the nodes of few references that sweep sparsely (bins <= 64): also keeps a bit per
   // occupied bin of each axis, so that the sweep need not scan the bins for them and clear() need
   // not touch every count (the two scans were a tenth of a toaster build).
@@ -810,6 +839,12 @@ class Builder {
     if (sparse_sweep(n)) {
       for (size_t i = 0; i < n; ++i) hist.add_tracked(binner, refs[i]);
     } else {
+#if defined(MOBIRT_KD_AVX2)
+      if (avx2_) {
+        hist.add_all_avx2(binner, refs, n);
+        return;
+      }
+#endif
       for (size_t i = 0; i < n; ++i) hist.add(binner, refs[i]);
     }
   }
