@@ -241,7 +241,9 @@ TEST_P(FrameShading, OnePassAFrameDrawsWhatAPassAGenerationDraws) {
       for (size_t k = 0; k < 3; ++k) {
         EXPECT_EQ(t_end.generations[k].hits, t_each.generations[k].hits);
         EXPECT_GE(t_end.generations[k].shaded, t_end.generations[k].hits);
-        EXPECT_GT(t_end.generations[k].shade_ms, 0.0) << "a share of the pass that shaded it";
+        if (t_end.generations[k].shaded > 0) {
+          EXPECT_GT(t_end.generations[k].shade_ms, 0.0) << "a share of the pass that shaded it";
+        }
         hits += t_end.generations[k].hits;
         rays += t_end.generations[k].rays;
       }

@@ -971,6 +971,7 @@ int cmd_bench(const std::vector<std::string>& args) {
                         {"primary", primary_hits_name(o.settings.primary)},
                         {"mirrors", mirror_hits_name(o.settings.mirrors)},
                         {"tree", tree_fit_name(o.settings.tree)},
+                        {"shading", shading_passes_name(o.settings.shading)},
                         {"worker", worker_priority_name(o.settings.worker)},
                         {"pipelined", o.pipelined},
                         {"serial_twin", o.pipelined && o.serial_twin},

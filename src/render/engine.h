@@ -155,8 +155,8 @@ class WhittedEngine {
 
   // shades_at_end(): the colours of the generations queued since the last call, one array per
   // generation in the order queued, each as shade() would return it; fills the stages it runs in
-  // g[k] for the k-th of them (a pass shared by several split among them by the rays each had
-  // shaded). Empties the queue.
+  // g[k] for the k-th of them (a pass shared by several split among them by the texels each had
+  // shaded: its hits, and the miss where it is the first of them with one). Empties the queue.
   virtual std::vector<std::vector<glm::vec3>> shade_queued(const Scene& scene, std::span<GenerationTimings> g);
 
   // After a generation is shaded (queued, where the engine shades at the end), before its colours

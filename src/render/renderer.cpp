@@ -502,6 +502,7 @@ struct Renderer::Data {
     GenerationTimings pass;       // its share of that pass (upload, shade, read-back, bytes, shaded)
   };
   std::vector<QueuedShade> shade_queue;
+  const Scene* shade_queue_scene = nullptr;  // the scene of the queued generations
   uint32_t shade_texels = 0;    // input texels of the queued generations no pass has shaded yet
   bool shade_miss = false;      // one of those has a miss (one texel at shade_texels shades them all)
   // The inputs' textures while open (open_shade_inputs): their texels in the backend's memory
@@ -522,9 +523,10 @@ struct Renderer::Data {
   std::map<std::tuple<int, int, int, int, bool>, PassHandle> shade_passes;  // (lights, textures, pages, colour, wide)
 };
 
-// The frame loop's view of the passes: the tree built or kept once per frame, one traversal and one
-// shading pass (two for 16-bit colour) per generation.
-// Its shading (shade(), or at the frame's end) is ShadedByRenderer's on the renderer itself.
+// The frame loop's view of the passes: the tree built or kept once per frame, one traversal pass per
+// generation, and one shading pass a frame (two for 16-bit colour; with --shading generation, one
+// a generation). Its shading (shade(), or at the frame's end) is ShadedByRenderer's on the
+// renderer itself.
 class Renderer::Engine final : public ShadedByRenderer {
  public:
   explicit Engine(Renderer& renderer) : ShadedByRenderer(renderer), r_(renderer) {}
@@ -618,8 +620,13 @@ class Renderer::Engine final : public ShadedByRenderer {
   // renderer on the same backend would drop it unseen (Backend::start_raster).
   // So is a queue of generations a frame that ended early never shaded.
   void end_frame() override {
+    try {
+      ShadedByRenderer::end_frame();
+    } catch (...) {
+      r_.settle_mirror_raster();
+      throw;
+    }
     r_.settle_mirror_raster();
-    ShadedByRenderer::end_frame();
   }
 
   TracedGeneration trace_secondary(const Scene& scene, const Camera& camera, int generation, const RayBatch& rays,
@@ -1590,9 +1597,14 @@ std::vector<glm::vec3> Renderer::shade(const Scene& scene, const RayBatch& rays,
   if (!data_->shade_queue.empty()) {
     throw Error(ErrorKind::Internal, "Renderer::shade: generations are queued for the frame's shading");
   }
-  queue_shade(scene, rays, hits, timings);
-  std::vector<std::vector<glm::vec3>> colors = shade_queued(scene, std::span<GenerationTimings>(&timings, 1));
-  return std::move(colors.front());
+  try {
+    queue_shade(scene, rays, hits, timings);
+    std::vector<std::vector<glm::vec3>> colors = shade_queued(scene, std::span<GenerationTimings>(&timings, 1));
+    return std::move(colors.front());
+  } catch (...) {
+    drop_shade_queue();  // the next call starts with an empty queue
+    throw;
+  }
 }
 
 void Renderer::queue_shade(const Scene& scene, const RayBatch& rays, const SurfaceHits& hits,
@@ -1621,7 +1633,12 @@ void Renderer::queue_shade(const Scene& scene, const RayBatch& rays, const Surfa
     d.shade_queue.push_back(std::move(q));
     return;
   }
-  // One ray layout for every generation a pass shades (a frame's generations share it).
+  // One scene per queue (its atlas and materials are the pass's), and one ray layout for every
+  // generation a pass shades (a frame's generations share it).
+  if (!d.shade_queue.empty() && d.shade_queue_scene != &scene) {
+    throw Error(ErrorKind::Internal, "Renderer::queue_shade: generations of another scene are queued");
+  }
+  d.shade_queue_scene = &scene;
   if (d.shade_inputs_open && rays.width != d.ray_width) shade_pending(scene);
   fit_ray_layout(rays.width);
   prepare_atlas(scene);  // says whether the scene has textures
@@ -1643,7 +1660,17 @@ void Renderer::queue_shade(const Scene& scene, const RayBatch& rays, const Surfa
   timings.decode_ms += elapsed_ms(stage);
   // Room for these hits and a miss after those queued; where there is none, those are shaded first.
   if (d.shade_inputs_open && uint64_t(d.shade_texels) + q.hits + 1 > d.shade_capacity) shade_pending(scene);
-  if (!d.shade_inputs_open) open_shade_inputs(std::max(q.hits + 1, d.shade_texels_hint));
+  if (!d.shade_inputs_open) {
+    // The last frame's room where the backend can make it; else room for this generation alone
+    // (its later generations then shaded early), as one pass a generation needs.
+    try {
+      open_shade_inputs(std::max(q.hits + 1, d.shade_texels_hint));
+    } catch (const Error& e) {
+      if (e.kind() != ErrorKind::BadInput || d.shade_texels_hint <= q.hits + 1) throw;
+      d.shade_texels_hint = 0;
+      open_shade_inputs(q.hits + 1);
+    }
+  }
   stage = Clock::now();
   const uint32_t base = d.shade_texels;
   for (uint32_t c = 0; c <= chunks; ++c) q.first[c] += base;
@@ -1822,15 +1849,17 @@ std::vector<std::vector<glm::vec3>> Renderer::shade_queued(const Scene& scene, s
     colors.push_back(std::move(q.colors));
   }
   d.shade_queue.clear();
+  d.shade_queue_scene = nullptr;
   return colors;
 }
 
 void Renderer::drop_shade_queue() {
   Data& d = *data_;
-  close_shade_inputs(0);
   d.shade_texels = 0;
   d.shade_miss = false;
   d.shade_queue.clear();
+  d.shade_queue_scene = nullptr;
+  close_shade_inputs(0);  // last: the queue is empty even where closing throws
 }
 
 size_t Renderer::shading_passes() const { return data_->shading_passes; }

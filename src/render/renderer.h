@@ -78,9 +78,9 @@ enum class TreeFit { Full, Walks };
 const char* tree_fit_name(TreeFit fit);
 
 // How a frame's hits are shaded: Frame, one shading pass over every generation's hits after the
-// last generation (two for 16-bit colour), the pass's fixed cost paid once a frame
-// (WhittedEngine::shades_at_end); Generation, one pass per generation as it is decoded. The same
-// colours and image either way.
+// last generation (two for 16-bit colour; more where the inputs' textures opened for the frame fill
+// up, Renderer::queue_shade), the pass's fixed cost paid once a frame (WhittedEngine::shades_at_end);
+// Generation, one pass per generation as it is decoded. The same colours and image either way.
 enum class ShadingPasses { Frame, Generation };
 const char* shading_passes_name(ShadingPasses passes);
 
