@@ -38,40 +38,49 @@ uint32_t data_rows(size_t elements) {
 }
 
 // Texels written where a pass reads them: in place where the backend maps the texture
-// (Backend::begin_write: Vulkan's buffers), else into an array of its own, uploaded by done(). For
-// arrays that exist only to be uploaded (the shading inputs, the tree's arrays with the light
-// buffers after them): in place they are written once, with no copy after.
+// (Backend::begin_write: Vulkan's buffers), else into an array of its own (or the caller's `kept`,
+// grown to `count` and kept from use to use), uploaded by done(). For arrays that exist only to be
+// uploaded (the shading inputs, the tree's arrays with the light buffers after them): in place
+// they are written once, with no copy after.
 template <class T>
 class TexelWriter {
   static_assert(sizeof(T) % sizeof(glm::vec4) == 0 && std::is_trivially_copyable_v<T>);
 
  public:
-  TexelWriter(Backend& backend, TextureHandle texture, size_t count)
-      : backend_(backend), texture_(texture), bytes_(count * sizeof(T)) {
-    data_ = static_cast<T*>(backend.begin_write(texture, bytes_));
-    if (!data_) {
+  TexelWriter(Backend& backend, TextureHandle texture, size_t count, std::vector<T>* kept = nullptr)
+      : backend_(backend), texture_(texture), count_(count) {
+    data_ = static_cast<T*>(backend.begin_write(texture, count * sizeof(T)));
+    if (data_) return;
+    if (kept) {
+      if (kept->size() < count) kept->resize(count);
+      data_ = kept->data();
+    } else {
       own_ = std::make_unique_for_overwrite<T[]>(count);
       data_ = own_.get();
     }
+    uploads_ = true;
   }
   TexelWriter(const TexelWriter&) = delete;
   TexelWriter& operator=(const TexelWriter&) = delete;
 
   T* data() const { return data_; }
   T& operator[](size_t i) const { return data_[i]; }
-  void done() {
-    if (!own_) {
+  // The first `written` texels (at most the count) made visible to the next pass.
+  void done(size_t written) {
+    if (!uploads_) {
       backend_.end_write(texture_);
-    } else if (bytes_ > 0) {
-      backend_.upload(texture_, data_, bytes_);
+    } else if (written > 0) {
+      backend_.upload(texture_, data_, std::min(written, count_) * sizeof(T));
     }
   }
+  void done() { done(count_); }
 
  private:
   Backend& backend_;
   TextureHandle texture_;
-  size_t bytes_;
-  std::unique_ptr<T[]> own_;  // where the backend has no memory to write in place
+  size_t count_;
+  bool uploads_ = false;      // not written in place: uploaded by done()
+  std::unique_ptr<T[]> own_;  // where the backend has no memory to write in place and no `kept`
   T* data_ = nullptr;
 };
 
@@ -505,13 +514,11 @@ struct Renderer::Data {
   const Scene* shade_queue_scene = nullptr;  // the scene of the queued generations
   uint32_t shade_texels = 0;    // input texels of the queued generations no pass has shaded yet
   bool shade_miss = false;      // one of those has a miss (one texel at shade_texels shades them all)
-  // The inputs' textures while open (open_shade_inputs): their texels in the backend's memory
-  // (begin_write) or, where it has none, in the own_ arrays, uploaded when closed.
+  // The inputs' textures while open (open_shade_inputs): written in place or, where the backend
+  // has no such memory, into `kept` (from frame to frame: its memory reused), uploaded when closed.
   struct ShadeInput {
-    Texture* texture = nullptr;
-    glm::vec4* data = nullptr;
-    bool mapped = false;
-    std::vector<glm::vec4> own;  // kept from frame to frame: their memory reused
+    std::optional<TexelWriter<glm::vec4>> writer;
+    std::vector<glm::vec4> kept;
   };
   std::array<ShadeInput, 4> shade_inputs;  // position, normal, direction, texture coordinates
   bool shade_inputs_open = false;
@@ -1674,10 +1681,10 @@ void Renderer::queue_shade(const Scene& scene, const RayBatch& rays, const Surfa
   stage = Clock::now();
   const uint32_t base = d.shade_texels;
   for (uint32_t c = 0; c <= chunks; ++c) q.first[c] += base;
-  auto* position = reinterpret_cast<HitPositionTexel*>(d.shade_inputs[0].data);
-  auto* normal = reinterpret_cast<HitNormalTexel*>(d.shade_inputs[1].data);
-  glm::vec4* direction = d.shade_inputs[2].data;
-  auto* uv = d.has_atlas ? reinterpret_cast<HitTexcoordTexel*>(d.shade_inputs[3].data) : nullptr;
+  auto* position = reinterpret_cast<HitPositionTexel*>(d.shade_inputs[0].writer->data());
+  auto* normal = reinterpret_cast<HitNormalTexel*>(d.shade_inputs[1].writer->data());
+  glm::vec4* direction = d.shade_inputs[2].writer->data();
+  auto* uv = d.has_atlas ? reinterpret_cast<HitTexcoordTexel*>(d.shade_inputs[3].writer->data()) : nullptr;
   parallel_for_chunks(n, kShadeChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
     if (q.first[c + 1] == q.first[c]) return;
     uint32_t k = q.first[c];
@@ -1711,14 +1718,8 @@ void Renderer::open_shade_inputs(uint32_t texels) {
   d.shade_capacity = uint32_t(std::min<uint64_t>(uint64_t(capacity_rows) * width, UINT32_MAX));
   for (int i = 0; i < 4; ++i) {
     Data::ShadeInput& in = d.shade_inputs[size_t(i)];
-    in = Data::ShadeInput{textures[i], nullptr, false, std::move(in.own)};
-    if (i >= used) continue;
-    in.data = static_cast<glm::vec4*>(backend_.begin_write(textures[i]->handle, size_t(d.shade_capacity) * sizeof(glm::vec4)));
-    in.mapped = in.data != nullptr;
-    if (!in.mapped) {
-      if (in.own.size() < d.shade_capacity) in.own.resize(d.shade_capacity);
-      in.data = in.own.data();
-    }
+    in.writer.reset();
+    if (i < used) in.writer.emplace(backend_, textures[i]->handle, d.shade_capacity, &in.kept);
   }
   d.shade_inputs_open = true;
 }
@@ -1728,14 +1729,10 @@ void Renderer::close_shade_inputs(uint32_t texels) {
   if (!d.shade_inputs_open) return;
   d.shade_inputs_open = false;
   for (Data::ShadeInput& in : d.shade_inputs) {
-    if (!in.data) continue;
+    if (!in.writer) continue;
     // An upload where not written in place: the backend counts it in the pass's upload.
-    if (in.mapped) {
-      backend_.end_write(in.texture->handle);
-    } else if (texels > 0) {
-      backend_.upload(in.texture->handle, in.data, size_t(texels) * sizeof(glm::vec4));
-    }
-    in.data = nullptr;
+    in.writer->done(texels);
+    in.writer.reset();
   }
 }
 
@@ -1746,11 +1743,12 @@ void Renderer::shade_pending(const Scene& scene) {
   const bool any_miss = d.shade_miss;
   const uint32_t shaded = hit_count + (any_miss ? 1u : 0u);  // the miss last
   if (any_miss) {
-    reinterpret_cast<HitPositionTexel*>(d.shade_inputs[0].data)[hit_count] = HitPositionTexel::miss();
-    reinterpret_cast<HitNormalTexel*>(d.shade_inputs[1].data)[hit_count] = HitNormalTexel{glm::vec3(0.0f), 0.0f};
-    d.shade_inputs[2].data[hit_count] = glm::vec4(0.0f, 0.0f, -1.0f, 0.0f);  // not read for a miss
+    reinterpret_cast<HitPositionTexel*>(d.shade_inputs[0].writer->data())[hit_count] = HitPositionTexel::miss();
+    reinterpret_cast<HitNormalTexel*>(d.shade_inputs[1].writer->data())[hit_count] =
+        HitNormalTexel{glm::vec3(0.0f), 0.0f};
+    (*d.shade_inputs[2].writer)[hit_count] = glm::vec4(0.0f, 0.0f, -1.0f, 0.0f);  // not read for a miss
     if (d.has_atlas) {
-      reinterpret_cast<HitTexcoordTexel*>(d.shade_inputs[3].data)[hit_count] =
+      reinterpret_cast<HitTexcoordTexel*>(d.shade_inputs[3].writer->data())[hit_count] =
           HitTexcoordTexel{glm::vec2(0.0f), glm::vec2(0.0f)};
     }
   }
