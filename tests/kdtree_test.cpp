@@ -736,9 +736,48 @@ TEST(KdClip, SplitTriangleContainsTheExactClip) {
   EXPECT_GT(compared, 1000);
 }
 
+// The fast build's float split (crossings padded by a few ulps) holds the exact split's bounds
+// (crossings in double, rounded outwards) at every scale and for planes an ulp from a vertex, and
+// never reports a side empty that the exact split fills.
+TEST(KdClip, FloatSplitHoldsTheExactSplit) {
+  std::mt19937 rng(80);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  int compared = 0;
+  for (int trial = 0; trial < 40000; ++trial) {
+    glm::vec3 v[3];
+    const float scales[] = {1e-30f, 1e-3f, 1.0f, 1e6f, 1e30f};
+    const float scale = scales[trial % 5];
+    const glm::vec3 offset = trial % 3 == 0 ? glm::vec3(u(rng), u(rng), u(rng)) * scale * 1000.0f : glm::vec3(0.0f);
+    for (glm::vec3& p : v) p = glm::vec3(u(rng), u(rng), u(rng)) * scale + offset;
+    const int axis = trial % 3;
+    float split = v[0][axis] + (v[1][axis] - v[0][axis]) * (0.5f + 0.5f * u(rng));
+    if (trial % 7 == 0) split = std::nextafter(v[2][axis], trial % 2 ? kInfinity : -kInfinity);  // an ulp off a vertex
+    kdclip::Box exact[2];
+    kdclip::Box loose[2];
+    const int exact_sides = kdclip::split_triangle_exact(v, axis, split, exact[0], exact[1]);
+    const int loose_sides = kdclip::split_triangle(v, axis, split, loose[0], loose[1]);
+    ASSERT_EQ(exact_sides, loose_sides) << "trial " << trial;
+    for (int side = 0; side < 2; ++side) {
+      if (!(exact_sides & (1 << side))) continue;
+      for (int k = 0; k < 3; ++k) {
+        ASSERT_LE(loose[side].lo[k], exact[side].lo[k]) << "trial " << trial << " side " << side << " axis " << k;
+        ASSERT_GE(loose[side].hi[k], exact[side].hi[k]) << "trial " << trial << " side " << side << " axis " << k;
+        // A few ulps looser at most: the pad is 2^-19 of the edge's largest coordinate.
+        const float m = std::max({std::fabs(v[0][k]), std::fabs(v[1][k]), std::fabs(v[2][k])});
+        ASSERT_LE(exact[side].lo[k] - loose[side].lo[k], m * 0x1p-18f + 1e-37f) << "trial " << trial;
+        ASSERT_LE(loose[side].hi[k] - exact[side].hi[k], m * 0x1p-18f + 1e-37f) << "trial " << trial;
+      }
+      ++compared;
+    }
+  }
+  EXPECT_GT(compared, 50000);
+}
+
 // The SIMD split_triangle against the scalar one, bit for bit, including planes through a vertex,
 // on the box's faces, and at negative and zero coordinates (the outward rounding's sign cases).
-TEST(KdClip, SplitTriangleIsTheScalarSplitBitForBit) {
+// Both pairs: the fast build's float split and the exact split that clip_and_split uses.
+void expect_simd_split_is_scalar(int (*simd_split)(const glm::vec3*, int, float, kdclip::Box&, kdclip::Box&),
+                                 int (*scalar_split)(const glm::vec3*, int, float, kdclip::Box&, kdclip::Box&)) {
   std::mt19937 rng(79);
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
   int both_sides = 0;
@@ -753,8 +792,8 @@ TEST(KdClip, SplitTriangleIsTheScalarSplitBitForBit) {
     if (trial % 11 == 0) split = 0.0f;
     kdclip::Box simd[2];
     kdclip::Box scalar[2];
-    const int simd_sides = kdclip::split_triangle(v, axis, split, simd[0], simd[1]);
-    const int scalar_sides = kdclip::split_triangle_scalar(v, axis, split, scalar[0], scalar[1]);
+    const int simd_sides = simd_split(v, axis, split, simd[0], simd[1]);
+    const int scalar_sides = scalar_split(v, axis, split, scalar[0], scalar[1]);
     ASSERT_EQ(simd_sides, scalar_sides) << "trial " << trial;
     for (int side = 0; side < 2; ++side) {
       if (!(scalar_sides & (1 << side))) continue;
@@ -763,6 +802,11 @@ TEST(KdClip, SplitTriangleIsTheScalarSplitBitForBit) {
     both_sides += scalar_sides == 3 ? 1 : 0;
   }
   EXPECT_GT(both_sides, 10000);
+}
+
+TEST(KdClip, SplitTriangleIsTheScalarSplitBitForBit) {
+  expect_simd_split_is_scalar(kdclip::split_triangle, kdclip::split_triangle_scalar);
+  expect_simd_split_is_scalar(kdclip::split_triangle_exact, kdclip::split_triangle_exact_scalar);
 }
 
 TEST(KdTree, BuildModesParseAndNameEachOther) {

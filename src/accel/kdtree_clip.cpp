@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <utility>
@@ -84,9 +85,9 @@ int split_polygon(const double (*poly)[3], int n, int axis, float split, Box& be
 
 }  // namespace
 
-#if defined(__SSE2__)
 namespace {
 
+#if defined(__SSE2__)
 // A vertex in lanes x, y, z (w = 0) without reading past its 12 bytes (the last vertex of the
 // positions array may end the allocation). x and y by _mm_loadl_epi64, whose 8-byte read has no
 // alignment requirement (a `double` load from a float's address is misaligned: UBSan stops there).
@@ -113,14 +114,14 @@ __m128 narrow_masks(__m128d lo, __m128d hi) {
   return _mm_shuffle_ps(_mm_castpd_ps(lo), _mm_castpd_ps(hi), _MM_SHUFFLE(2, 0, 2, 0));
 }
 
-}  // namespace
 #endif
 
-// split_polygon on the triangle itself, with the same result: its vertices are floats already
-// (no rounding), only the two edge crossings are computed in double and rounded outwards (round
-// down and up are monotone, so rounding each point equals rounding the bounds), and the crossing's
-// coordinate on the split axis is the plane itself.
-int split_triangle_scalar(const glm::vec3* v, int split_axis, float split, Box& below, Box& above) {
+// The bounds of the triangle's parts on each side of the plane: its vertices on each side, and
+// the two edge crossings on both, whose bounds crossing(a, b, lo, hi) gives on the axes other than
+// the plane's (the crossing's coordinate on that axis is the plane itself). An edge crosses when
+// its ends lie strictly on either side (the float comparisons say what the exact differences do).
+template <class Crossing>
+int split_triangle_with(const glm::vec3* v, int split_axis, float split, Box& below, Box& above, Crossing crossing) {
   float p[3][3];
   for (int i = 0; i < 3; ++i) {
     p[i][0] = v[i].x;
@@ -141,27 +142,21 @@ int split_triangle_scalar(const glm::vec3* v, int split_axis, float split, Box& 
       b.hi[a] = std::max(b.hi[a], x[a]);
     }
   };
-  const double s = split;
   for (int i = 0; i < 3; ++i) {
     const float* a = p[i];
     const float* b = p[i == 2 ? 0 : i + 1];
     if (a[split_axis] <= split) extend(below, a);
     if (a[split_axis] >= split) extend(above, a);
-    const double da = double(a[split_axis]) - s;
-    const double db = double(b[split_axis]) - s;
-    if ((da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0)) {
-      const double t = da / (da - db);
-      for (int k = 0; k < 3; ++k) {
-        float lo = split;
-        float hi = split;
-        if (k != split_axis) {
-          const double x = double(a[k]) + t * (double(b[k]) - double(a[k]));
-          lo = round_down(x);
-          hi = round_up(x);
-        }
-        for (Box* side : out) {
-          side->lo[k] = std::min(side->lo[k], lo);
-          side->hi[k] = std::max(side->hi[k], hi);
+    if ((a[split_axis] < split && b[split_axis] > split) || (a[split_axis] > split && b[split_axis] < split)) {
+      float lo[3];
+      float hi[3];
+      crossing(a, b, lo, hi);
+      lo[split_axis] = split;
+      hi[split_axis] = split;
+      for (Box* side : out) {
+        for (int k = 0; k < 3; ++k) {
+          side->lo[k] = std::min(side->lo[k], lo[k]);
+          side->hi[k] = std::max(side->hi[k], hi[k]);
         }
       }
     }
@@ -169,14 +164,12 @@ int split_triangle_scalar(const glm::vec3* v, int split_axis, float split, Box& 
   return (below.lo[0] <= below.hi[0] ? 1 : 0) | (above.lo[0] <= above.hi[0] ? 2 : 0);
 }
 
-// split_triangle_scalar's bounds, the three coordinates of a point in the lanes of one register:
-// the vertices compared with the plane as floats, the two crossings computed in double as there
-// (the same operations, no FMA), rounded to nearest float and moved one ulp outwards where that
-// rounding went inwards (round_down, round_up). min and max take their operands in std::min's
-// and std::max's order, so even the signs of zeros are the same. 61,000 splits were 13 % of a
-// toaster build at 342 instructions each.
-int split_triangle(const glm::vec3* v, int split_axis, float split, Box& below, Box& above) {
 #if defined(__SSE2__)
+// split_triangle_with, the three coordinates of a point in the lanes of one register: crossing(i,
+// j) gives the (lo, hi) lanes of edge (v[i], v[j])'s crossing. min and max take their operands in
+// std::min's and std::max's order, so even the signs of zeros are the same.
+template <class Crossing>
+int split_triangle_lanes(const glm::vec3* v, int split_axis, float split, Box& below, Box& above, Crossing crossing) {
   const __m128 p[3] = {load_vertex(v[0]), load_vertex(v[1]), load_vertex(v[2])};
   const float c[3] = {v[0][split_axis], v[1][split_axis], v[2][split_axis]};
   const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
@@ -186,7 +179,6 @@ int split_triangle(const glm::vec3* v, int split_axis, float split, Box& below, 
   axis_lane[split_axis] = -1;
   const __m128 on_axis = _mm_load_ps(reinterpret_cast<const float*>(axis_lane));
   const __m128 plane = _mm_set1_ps(split);
-  const double s = split;
   for (int i = 0; i < 3; ++i) {
     const int j = i == 2 ? 0 : i + 1;
     if (c[i] <= split) {
@@ -197,24 +189,8 @@ int split_triangle(const glm::vec3* v, int split_axis, float split, Box& below, 
       above_lo = _mm_min_ps(p[i], above_lo);
       above_hi = _mm_max_ps(p[i], above_hi);
     }
-    const double da = double(c[i]) - s;
-    const double db = double(c[j]) - s;
-    if ((da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0)) {
-      const __m128d t = _mm_set1_pd(da / (da - db));
-      const __m128d a01 = _mm_cvtps_pd(p[i]);
-      const __m128d a23 = _mm_cvtps_pd(_mm_movehl_ps(p[i], p[i]));
-      const __m128d b01 = _mm_cvtps_pd(p[j]);
-      const __m128d b23 = _mm_cvtps_pd(_mm_movehl_ps(p[j], p[j]));
-      const __m128d x01 = _mm_add_pd(a01, _mm_mul_pd(t, _mm_sub_pd(b01, a01)));
-      const __m128d x23 = _mm_add_pd(a23, _mm_mul_pd(t, _mm_sub_pd(b23, a23)));
-      const __m128 f = _mm_movelh_ps(_mm_cvtpd_ps(x01), _mm_cvtpd_ps(x23));
-      const __m128d f01 = _mm_cvtps_pd(f);
-      const __m128d f23 = _mm_cvtps_pd(_mm_movehl_ps(f, f));
-      __m128 lo = next_down_where(f, narrow_masks(_mm_cmpgt_pd(f01, x01), _mm_cmpgt_pd(f23, x23)));
-      // round_up(x) = next_up where the float is below: -next_down(-f).
-      const __m128 sign = _mm_set1_ps(-0.0f);
-      __m128 hi = _mm_xor_ps(
-          next_down_where(_mm_xor_ps(f, sign), narrow_masks(_mm_cmplt_pd(f01, x01), _mm_cmplt_pd(f23, x23))), sign);
+    if ((c[i] < split && c[j] > split) || (c[i] > split && c[j] < split)) {
+      auto [lo, hi] = crossing(p[i], p[j], c[i], c[j]);
       // The crossing's coordinate on the split axis is the plane itself.
       lo = _mm_or_ps(_mm_andnot_ps(on_axis, lo), _mm_and_ps(on_axis, plane));
       hi = _mm_or_ps(_mm_andnot_ps(on_axis, hi), _mm_and_ps(on_axis, plane));
@@ -236,6 +212,98 @@ int split_triangle(const glm::vec3* v, int split_axis, float split, Box& below, 
     above.hi[a] = out[3][a];
   }
   return (below.lo[0] <= below.hi[0] ? 1 : 0) | (above.lo[0] <= above.hi[0] ? 2 : 0);
+}
+#endif
+
+// The crossing of edge (a, b) with a plane, computed in float (t = da / (da - db), then a + t (b - a)
+// per axis) is within 15 units of 2^-24 of m = max(|a_k|, |b_k|) of the exact crossing (each of the
+// seven roundings is relative to m or less, t in [0, 1]); kCrossingPad pads it by twice that, and
+// kCrossingFloor covers underflow, so that [x - pad, x + pad] always holds the exact point. Padding
+// a float crossing costs a few ulps of looseness where the exact one in double cost its conversions
+// and rounding (13 % of a toaster build, session 42).
+constexpr float kCrossingPad = 0x1p-19f;
+constexpr float kCrossingFloor = std::numeric_limits<float>::min();
+
+}  // namespace
+
+// split_polygon on the triangle itself, with the same result: its vertices are floats already
+// (no rounding), only the two edge crossings are computed in double and rounded outwards (round
+// down and up are monotone, so rounding each point equals rounding the bounds).
+int split_triangle_exact_scalar(const glm::vec3* v, int split_axis, float split, Box& below, Box& above) {
+  const double s = split;
+  return split_triangle_with(v, split_axis, split, below, above, [&](const float* a, const float* b, float* lo, float* hi) {
+    const double da = double(a[split_axis]) - s;
+    const double db = double(b[split_axis]) - s;
+    const double t = da / (da - db);
+    for (int k = 0; k < 3; ++k) {
+      const double x = double(a[k]) + t * (double(b[k]) - double(a[k]));
+      lo[k] = round_down(x);
+      hi[k] = round_up(x);
+    }
+  });
+}
+
+// split_triangle_exact_scalar in lanes: the two crossings computed in double as there (the same
+// operations, no FMA), rounded to nearest float and moved one ulp outwards where that rounding
+// went inwards (round_down, round_up). 61,000 splits were 13 % of a toaster build at 342
+// instructions each.
+int split_triangle_exact(const glm::vec3* v, int split_axis, float split, Box& below, Box& above) {
+#if defined(__SSE2__)
+  const double s = split;
+  return split_triangle_lanes(v, split_axis, split, below, above, [&](__m128 pi, __m128 pj, float ci, float cj) {
+    const double da = double(ci) - s;
+    const double db = double(cj) - s;
+    const __m128d t = _mm_set1_pd(da / (da - db));
+    const __m128d a01 = _mm_cvtps_pd(pi);
+    const __m128d a23 = _mm_cvtps_pd(_mm_movehl_ps(pi, pi));
+    const __m128d b01 = _mm_cvtps_pd(pj);
+    const __m128d b23 = _mm_cvtps_pd(_mm_movehl_ps(pj, pj));
+    const __m128d x01 = _mm_add_pd(a01, _mm_mul_pd(t, _mm_sub_pd(b01, a01)));
+    const __m128d x23 = _mm_add_pd(a23, _mm_mul_pd(t, _mm_sub_pd(b23, a23)));
+    const __m128 f = _mm_movelh_ps(_mm_cvtpd_ps(x01), _mm_cvtpd_ps(x23));
+    const __m128d f01 = _mm_cvtps_pd(f);
+    const __m128d f23 = _mm_cvtps_pd(_mm_movehl_ps(f, f));
+    const __m128 lo = next_down_where(f, narrow_masks(_mm_cmpgt_pd(f01, x01), _mm_cmpgt_pd(f23, x23)));
+    // round_up(x) = next_up where the float is below: -next_down(-f).
+    const __m128 sign = _mm_set1_ps(-0.0f);
+    const __m128 hi = _mm_xor_ps(
+        next_down_where(_mm_xor_ps(f, sign), narrow_masks(_mm_cmplt_pd(f01, x01), _mm_cmplt_pd(f23, x23))), sign);
+    return std::pair{lo, hi};
+  });
+#else
+  return split_triangle_exact_scalar(v, split_axis, split, below, above);
+#endif
+}
+
+// The fast build's split: the crossings in float, padded outwards (kCrossingPad). Conservative:
+// the bounds hold split_triangle_exact's (KdClip tests).
+int split_triangle_scalar(const glm::vec3* v, int split_axis, float split, Box& below, Box& above) {
+  return split_triangle_with(v, split_axis, split, below, above, [&](const float* a, const float* b, float* lo, float* hi) {
+    const float da = a[split_axis] - split;
+    const float db = b[split_axis] - split;
+    const float t = da / (da - db);
+    for (int k = 0; k < 3; ++k) {
+      const float x = a[k] + t * (b[k] - a[k]);
+      const float pad = std::max(std::fabs(a[k]), std::fabs(b[k])) * kCrossingPad + kCrossingFloor;
+      lo[k] = x - pad;
+      hi[k] = x + pad;
+    }
+  });
+}
+
+// split_triangle_scalar in lanes, the same operations in the same order (no FMA).
+int split_triangle(const glm::vec3* v, int split_axis, float split, Box& below, Box& above) {
+#if defined(__SSE2__)
+  const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+  return split_triangle_lanes(v, split_axis, split, below, above, [&](__m128 pi, __m128 pj, float ci, float cj) {
+    const float da = ci - split;
+    const float db = cj - split;
+    const __m128 t = _mm_set1_ps(da / (da - db));
+    const __m128 x = _mm_add_ps(pi, _mm_mul_ps(t, _mm_sub_ps(pj, pi)));
+    const __m128 m = _mm_max_ps(_mm_and_ps(pi, abs_mask), _mm_and_ps(pj, abs_mask));
+    const __m128 pad = _mm_add_ps(_mm_mul_ps(m, _mm_set1_ps(kCrossingPad)), _mm_set1_ps(kCrossingFloor));
+    return std::pair{_mm_sub_ps(x, pad), _mm_add_ps(x, pad)};
+  });
 #else
   return split_triangle_scalar(v, split_axis, split, below, above);
 #endif
@@ -268,7 +336,7 @@ int clip_and_split(const glm::vec3* v, const Box& box, int split_axis, float spl
     crossed[a][1] = tri_hi[a] > box.hi[a];
     inside = inside && !crossed[a][0] && !crossed[a][1];
   }
-  if (inside) return split_triangle(v, split_axis, split, below, above);
+  if (inside) return split_triangle_exact(v, split_axis, split, below, above);
   int n = 3;
   for (int axis = 0; axis < 3; ++axis) {
     for (int side = 0; side < 2; ++side) {

@@ -21,12 +21,20 @@ struct Box {
 int clip_and_split(const glm::vec3* v, const Box& box, int axis, float split, Box& below, Box& above);
 
 // The whole triangle v[0..2] split by the plane x[axis] = split, without clipping it to a box
-// first: the same bounds as clip_and_split with a box that contains the triangle. Intersected
-// with a reference's box, a conservative (looser) stand-in for clip_and_split at a fraction of
-// its cost: 3 edges against one plane instead of up to 6 planes of polygon clipping.
+// first: bounds that contain clip_and_split's with a box that contains the triangle (its edge
+// crossings computed in float and padded by a few ulps of the edge's coordinates, where
+// clip_and_split rounds a double crossing to the tightest floats). Intersected with a reference's
+// box, a conservative (looser) stand-in for clip_and_split at a fraction of its cost: 3 edges
+// against one plane instead of up to 6 planes of polygon clipping.
 int split_triangle(const glm::vec3* v, int axis, float split, Box& below, Box& above);
 // split_triangle in plain scalar code: what it computes on CPUs without SSE2, and its test's oracle
 // (the two give the same bits).
 int split_triangle_scalar(const glm::vec3* v, int axis, float split, Box& below, Box& above);
+
+// The whole triangle split by the plane with clip_and_split's exact bounds (its crossings in
+// double, rounded outwards to the tightest floats): what clip_and_split does for a triangle inside
+// its box. The _scalar twin as above.
+int split_triangle_exact(const glm::vec3* v, int axis, float split, Box& below, Box& above);
+int split_triangle_exact_scalar(const glm::vec3* v, int axis, float split, Box& below, Box& above);
 
 }  // namespace mobirt::kdclip
