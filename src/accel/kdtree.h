@@ -300,6 +300,7 @@ struct TraversalTrace {
   struct Segment {
     uint32_t node_iterations = 0;
     uint32_t triangle_tests = 0;
+    float tmax = 0.0f;  // a leaf's: the end of the ray's interval in it (where a walk resumed after it would start)
   };
   std::vector<Segment> segments;
   // When the walk ended at a hit in a leaf: the node-loop iterations a lane that had not yet

@@ -334,9 +334,9 @@ class TraceRecorder {
     if (trace_) *trace_ = TraversalTrace{};
   }
   void node() { ++node_iterations_; }
-  void leaf(uint32_t triangle_tests) {
+  void leaf(uint32_t triangle_tests, float tmax) {
     if (!trace_) return;
-    trace_->segments.push_back({node_iterations_, triangle_tests});
+    trace_->segments.push_back({node_iterations_, triangle_tests, tmax});
     node_iterations_ = 0;
   }
   // The walk ends in the node loop: the iteration that closes the last leaf ends it.
@@ -512,14 +512,14 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
       const glm::vec4* texels = leaf_prim_texel::of(tree.leaf_prims, entry);
       const int32_t prim = checked_index(leaf_prim_texel::prim(texels), prim_count, "primitive");
       if (intersect_texels(texels, prim, ray, best, test) && kAnyHit) {
-        recorder.leaf(uint32_t(i + 1));
+        recorder.leaf(uint32_t(i + 1), tmax);
         if (!walk_on()) return best;
         any_hit = true;
         break;
       }
     }
     if (count > 0 && !any_hit) {
-      recorder.leaf(uint32_t(count));
+      recorder.leaf(uint32_t(count), tmax);
       // glsl/traverse.glsl closes a leaf with primitives right after its triangle loop: a hit
       // within the leaf's interval ends the walk there, without a node-loop iteration (close()
       // would return true at once; only the trace differs).

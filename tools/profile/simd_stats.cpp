@@ -36,6 +36,10 @@
 //   packets           (secondary generations) the closest-hit walks with each 4x2 tile walking one
 //                     node sequence together (a packet traversal): node-loop and triangle-loop
 //                     iterations against the pass's own walk; see packet_walk() below
+//   continued in a    (secondary generations) the closest-hit walks stopped after 16 to 64 steps
+//   second pass       at a leaf and walked on from that leaf's end by a second pass over the
+//                     stopped rays packed 8 to a group: both passes' iterations against the one
+//                     pass's; see estimate_continued() below
 //
 // Usage: mobirt_simd_stats SCENE [--mtl F] [--camera SPEC] [--light SPEC]... [--size WxH]
 //        [--stack N] [--bins N] [--leaf-size N] [--isect-cost C] [--depth N]
@@ -782,6 +786,90 @@ PacketEstimate estimate_packets(const FlatKdTree& tree, const RayBatch& rays, co
   return e;
 }
 
+// Walks continued in a second pass (an estimate, not built): the pass stops a closest-hit walk at
+// the first leaf it closes after `cap` steps (node iterations and triangle tests), writing the
+// leaf instead of a hit; the CPU packs the walks so stopped 8 to a group (in the order of the
+// generation, tiles of 8 consecutive rays) and a second pass walks them on from the root, from
+// the end of that leaf's interval (no hit lies before it: every leaf before it was closed without
+// one). Counted: the node-loop and triangle-loop group iterations of both passes against the one
+// pass's, the walks continued, and rays whose hit differs from the one pass's walk.
+struct ContinueEstimate {
+  LoopCounts as_is, first, second;
+  uint64_t continued = 0, differ = 0;
+};
+
+ContinueEstimate estimate_continued(const FlatKdTree& tree, const RayBatch& rays, const ClosestWalks& walks,
+                                    int stack, uint32_t cap) {
+  ContinueEstimate e;
+  const uint32_t n = rays.count(), w = rays.width, rows = rays.rows();
+  std::vector<TraversalTrace> first(n);
+  std::vector<TraversalTrace> resumed;
+  std::vector<uint32_t> resumed_ray;
+  std::vector<int64_t> resumed_of(n, -1);
+  for (uint32_t i = 0; i < n; ++i) {
+    const TraversalTrace& t = walks.traces[i];
+    uint32_t steps = 0;
+    size_t stop = t.segments.size();
+    for (size_t k = 0; k < t.segments.size(); ++k) {
+      const TraversalTrace::Segment& seg = t.segments[k];
+      steps += seg.node_iterations + seg.triangle_tests;
+      // A leaf closed with the walk going on after it (not the walk's last segment).
+      if (steps >= cap && seg.triangle_tests > 0 && k + 1 < t.segments.size()) {
+        stop = k;
+        break;
+      }
+    }
+    if (stop == t.segments.size()) {
+      first[i] = t;
+      continue;
+    }
+    first[i].segments.assign(t.segments.begin(), t.segments.begin() + std::ptrdiff_t(stop) + 1);
+    Ray r = rays.ray(i);
+    r.tmin = t.segments[stop].tmax;
+    TraversalStats stats;
+    TraversalTrace trace;
+    const Hit h = traverse(tree, r, stack, stats, -1, {}, &trace);
+    const Hit& want = walks.hits[i];
+    if (h.prim != want.prim || (want.valid() && h.t != want.t)) ++e.differ;
+    resumed_of[i] = int64_t(resumed.size());
+    resumed.push_back(std::move(trace));
+    ++e.continued;
+  }
+  const TraversalTrace idle;
+  for (uint32_t y0 = 0; y0 < rows; y0 += 2) {
+    for (uint32_t x0 = 0; x0 < w; x0 += 4) {
+      std::vector<const TraversalTrace*> g0, g1;
+      for (uint32_t y = y0; y < std::min(y0 + 2, rows); ++y) {
+        for (uint32_t x = x0; x < std::min(x0 + 4, w); ++x) {
+          const uint64_t i = uint64_t(y) * w + x;
+          g0.push_back(i < n ? &walks.traces[i] : &idle);
+          g1.push_back(i < n ? &first[i] : &idle);
+        }
+      }
+      e.as_is += simulate_walk(g0);
+      e.first += simulate_walk(g1);
+    }
+  }
+  // The continued walks in the generation's order (tile by tile: the k-th ray of the order sits at
+  // simd_tile_place(k)), 8 to a group.
+  const uint32_t tiled = simd_tiled_rays(rays);
+  std::vector<const TraversalTrace*> g;
+  for (uint32_t k = 0; k < n; ++k) {
+    const int64_t r = resumed_of[simd_tile_place(k, tiled, w)];
+    if (r < 0) continue;
+    g.push_back(&resumed[size_t(r)]);
+    if (g.size() == 8) {
+      e.second += simulate_walk(g);
+      g.clear();
+    }
+  }
+  if (!g.empty()) {
+    while (g.size() < 8) g.push_back(&idle);
+    e.second += simulate_walk(g);
+  }
+  return e;
+}
+
 double occupancy(uint64_t lane, uint64_t group) { return group ? double(lane) / (8.0 * double(group)) : 0.0; }
 
 int run(int argc, char** argv) {
@@ -870,6 +958,19 @@ int run(int argc, char** argv) {
       line("ropes from the start leaf, exit 1", r.from_leaf[0]);
       line("ropes from the start leaf, exit 2", r.from_leaf[1]);
       line("ropes from the start leaf, exit 3", r.from_leaf[2]);
+      for (const uint32_t cap : {16u, 24u, 32u, 48u, 64u}) {
+        const ContinueEstimate c = estimate_continued(tree, rays, closest, stack, cap);
+        const LoopCounts both = [&] { LoopCounts x = c.first; x += c.second; return x; }();
+        std::printf("    continued in a second pass after %2u steps: %6llu walks (%.1f %%), node iter. %llu + %llu (x%.3f), "
+                    "leaf iter. %llu + %llu (x%.3f), 1:2 weighted x%.3f, hits that differ %llu\n",
+                    cap, (unsigned long long)c.continued, 100.0 * double(c.continued) / double(std::max<uint32_t>(rays.count(), 1)),
+                    (unsigned long long)c.first.node, (unsigned long long)c.second.node,
+                    double(both.node) / double(std::max<uint64_t>(c.as_is.node, 1)),
+                    (unsigned long long)c.first.leaf, (unsigned long long)c.second.leaf,
+                    double(both.leaf) / double(std::max<uint64_t>(c.as_is.leaf, 1)),
+                    double(both.node + 2 * both.leaf) / double(std::max<uint64_t>(c.as_is.node + 2 * c.as_is.leaf, 1)),
+                    (unsigned long long)c.differ);
+      }
       const PacketEstimate pk = estimate_packets(tree, rays, closest);
       std::printf("    packets (closest-hit walks, 4x2 tiles walking one node sequence): node iter. %llu (x%.3f of "
                   "the pass's %llu), triangle iter. %llu (x%.3f of %llu), pops with no live lane %llu, deepest stack "
