@@ -737,21 +737,24 @@ TEST(KdClip, SplitTriangleContainsTheExactClip) {
 }
 
 // The fast build's float split (crossings padded by a few ulps) holds the exact split's bounds
-// (crossings in double, rounded outwards) at every scale and for planes an ulp from a vertex, and
-// never reports a side empty that the exact split fills.
+// (crossings in double, rounded outwards) from subnormal coordinates (where only the pad's floor
+// covers the rounding) to coordinates past 2^126 (which take the exact split), off-centre
+// triangles, and planes an ulp from a vertex; it reports the sides the exact split does.
 TEST(KdClip, FloatSplitHoldsTheExactSplit) {
   std::mt19937 rng(80);
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
   int compared = 0;
-  for (int trial = 0; trial < 40000; ++trial) {
+  for (int trial = 0; trial < 42000; ++trial) {
     glm::vec3 v[3];
-    const float scales[] = {1e-30f, 1e-3f, 1.0f, 1e6f, 1e30f};
-    const float scale = scales[trial % 5];
-    const glm::vec3 offset = trial % 3 == 0 ? glm::vec3(u(rng), u(rng), u(rng)) * scale * 1000.0f : glm::vec3(0.0f);
+    const float scales[] = {1e-42f, 1e-30f, 1e-3f, 1.0f, 1e6f, 1e30f, 3e38f};
+    const float scale = scales[trial % 7];
+    // Off-centre triangles (an offset far larger than the triangle) where that stays finite.
+    const bool off_centre = (trial / 7) % 3 == 0 && scale <= 1e30f;
+    const glm::vec3 offset = off_centre ? glm::vec3(u(rng), u(rng), u(rng)) * scale * 1000.0f : glm::vec3(0.0f);
     for (glm::vec3& p : v) p = glm::vec3(u(rng), u(rng), u(rng)) * scale + offset;
     const int axis = trial % 3;
     float split = v[0][axis] + (v[1][axis] - v[0][axis]) * (0.5f + 0.5f * u(rng));
-    if (trial % 7 == 0) split = std::nextafter(v[2][axis], trial % 2 ? kInfinity : -kInfinity);  // an ulp off a vertex
+    if ((trial / 7) % 5 == 0) split = std::nextafter(v[2][axis], trial % 2 ? kInfinity : -kInfinity);  // an ulp off a vertex
     kdclip::Box exact[2];
     kdclip::Box loose[2];
     const int exact_sides = kdclip::split_triangle_exact(v, axis, split, exact[0], exact[1]);
@@ -764,8 +767,13 @@ TEST(KdClip, FloatSplitHoldsTheExactSplit) {
         ASSERT_GE(loose[side].hi[k], exact[side].hi[k]) << "trial " << trial << " side " << side << " axis " << k;
         // A few ulps looser at most: the pad is 2^-19 of the edge's largest coordinate.
         const float m = std::max({std::fabs(v[0][k]), std::fabs(v[1][k]), std::fabs(v[2][k])});
-        ASSERT_LE(exact[side].lo[k] - loose[side].lo[k], m * 0x1p-18f + 1e-37f) << "trial " << trial;
-        ASSERT_LE(loose[side].hi[k] - exact[side].hi[k], m * 0x1p-18f + 1e-37f) << "trial " << trial;
+        if (scale > 1e38f) {  // past 2^126: the exact split itself
+          ASSERT_EQ(loose[side].lo[k], exact[side].lo[k]) << "trial " << trial;
+          ASSERT_EQ(loose[side].hi[k], exact[side].hi[k]) << "trial " << trial;
+          continue;
+        }
+        ASSERT_LE(double(exact[side].lo[k]) - double(loose[side].lo[k]), double(m) * 0x1p-18 + 1e-37) << "trial " << trial;
+        ASSERT_LE(double(loose[side].hi[k]) - double(exact[side].hi[k]), double(m) * 0x1p-18 + 1e-37) << "trial " << trial;
       }
       ++compared;
     }
@@ -783,7 +791,9 @@ void expect_simd_split_is_scalar(int (*simd_split)(const glm::vec3*, int, float,
   int both_sides = 0;
   for (int trial = 0; trial < 20000; ++trial) {
     glm::vec3 v[3];
-    const float scale = trial % 4 == 0 ? 1e-30f : (trial % 4 == 1 ? 1e6f : 1.0f);
+    // Subnormal and past-2^126 coordinates too (the float split's floor and its exact fallback).
+    const float scales[] = {1e-30f, 1e6f, 1.0f, 1.0f, 1e-42f, 3e38f};
+    const float scale = scales[trial % 6];
     for (glm::vec3& p : v) p = glm::vec3(u(rng), u(rng), u(rng)) * scale;
     if (trial % 5 == 0) v[1][trial % 3] = 0.0f;  // zeros next to the plane
     const int axis = trial % 3;
@@ -805,8 +815,14 @@ void expect_simd_split_is_scalar(int (*simd_split)(const glm::vec3*, int, float,
 }
 
 TEST(KdClip, SplitTriangleIsTheScalarSplitBitForBit) {
-  expect_simd_split_is_scalar(kdclip::split_triangle, kdclip::split_triangle_scalar);
-  expect_simd_split_is_scalar(kdclip::split_triangle_exact, kdclip::split_triangle_exact_scalar);
+  {
+    SCOPED_TRACE("the fast build's float split");
+    expect_simd_split_is_scalar(kdclip::split_triangle, kdclip::split_triangle_scalar);
+  }
+  {
+    SCOPED_TRACE("the exact split");
+    expect_simd_split_is_scalar(kdclip::split_triangle_exact, kdclip::split_triangle_exact_scalar);
+  }
 }
 
 TEST(KdTree, BuildModesParseAndNameEachOther) {

@@ -25,12 +25,13 @@
 // clipping to the node box first, the crossings in float padded by a few ulps) and intersects its
 // parts' bounds with the reference's box, a superset of the exact bounds. (The crossings were
 // computed in double and rounded to the tightest floats until session 42: float with a pad took
-// 4-5 % off a build's instructions, fish, toaster and torus 100K, for SAH within 1 %.) Measured (callgrind, one single-threaded build): fish 34.1M ->
-// 26.8M instructions, toaster 210M -> 166M, torus 100K 872M -> 793M; SAH cost 185.0 -> 185.7,
-// 223.7 -> 221.8, 3012 -> 2976; refs/tri +1 to +9%; traversal steps per ray within 0.2%. The cheaper alternative, clipping only the reference's box to the child
-// box, builds exactly the same tree as no clipping at all (the binning clamps to the node box and
-// the classification compares with a plane inside it), so exact clipping is the only one worth
-// having. Measured (-O2, one thread, 32 bins, pbrt costs, the first serial builder), clipping
+// 3.7-4.6 % off a build's instructions, fish, toaster and torus 100K, for SAH within 1.1 %.)
+// Measured (callgrind, one single-threaded build): fish 34.1M -> 26.8M instructions, toaster
+// 210M -> 166M, torus 100K 872M -> 793M; SAH cost 185.0 -> 185.7, 223.7 -> 221.8, 3012 -> 2976;
+// refs/tri +1 to +9%; traversal steps per ray within 0.2%. The cheaper alternative, clipping only
+// the reference's box to the child box, builds exactly the same tree as no clipping at all (the
+// binning clamps to the node box and the classification compares with a plane inside it), so
+// exact clipping is the only one worth having. Measured (-O2, one thread, 32 bins, pbrt costs, the first serial builder), clipping
 // off -> on:
 //   Utah toasters 11,141 tris: refs/tri 13.8 -> 6.4, SAH 1669 -> 893, build 26 -> 32 ms,
 //                              traversal 1.71 -> 1.92 Mrays/s (full stack, one thread)

@@ -215,14 +215,18 @@ int split_triangle_lanes(const glm::vec3* v, int split_axis, float split, Box& b
 }
 #endif
 
-// The crossing of edge (a, b) with a plane, computed in float (t = da / (da - db), then a + t (b - a)
-// per axis) is within 15 units of 2^-24 of m = max(|a_k|, |b_k|) of the exact crossing (each of the
-// seven roundings is relative to m or less, t in [0, 1]); kCrossingPad pads it by twice that, and
-// kCrossingFloor covers underflow, so that [x - pad, x + pad] always holds the exact point. Padding
-// a float crossing costs a few ulps of looseness where the exact one in double cost its conversions
-// and rounding (13 % of a toaster build, session 42).
+// The crossing of edge (a, b) with a plane, computed in float: t = da / (da - db) from the
+// split-axis differences (da and db of opposite signs, so no cancellation: t within about 4 units
+// of 2^-24 of itself, t in [0, 1]), then x = a_k + t (b_k - a_k) on axis k, within about 13 units
+// of 2^-24 of m = max(|a_k|, |b_k|) of the exact point (|t (b_k - a_k)| <= 2 m, |x| <= m).
+// kCrossingPad pads it by 32 such units, kCrossingFloor covers underflow, so that [x - pad, x + pad]
+// holds the exact point. Coordinates of 2^126 or more could overflow a difference: such a triangle
+// takes the exact split (kCrossingLimit). Padding a float crossing costs a few ulps of looseness
+// where the exact one in double cost its conversions and rounding (13 % of a toaster build,
+// session 42).
 constexpr float kCrossingPad = 0x1p-19f;
 constexpr float kCrossingFloor = std::numeric_limits<float>::min();
+constexpr float kCrossingLimit = 0x1p126f;
 
 }  // namespace
 
@@ -245,8 +249,7 @@ int split_triangle_exact_scalar(const glm::vec3* v, int split_axis, float split,
 
 // split_triangle_exact_scalar in lanes: the two crossings computed in double as there (the same
 // operations, no FMA), rounded to nearest float and moved one ulp outwards where that rounding
-// went inwards (round_down, round_up). 61,000 splits were 13 % of a toaster build at 342
-// instructions each.
+// went inwards (round_down, round_up).
 int split_triangle_exact(const glm::vec3* v, int split_axis, float split, Box& below, Box& above) {
 #if defined(__SSE2__)
   const double s = split;
@@ -276,8 +279,14 @@ int split_triangle_exact(const glm::vec3* v, int split_axis, float split, Box& b
 }
 
 // The fast build's split: the crossings in float, padded outwards (kCrossingPad). Conservative:
-// the bounds hold split_triangle_exact's (KdClip tests).
+// the bounds hold split_triangle_exact's (KdClip tests). A triangle with a coordinate of
+// kCrossingLimit or more takes the exact split.
 int split_triangle_scalar(const glm::vec3* v, int split_axis, float split, Box& below, Box& above) {
+  for (int i = 0; i < 3; ++i) {
+    for (int k = 0; k < 3; ++k) {
+      if (!(std::fabs(v[i][k]) < kCrossingLimit)) return split_triangle_exact_scalar(v, split_axis, split, below, above);
+    }
+  }
   return split_triangle_with(v, split_axis, split, below, above, [&](const float* a, const float* b, float* lo, float* hi) {
     const float da = a[split_axis] - split;
     const float db = b[split_axis] - split;
@@ -295,6 +304,11 @@ int split_triangle_scalar(const glm::vec3* v, int split_axis, float split, Box& 
 int split_triangle(const glm::vec3* v, int split_axis, float split, Box& below, Box& above) {
 #if defined(__SSE2__)
   const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+  const __m128 largest = _mm_max_ps(_mm_max_ps(_mm_and_ps(load_vertex(v[0]), abs_mask), _mm_and_ps(load_vertex(v[1]), abs_mask)),
+                                    _mm_and_ps(load_vertex(v[2]), abs_mask));
+  if (_mm_movemask_ps(_mm_cmplt_ps(largest, _mm_set1_ps(kCrossingLimit))) != 0xF) {  // lane w is 0
+    return split_triangle_exact(v, split_axis, split, below, above);
+  }
   return split_triangle_lanes(v, split_axis, split, below, above, [&](__m128 pi, __m128 pj, float ci, float cj) {
     const float da = ci - split;
     const float db = cj - split;

@@ -813,8 +813,12 @@ ContinueEstimate estimate_continued(const FlatKdTree& tree, const RayBatch& rays
     for (size_t k = 0; k < t.segments.size(); ++k) {
       const TraversalTrace::Segment& seg = t.segments[k];
       steps += seg.node_iterations + seg.triangle_tests;
-      // A leaf closed with the walk going on after it (not the walk's last segment).
-      if (steps >= cap && seg.triangle_tests > 0 && k + 1 < t.segments.size()) {
+      // A leaf closed with the walk going on after it: not the walk's last segment, nor the one
+      // before a last segment that is only the closing iteration (an empty stack and the scene's
+      // end: the pass knows the walk is over there and writes its miss).
+      const bool ends_at_close = k + 2 == t.segments.size() && t.segments[k + 1].triangle_tests == 0 &&
+                                 t.segments[k + 1].node_iterations <= 1;
+      if (steps >= cap && seg.triangle_tests > 0 && k + 1 < t.segments.size() && !ends_at_close) {
         stop = k;
         break;
       }
