@@ -87,6 +87,7 @@ TEST(Cli, BadInputIsRefusedWithoutOutput) {
   expect_refused("render " + scene + " --colour 10", out, "expected one of 8, 16");
   expect_refused("render " + scene + " --build sah", out, "expected one of fast, quality");
   expect_refused("render " + scene + " --pin-threads maybe", out, "expected one of on, off");
+  expect_refused("render " + scene + " --gpu-timestamps sometimes", out, "expected one of auto, on, off");
   expect_refused("render " + scene + " --device no-such-device", out, "no-such-device");
   expect_refused("render " + scene + " --light 'point pos=0,5,0' --light 'point pos=1,5,0' "
                  "--light 'point pos=2,5,0' --light 'point pos=3,5,0' --light 'point pos=4,5,0' "
@@ -130,6 +131,8 @@ TEST(Cli, HelpListsTheSharedSettings) {
     EXPECT_EQ(r.output.rfind(std::string("Usage: mobirt ") + command, 0), 0u) << r.output;
     EXPECT_NE(r.output.find("Render options:"), std::string::npos) << r.output;
     for (const std::string& s : frame_settings) EXPECT_NE(r.output.find("  " + s + " "), std::string::npos) << s;
+    // Past the 26-character column: its description on the next line.
+    EXPECT_NE(r.output.find("  --gpu-timestamps auto|on|off\n"), std::string::npos) << r.output;
     for (const std::string& s : view_settings) {
       // bench sets each cell's view itself; its --size is for scenes given on the command line.
       if (std::string(command) == "bench" && s != "--size WxH") {

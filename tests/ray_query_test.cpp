@@ -174,6 +174,35 @@ TEST(RayQuery, TexelsEqualTheCpuTraversalOnRandomRays) {
   EXPECT_TRUE(messages.empty()) << join(messages);
 }
 
+// --gpu-timestamps: the peer's build and pass timed on the device's clock or on the CPU's (the
+// default on lavapipe, where each timestamp waits for the work), the same texels either way and a
+// time for the pass in both.
+TEST(RayQuery, TimedOnEitherClock) {
+  const Scene scene = load_scene(std::string(MOBIRT_SOURCE_DIR) + "/scenes/toaster.gltf");
+  ASSERT_TRUE(scene.camera);
+  const RayBatch rays = random_rays(scene, *scene.camera, 5000, 100, 11);
+  std::vector<uint32_t> texels[2];
+  int made = 0;
+  for (const GpuTimestamps mode : {GpuTimestamps::On, GpuTimestamps::Off}) {
+    SCOPED_TRACE(gpu_timestamps_name(mode));
+    RayQueryOptions options = validated();
+    options.timestamps = mode;
+    MOBIRT_RAY_QUERY_ENGINE(engine, options);
+    AsBuildTimings build;
+    engine->build(scene, &build);
+    EXPECT_GT(build.wall_ms, 0.0);
+    std::vector<uint32_t>& out = texels[made++];
+    out.assign(rays.count(), 0u);
+    RayQueryTimings timings;
+    engine->trace(rays, scene.lights, ShadowSettings{}, out, &timings);
+    EXPECT_GT(timings.trace_ms, 0.0);
+    EXPECT_GE(timings.readback_ms, 0.0);
+    const std::vector<std::string> messages = engine->take_debug_messages();
+    EXPECT_TRUE(messages.empty()) << join(messages);
+  }
+  EXPECT_EQ(texels[0], texels[1]);
+}
+
 TEST(RayQuery, PrimaryRaysWithoutShadowsEqualTheCpu) {
   MOBIRT_RAY_QUERY_ENGINE(engine, validated());
   const Scene scene = load_scene(std::string(MOBIRT_SOURCE_DIR) + "/scenes/toaster.gltf");

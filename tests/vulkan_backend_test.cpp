@@ -700,6 +700,61 @@ TEST_F(VulkanBackendTest, CyclesDoNotLeak) {
   EXPECT_THROW(backend->upload(input, texels.data(), 16), Error);
 }
 
+// --gpu-timestamps: a pass timed on the device's clock (timestamp queries) and one timed on the
+// CPU's (lavapipe's default: each timestamp there waits for the work) write the same texels, and
+// both report a time for the pass and for the raster. Auto takes timestamps on a GPU only.
+TEST(GpuTimestamps, ModesChooseTheClock) {
+  EXPECT_FALSE(takes_gpu_timestamps(GpuTimestamps::Auto, 64, true));
+  EXPECT_TRUE(takes_gpu_timestamps(GpuTimestamps::Auto, 64, false));
+  EXPECT_TRUE(takes_gpu_timestamps(GpuTimestamps::On, 64, true));
+  EXPECT_FALSE(takes_gpu_timestamps(GpuTimestamps::Off, 64, false));
+  EXPECT_FALSE(takes_gpu_timestamps(GpuTimestamps::On, 0, false));  // a queue without timestamps
+  EXPECT_STREQ(gpu_timestamps_name(GpuTimestamps::Auto), "auto");
+  EXPECT_STREQ(gpu_timestamps_name(GpuTimestamps::On), "on");
+  EXPECT_STREQ(gpu_timestamps_name(GpuTimestamps::Off), "off");
+
+  const uint32_t width = 64, height = 16, count = width * height;
+  std::vector<float> texels(size_t(count) * 4);
+  for (size_t i = 0; i < texels.size(); ++i) texels[i] = float(i % 251) / 251.0f;
+  const float scale[4] = {1, 1, 1, 1};
+  std::vector<uint32_t> outputs[2], rasters[2];
+  int made = 0;
+  for (const GpuTimestamps mode : {GpuTimestamps::On, GpuTimestamps::Off}) {
+    SCOPED_TRACE(gpu_timestamps_name(mode));
+    BackendOptions options = test::validated_options();
+    options.timestamps = mode;
+    const std::unique_ptr<Backend> backend = create_vulkan_backend(options);
+    if (mode == GpuTimestamps::Off) {
+      EXPECT_FALSE(backend->device_info().gpu_timestamps);
+    } else if (backend->device_info().is_software) {
+      EXPECT_TRUE(backend->device_info().gpu_timestamps);  // lavapipe has timestamps: On takes them
+    }
+    const TextureHandle input = backend->create_texture(width, height, TexelFormat::RGBA32F);
+    backend->upload(input, texels.data(), texels.size() * sizeof(float));
+    const PassHandle pass = test::create_copy_pass(*backend);
+    std::vector<uint32_t>& out = outputs[made++];
+    out.assign(count, 0u);
+    const PassTiming t = backend->run_pass(pass, std::span(&input, 1), scale, width, count, out);
+    EXPECT_GT(t.gpu_ms, 0.0);
+    EXPECT_GE(t.wall_ms, t.gpu_ms * (backend->device_info().gpu_timestamps ? 0.0 : 1.0));
+    // A raster pass on the same clock: one triangle (index 0) over the whole view, seen from the
+    // origin down -z.
+    const float vertices[] = {-10, -10, -1, 1, 10, -10, -1, 1, 0, 10, -1, 1};
+    const RasterView view{{0, 0, 0, 0}, {1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, -1, 0}, {0.25f, 1, 0.1f, 100}};
+    std::vector<uint32_t>& raster = rasters[made - 1];
+    raster.assign(size_t(width) * height, 0u);
+    const PassTiming r = backend->run_raster(vertices, view, width, height, raster);
+    EXPECT_GT(r.gpu_ms, 0.0);
+    EXPECT_EQ(raster[size_t(height / 2) * width + width / 2] & 0xFFFFFFu, 1u);
+    backend->destroy(pass);
+    backend->destroy(input);
+    const std::vector<std::string> messages = backend->take_debug_messages();
+    EXPECT_TRUE(messages.empty()) << test::join(messages);
+  }
+  EXPECT_EQ(outputs[0], outputs[1]);
+  EXPECT_EQ(rasters[0], rasters[1]);
+}
+
 TEST_F(VulkanBackendTest, CopyPassTiming400x240) {
   const uint32_t width = 400, count = 400 * 240;
   std::vector<float> texels(size_t(count) * 4, 0.25f);

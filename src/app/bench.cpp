@@ -929,6 +929,7 @@ int cmd_bench(const std::vector<std::string>& args) {
     ro.device = o.backend_options.device;
     ro.validation = o.backend_options.validation;
     ro.sync_validation = o.backend_options.sync_validation;
+    ro.timestamps = o.backend_options.timestamps;
     rq_skipped = o.settings.shadow_rays.ray_test.precision == Precision::Medium
                      ? "it traces in fp32 only, and --precision mediump was asked for"
                      : RayQueryEngine::unavailable_reason(ro);
@@ -948,6 +949,11 @@ int cmd_bench(const std::vector<std::string>& args) {
   // Every device made: all their rasterizer threads pinned (create_backend pinned the columns').
   const int pinned = pin_driver_threads(o.backend_options);
   const DeviceInfo info = columns[0].backend->device_info();
+  // Whether the Vulkan columns' passes are timed on the device's clock (--gpu-timestamps).
+  bool gpu_timestamps = false;
+  for (const GpuColumn& c : columns) {
+    if (c.key == "mobirt") gpu_timestamps = c.backend->device_info().gpu_timestamps;
+  }
   const char* lp = std::getenv("LP_NUM_THREADS");
   nlohmann::json result;
   result["machine"] = {{"cores", std::thread::hardware_concurrency()},
@@ -976,7 +982,8 @@ int cmd_bench(const std::vector<std::string>& args) {
                         {"pipelined", o.pipelined},
                         {"serial_twin", o.pipelined && o.serial_twin},
                         {"build_threads", o.settings.kd.threads},
-                        {"driver_threads_pinned", pinned}};
+                        {"driver_threads_pinned", pinned},
+                        {"gpu_timestamps", gpu_timestamps}};
   result["settings"].update(cli::kd_settings_json(o.settings.kd));
   std::printf("mobirt bench: %d frames per cell after %d warm-up frames, animation playing, kd-tree rebuilt every frame\n",
               o.frames, o.warmup);
@@ -1014,6 +1021,12 @@ int cmd_bench(const std::vector<std::string>& args) {
               std::thread::hardware_concurrency(), info.api.c_str(), info.device.c_str(), info.driver.c_str(),
               lp ? lp : "(all cores)", pinned, o.backend_options.pin_threads ? "" : " (--pin-threads off)",
               EmbreeEngine::version().c_str(), o.threads);
+  std::printf("Vulkan passes timed on the %s (--gpu-timestamps %s%s)\n",
+              gpu_timestamps ? "device's clock: timestamp queries around each pass's commands"
+                             : "CPU's clock: each submission until its fence; a raster started ahead,\nwhat the frame still waited for",
+              gpu_timestamps_name(o.backend_options.timestamps),
+              o.backend_options.timestamps == GpuTimestamps::Auto
+                  ? (gpu_timestamps ? ": a GPU" : ": a CPU device, where each timestamp waits for the work") : "");
   std::fflush(stdout);
 
   nlohmann::json cells = nlohmann::json::array();

@@ -284,6 +284,16 @@ const Setting kSettings[] = {
        static constexpr std::pair<const char*, bool> modes[] = {{"on", true}, {"off", false}};
        o.backend.pin_threads = v.choice(modes);
      }},
+    {"--gpu-timestamps", "auto|on|off", kDevice,
+     "time each Vulkan pass on the device's clock (timestamp queries) or on\n"
+     "the CPU's (its submission until its fence); lavapipe waits for the\n"
+     "work at every timestamp, about 0.15 ms a pass; auto: on for a GPU,\n"
+     "off for a CPU device (default auto)",
+     [](CommonOptions& o, const Value& v) {
+       static constexpr std::pair<const char*, GpuTimestamps> modes[] = {
+           {"auto", GpuTimestamps::Auto}, {"on", GpuTimestamps::On}, {"off", GpuTimestamps::Off}};
+       o.backend.timestamps = v.choice(modes);
+     }},
 };
 
 // --help as mobirt has always printed it: the usage line and text, then each group of options

@@ -129,6 +129,20 @@ uint32_t checked_target_height(const PassDesc& desc, uint32_t width, uint32_t co
   return height;
 }
 
+const char* gpu_timestamps_name(GpuTimestamps mode) {
+  switch (mode) {
+    case GpuTimestamps::On: return "on";
+    case GpuTimestamps::Off: return "off";
+    case GpuTimestamps::Auto: break;
+  }
+  return "auto";
+}
+
+bool takes_gpu_timestamps(GpuTimestamps mode, uint32_t timestamp_bits, bool cpu_device) {
+  if (timestamp_bits == 0 || mode == GpuTimestamps::Off) return false;
+  return mode == GpuTimestamps::On || !cpu_device;
+}
+
 PassTiming empty_pass_timing(double& pending_upload_ms, std::chrono::steady_clock::time_point wall_start) {
   PassTiming timing;
   timing.upload_ms = pending_upload_ms;

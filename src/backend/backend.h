@@ -136,6 +136,9 @@ struct DeviceInfo {
   // GL_EXT_sRGB, which Mesa does not offer to an ES 2.0 context. Without them the atlas pages are
   // RGBA8 read texel by texel (atlas_page_format()).
   bool srgb_textures = false;
+  // Passes timed on the device's clock (timestamp queries; BackendOptions::timestamps), else on
+  // the CPU's.
+  bool gpu_timestamps = false;
   std::vector<std::string> limits;  // "name: value" lines that matter to mobirt
 };
 
@@ -257,6 +260,18 @@ uint32_t start_run_pass(const PassDesc& desc, std::span<const TextureHandle> tex
 // An empty pass's timing: the uploads since the last pass, now taken, and the call's wall time.
 PassTiming empty_pass_timing(double& pending_upload_ms, std::chrono::steady_clock::time_point wall_start);
 
+// Where a Vulkan pass's time comes from (--gpu-timestamps): the device's clock, timestamp queries
+// around the pass's commands, or the CPU's, the submission until its fence (the raster pass started
+// ahead: what the frame still waited for). On lavapipe a timestamp written after work waits for
+// llvmpipe to finish that work and wakes its threads again, about 0.15 ms a pass of three
+// timestamps (an 8x8 frame of two passes 0.64-0.75 -> 0.34-0.36 ms without them): a frame of 3 to
+// 6 passes paid 2-11 % of itself to be timed. Auto: the device's clock on a GPU, the CPU's on a
+// CPU device (lavapipe). GLES times every pass on the CPU's clock.
+enum class GpuTimestamps { Auto, On, Off };
+const char* gpu_timestamps_name(GpuTimestamps mode);
+// Whether a device with `timestamp_bits` valid bits (0: none) takes timestamps under `mode`.
+bool takes_gpu_timestamps(GpuTimestamps mode, uint32_t timestamp_bits, bool cpu_device);
+
 // What every backend takes. Vulkan-only settings are VulkanOptions (backend/vulkan/vulkan_backend.h).
 struct BackendOptions {
   std::string device;        // Vulkan: index or a substring of the device name; empty = lavapipe
@@ -264,6 +279,7 @@ struct BackendOptions {
   // Mesa's rasterizer threads pinned one per CPU once the device or context exists
   // (backend/driver_threads.h); the app does it, after every device it makes.
   bool pin_threads = true;
+  GpuTimestamps timestamps = GpuTimestamps::Auto;  // Vulkan (and the Vulkan peers): see above
 };
 
 // Vulkan with the default Vulkan-only settings (VulkanOptions for the others).

@@ -124,7 +124,9 @@ ComputeEngine::Impl::Impl(const VulkanOptions& options, ComputeData data_reads) 
   VkFence f = VK_NULL_HANDLE;
   VK_CHECK(vkCreateFence(d, &fence_info, nullptr, &f));
   fence = vk::Fence(d, f);
-  if (device.timestamp_bits() > 0) {
+  // Timed as mobirt's passes are (GpuTimestamps: on lavapipe each timestamp waits for the work).
+  if (takes_gpu_timestamps(options.timestamps, device.timestamp_bits(),
+                           device.properties().deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU)) {
     VkQueryPoolCreateInfo query_info{VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO};
     query_info.queryType = VK_QUERY_TYPE_TIMESTAMP;
     query_info.queryCount = kTimestamps;

@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "accel/kdtree.h"
+#include "backend/backend.h"
 #include "raytree/hits.h"
 #include "raytree/packing.h"
 #include "raytree/rays.h"
@@ -49,6 +50,9 @@ struct RayQueryOptions {
   bool validation = false;   // Khronos validation layer (also MOBIRT_VALIDATION=1); see take_debug_messages()
   bool sync_validation = false;  // with validation: also the layer's synchronization validation
   AsBuildMode build_mode = AsBuildMode::Update;
+  // Timestamps around the build and the pass, or the CPU's clock, as mobirt's passes
+  // (GpuTimestamps, backend/backend.h: on lavapipe each timestamp waits for the work).
+  GpuTimestamps timestamps = GpuTimestamps::Auto;
 };
 
 // One build(): milliseconds. gpu: timestamps around the driver's work; wall: the whole call.
@@ -63,8 +67,9 @@ struct AsBuildTimings {
 
 // One trace(): milliseconds.
 struct RayQueryTimings {
-  double upload_ms = 0;     // ray textures: CPU copy + GPU copy (timestamps)
-  double trace_ms = 0;      // the fragment pass (GPU timestamps): the figure beside mobirt's trace_ms
+  double upload_ms = 0;     // ray textures: CPU copy + GPU copy (timestamps; without them the CPU copy)
+  double trace_ms = 0;      // the fragment pass (GPU timestamps; without them the submission until its
+                            // fence on the CPU's clock): the figure beside mobirt's trace_ms
   double readback_ms = 0;   // RGBA8 texels back to the host (GPU copy + CPU copy)
   double wall_ms = 0;
   uint32_t rays = 0;
