@@ -1023,7 +1023,7 @@ int cmd_bench(const std::vector<std::string>& args) {
               EmbreeEngine::version().c_str(), o.threads);
   std::printf("Vulkan passes timed on the %s (--gpu-timestamps %s%s)\n",
               gpu_timestamps ? "device's clock: timestamp queries around each pass's commands"
-                             : "CPU's clock: each submission until its fence; a raster started ahead,\nwhat the frame still waited for",
+                             : "CPU's clock: each submission until its fence (a raster started ahead: until\nthe fence was seen signalled, the CPU's work meanwhile included)",
               gpu_timestamps_name(o.backend_options.timestamps),
               o.backend_options.timestamps == GpuTimestamps::Auto
                   ? (gpu_timestamps ? ": a GPU" : ": a CPU device, where each timestamp waits for the work") : "");
