@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <memory>
 #include <string>
 #include <vector>
@@ -96,6 +97,31 @@ Agreement compare(const std::vector<HitRecord>& records, const TraceResult& frag
 // camera rays and rays from anywhere in the scene box, with shadow rays; the scene read from
 // storage buffers and from texel buffers.
 class ComputeReads : public ::testing::TestWithParam<ComputeData> {};
+
+// --gpu-timestamps: the dispatch timed on the device's clock or on the CPU's (the default on
+// lavapipe, where each timestamp waits for the work): the same records, and a time, either way.
+TEST(Compute, TimedOnEitherClock) {
+  const Scene scene = project_scene("toaster");
+  ASSERT_TRUE(scene.camera);
+  const FlatKdTree tree = build_kdtree(scene.mesh.positions);
+  const RayBatch rays = test::random_rays(scene, *scene.camera, 5000, 100, 13);
+  std::vector<HitRecord> records[2];
+  int made = 0;
+  for (const GpuTimestamps mode : {GpuTimestamps::On, GpuTimestamps::Off}) {
+    SCOPED_TRACE(gpu_timestamps_name(mode));
+    VulkanOptions options = validated();
+    options.timestamps = mode;
+    ComputeEngine engine(options);
+    engine.upload_tree(tree);
+    std::vector<HitRecord>& out = records[made++];
+    out.resize(rays.count());
+    ComputeTimings timings;
+    engine.trace(rays, scene.lights, ShadowSettings{}, {6, 2048}, out, &timings);
+    EXPECT_GT(timings.trace_ms, 0.0);
+  }
+  ASSERT_EQ(records[0].size(), records[1].size());
+  EXPECT_EQ(std::memcmp(records[0].data(), records[1].data(), records[0].size() * sizeof(HitRecord)), 0);
+}
 
 TEST_P(ComputeReads, RecordsEqualTheFragmentPassRayByRay) {
   ComputeEngine engine(validated(), GetParam());

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -746,6 +747,16 @@ TEST(GpuTimestamps, ModesChooseTheClock) {
     const PassTiming r = backend->run_raster(vertices, view, width, height, raster);
     EXPECT_GT(r.gpu_ms, 0.0);
     EXPECT_EQ(raster[size_t(height / 2) * width + width / 2] & 0xFFFFFFu, 1u);
+    // A raster started ahead and finished after the caller's own 20 ms of work: on the CPU's clock
+    // its time runs from its submission (an upper bound), never only the caller's last wait.
+    backend->start_raster(vertices, view, width, height);
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    std::vector<uint32_t> later(size_t(width) * height);
+    const PassTiming ahead = backend->finish_raster(later);
+    EXPECT_EQ(later, raster);
+    if (!backend->device_info().gpu_timestamps) {
+      EXPECT_GE(ahead.gpu_ms, 20.0);
+    }
     backend->destroy(pass);
     backend->destroy(input);
     const std::vector<std::string> messages = backend->take_debug_messages();
@@ -753,6 +764,11 @@ TEST(GpuTimestamps, ModesChooseTheClock) {
   }
   EXPECT_EQ(outputs[0], outputs[1]);
   EXPECT_EQ(rasters[0], rasters[1]);
+  // The default on lavapipe, a CPU device: the CPU's clock.
+  const std::unique_ptr<Backend> by_default = create_vulkan_backend(test::validated_options());
+  if (by_default->device_info().is_software) {
+    EXPECT_FALSE(by_default->device_info().gpu_timestamps);
+  }
 }
 
 TEST_F(VulkanBackendTest, CopyPassTiming400x240) {

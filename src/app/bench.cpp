@@ -954,6 +954,11 @@ int cmd_bench(const std::vector<std::string>& args) {
   for (const GpuColumn& c : columns) {
     if (c.key == "mobirt") gpu_timestamps = c.backend->device_info().gpu_timestamps;
   }
+  // Without a Vulkan column of mobirt's (--backend gles), the peers' own Vulkan device says.
+  if (std::none_of(columns.begin(), columns.end(), [](const GpuColumn& c) { return c.key == "mobirt"; }) &&
+      peers.shading) {
+    gpu_timestamps = peers.shading->device_info().gpu_timestamps;
+  }
   const char* lp = std::getenv("LP_NUM_THREADS");
   nlohmann::json result;
   result["machine"] = {{"cores", std::thread::hardware_concurrency()},
@@ -1026,7 +1031,9 @@ int cmd_bench(const std::vector<std::string>& args) {
                              : "CPU's clock: each submission until its fence (a raster started ahead: until\nthe fence was seen signalled, the CPU's work meanwhile included)",
               gpu_timestamps_name(o.backend_options.timestamps),
               o.backend_options.timestamps == GpuTimestamps::Auto
-                  ? (gpu_timestamps ? ": a GPU" : ": a CPU device, where each timestamp waits for the work") : "");
+                  ? (gpu_timestamps ? ": a GPU"
+                                    : ": a CPU device, where each timestamp waits for the work, or one without timestamps")
+                  : "");
   std::fflush(stdout);
 
   nlohmann::json cells = nlohmann::json::array();

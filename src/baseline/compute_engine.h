@@ -34,7 +34,8 @@ namespace mobirt {
 // What one trace() spends, milliseconds.
 struct ComputeTimings {
   double upload_ms = 0;    // the rays and uniforms into the mapped storage buffers (CPU copies)
-  double trace_ms = 0;     // the dispatch (GPU timestamps): the figure beside mobirt's trace_ms
+  double trace_ms = 0;     // the dispatch (GPU timestamps; without them its submission until its fence
+                           // on the CPU's clock): the figure beside mobirt's trace_ms
   double readback_ms = 0;  // the hit records out of the mapped buffer (CPU copy)
   double wall_ms = 0;
   uint32_t rays = 0;

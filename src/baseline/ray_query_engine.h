@@ -58,8 +58,8 @@ struct RayQueryOptions {
 // One build(): milliseconds. gpu: timestamps around the driver's work; wall: the whole call.
 struct AsBuildTimings {
   double upload_ms = 0;     // vertices and triangle texels into the device's buffers (CPU copies)
-  double blas_ms = 0;       // BLAS build or update (GPU timestamps)
-  double tlas_ms = 0;       // TLAS build (GPU timestamps)
+  double blas_ms = 0;       // BLAS build or update (GPU timestamps; 0 without them: see wall_ms)
+  double tlas_ms = 0;       // TLAS build (GPU timestamps; 0 without them)
   double wall_ms = 0;
   bool updated = false;     // the BLAS was updated, not built afresh
   uint32_t triangles = 0;
@@ -69,7 +69,8 @@ struct AsBuildTimings {
 struct RayQueryTimings {
   double upload_ms = 0;     // ray textures: CPU copy + GPU copy (timestamps; without them the CPU copy)
   double trace_ms = 0;      // the fragment pass (GPU timestamps; without them the submission until its
-                            // fence on the CPU's clock): the figure beside mobirt's trace_ms
+                            // fence on the CPU's clock, the rays' copies and the read-back's copy
+                            // on the device included): the figure beside mobirt's trace_ms
   double readback_ms = 0;   // RGBA8 texels back to the host (GPU copy + CPU copy)
   double wall_ms = 0;
   uint32_t rays = 0;

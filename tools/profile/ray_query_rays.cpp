@@ -80,6 +80,9 @@ int run(int argc, char** argv) {
   RayQueryOptions update_options, fresh_options;
   update_options.build_mode = AsBuildMode::Update;
   fresh_options.build_mode = AsBuildMode::Fresh;
+  // The BLAS and TLAS builds' own times come from the device's clock (timestamps), whatever the
+  // device (--gpu-timestamps auto turns them off on lavapipe, where each one waits for the work).
+  update_options.timestamps = fresh_options.timestamps = GpuTimestamps::On;
   RayQueryEngine updated(update_options), fresh(fresh_options);
 
   // AS builds over the animation (the rest scene again and again when it does not move), the two
