@@ -949,16 +949,11 @@ int cmd_bench(const std::vector<std::string>& args) {
   // Every device made: all their rasterizer threads pinned (create_backend pinned the columns').
   const int pinned = pin_driver_threads(o.backend_options);
   const DeviceInfo info = columns[0].backend->device_info();
-  // Whether the Vulkan columns' passes are timed on the device's clock (--gpu-timestamps).
-  bool gpu_timestamps = false;
-  for (const GpuColumn& c : columns) {
-    if (c.key == "mobirt") gpu_timestamps = c.backend->device_info().gpu_timestamps;
-  }
-  // Without a Vulkan column of mobirt's (--backend gles), the peers' own Vulkan device says.
-  if (std::none_of(columns.begin(), columns.end(), [](const GpuColumn& c) { return c.key == "mobirt"; }) &&
-      peers.shading) {
-    gpu_timestamps = peers.shading->device_info().gpu_timestamps;
-  }
+  // Whether the Vulkan passes are timed on the device's clock (--gpu-timestamps): mobirt's Vulkan
+  // column says, or without one (--backend gles) the peers' own Vulkan device.
+  const auto vulkan = std::find_if(columns.begin(), columns.end(), [](const GpuColumn& c) { return c.key == "mobirt"; });
+  const Backend* timed = vulkan != columns.end() ? vulkan->backend.get() : peers.shading.get();
+  const bool gpu_timestamps = timed && timed->device_info().gpu_timestamps;
   const char* lp = std::getenv("LP_NUM_THREADS");
   nlohmann::json result;
   result["machine"] = {{"cores", std::thread::hardware_concurrency()},

@@ -262,10 +262,11 @@ PassTiming empty_pass_timing(double& pending_upload_ms, std::chrono::steady_cloc
 
 // Where a Vulkan pass's time comes from (--gpu-timestamps): the device's clock, timestamp queries
 // around the pass's commands, or the CPU's, the submission until its fence (a raster pass started
-// ahead: its submission until the fence was seen signalled, the caller's work meanwhile included). On lavapipe a timestamp written after work waits for
-// llvmpipe to finish that work and wakes its threads again, about 0.15 ms a pass of three
-// timestamps (an 8x8 frame of two passes 0.64-0.75 -> 0.34-0.36 ms without them): a frame of 3 to
-// 6 passes paid 2-11 % of itself to be timed. Auto: the device's clock on a GPU, the CPU's on a
+// ahead: its submission until the fence was seen signalled, the caller's work meanwhile
+// included). On lavapipe a timestamp written after work waits for llvmpipe to finish that work
+// and wakes its threads again, about 0.15 ms a pass of three timestamps (an 8x8 frame of two
+// passes 0.64-0.75 -> 0.34-0.36 ms without them): a frame of 3 to 6 passes paid 2-11 % of itself
+// to be timed. Auto: the device's clock on a GPU, the CPU's on a
 // CPU device (lavapipe). GLES times every pass on the CPU's clock.
 enum class GpuTimestamps { Auto, On, Off };
 const char* gpu_timestamps_name(GpuTimestamps mode);

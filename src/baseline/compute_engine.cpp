@@ -125,8 +125,7 @@ ComputeEngine::Impl::Impl(const VulkanOptions& options, ComputeData data_reads) 
   VK_CHECK(vkCreateFence(d, &fence_info, nullptr, &f));
   fence = vk::Fence(d, f);
   // Timed as mobirt's passes are (GpuTimestamps: on lavapipe each timestamp waits for the work).
-  if (takes_gpu_timestamps(options.timestamps, device.timestamp_bits(),
-                           device.properties().deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU)) {
+  if (device.gpu_timestamps()) {
     VkQueryPoolCreateInfo query_info{VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO};
     query_info.queryType = VK_QUERY_TYPE_TIMESTAMP;
     query_info.queryCount = kTimestamps;

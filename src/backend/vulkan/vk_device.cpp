@@ -73,6 +73,8 @@ Device::Device(const VulkanOptions& options) {
                   options.sync_validation);
   pick_physical_device(options.device);
   create_device();
+  gpu_timestamps_ = takes_gpu_timestamps(options.timestamps, timestamp_bits_,
+                                         properties_.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU);
 }
 
 void Device::create_instance(bool validation, bool sync_validation) {
@@ -351,6 +353,7 @@ DeviceInfo Device::info() const {
   info.storage_buffers = true;  // and storage buffers, read from a fragment shader
   info.srgb_textures = true;    // R8G8B8A8_SRGB, checked with linear filtering at device creation
   info.is_software = properties_.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
+  info.gpu_timestamps = gpu_timestamps_;
   const VkPhysicalDeviceLimits& l = properties_.limits;
   auto add = [&](const char* name, const std::string& value) { info.limits.push_back(std::string(name) + ": " + value); };
   add("maxImageDimension2D", std::to_string(l.maxImageDimension2D));

@@ -66,6 +66,9 @@ class Device {
   VkQueue queue() const { return queue_; }
   uint32_t queue_family() const { return queue_family_; }
   uint32_t timestamp_bits() const { return timestamp_bits_; }
+  // Whether passes on this device are timed with timestamp queries (VulkanOptions::timestamps,
+  // takes_gpu_timestamps: the device's clock on a GPU, the CPU's on lavapipe by default).
+  bool gpu_timestamps() const { return gpu_timestamps_; }
   const VkPhysicalDeviceProperties& properties() const { return properties_; }
   const VkPhysicalDeviceMemoryProperties& memory_properties() const { return memory_properties_; }
 
@@ -95,6 +98,7 @@ class Device {
   PFN_vkGetBufferDeviceAddressKHR get_buffer_address_ = nullptr;
   uint32_t queue_family_ = 0;
   uint32_t timestamp_bits_ = 0;
+  bool gpu_timestamps_ = false;
   DeviceOwner device_;
   VkQueue queue_ = VK_NULL_HANDLE;
 };

@@ -60,11 +60,7 @@ class Impl {
   explicit Impl(const VulkanOptions& options);
   ~Impl();
 
-  DeviceInfo device_info() const {
-    DeviceInfo info = device_.info();
-    info.gpu_timestamps = timestamps_;
-    return info;
-  }
+  DeviceInfo device_info() const { return device_.info(); }
   TextureHandle create_texture(uint32_t width, uint32_t height, TexelFormat format);
   // A uniform texel buffer or a read-only storage buffer (kind).
   TextureHandle create_buffer(uint32_t texels, TexelFormat format, TextureKind kind);
@@ -150,15 +146,12 @@ class Impl {
   double pending_upload_ms_ = 0.0;
   double timeout_s_ = vk::pass_timeout_seconds();
   bool staged_images_ = false;
-  bool timestamps_ = false;     // passes timed on the device's clock (GpuTimestamps)
   bool lost_ = false;
   bool hung_ = false;
 };
 
 Impl::Impl(const VulkanOptions& options)
-    : device_(options), pipelines_(device_, options.pipeline_cache_dir), staged_images_(options.staged_images),
-      timestamps_(takes_gpu_timestamps(options.timestamps, device_.timestamp_bits(),
-                                       device_.properties().deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU)) {
+    : device_(options), pipelines_(device_, options.pipeline_cache_dir), staged_images_(options.staged_images) {
   create_command_objects();
   device_.throw_validation_errors();
 }
@@ -178,8 +171,8 @@ void Impl::create_command_objects() {
   make_submission(kTimestampCount, commands_, fence_, queries_);
 }
 
-// A command buffer from the pool, a fence and, where the pass is timed on the device's clock
-// (timestamps_, GpuTimestamps), a pool of `timestamps` queries: what one submission in flight
+// A command buffer from the pool, a fence and, where the passes are timed on the device's clock
+// (vk::Device::gpu_timestamps), a pool of `timestamps` queries: what one submission in flight
 // needs.
 void Impl::make_submission(uint32_t timestamps, VkCommandBuffer& commands, vk::Fence& fence, vk::QueryPool& queries) {
   VkCommandBufferAllocateInfo alloc{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
@@ -193,7 +186,7 @@ void Impl::make_submission(uint32_t timestamps, VkCommandBuffer& commands, vk::F
   VK_CHECK(vkCreateFence(device_.handle(), &fence_info, nullptr, &made));
   fence = vk::Fence(device_.handle(), made);
 
-  if (timestamps_) {
+  if (device_.gpu_timestamps()) {
     VkQueryPoolCreateInfo query_info{VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO};
     query_info.queryType = VK_QUERY_TYPE_TIMESTAMP;
     query_info.queryCount = timestamps;
