@@ -1151,7 +1151,7 @@ TEST(KdTree, ClusterRuleKeepsVertexFansTogetherAndStaysExact) {
         build_kdtree(soup, o);
       },
       {"cluster_refs"});
-  for (float bonus : {-0.1f, 1.0f, std::numeric_limits<float>::quiet_NaN()}) {
+  for (float bonus : {-0.1f, -2.0f, 1.0f, std::numeric_limits<float>::quiet_NaN()}) {
     KdBuildOptions o;
     o.empty_bonus = bonus;
     test::expect_bad_input([&] { build_kdtree(soup, o); }, {"empty_bonus"});
@@ -1273,16 +1273,38 @@ TEST(KdTree, SmallSplitGainMakesFewerNodesAndStaysExact) {
   expect_same_nodes(build_kdtree(soup, quality), build_kdtree(soup, quality_none));
 }
 
+// The empty bonus a build takes (kd_empty_bonus): the option where set, else pbrt's 0.5, and
+// kKdWalksEmptyBonus for a fast tree built for walks (rays > 0); the quality build keeps pbrt's.
+// A walks tree built by default is the one built with that bonus set, node for node.
+TEST(KdTree, TreesForWalksTakeTheWalksEmptyBonus) {
+  EXPECT_EQ(kd_empty_bonus(KdBuildOptions{}), 0.5f);
+  EXPECT_EQ(kd_empty_bonus(KdBuildOptions{.rays = 1000.0}), kKdWalksEmptyBonus);
+  EXPECT_EQ(kd_empty_bonus(KdBuildOptions{.build = KdBuildMode::Quality, .rays = 1000.0}), 0.5f);
+  EXPECT_EQ(kd_empty_bonus(KdBuildOptions{.empty_bonus = 0.3f, .rays = 1000.0}), 0.3f);
+  EXPECT_EQ(kd_empty_bonus(KdBuildOptions{.empty_bonus = 0.0f}), 0.0f);
+  const Positions mesh = terrain(40);
+  for (double rays : {2000.0, 1e30}) {
+    SCOPED_TRACE("rays " + std::to_string(rays));
+    const FlatKdTree walks = build_kdtree(mesh, KdBuildOptions{.rays = rays});
+    expect_same_nodes(walks, build_kdtree(mesh, KdBuildOptions{.empty_bonus = kKdWalksEmptyBonus, .rays = rays}));
+    // pbrt's bonus builds another tree for the same rays (fewer nodes: fewer cuts of empty space).
+    const FlatKdTree pbrt = build_kdtree(mesh, KdBuildOptions{.empty_bonus = 0.5f, .rays = rays});
+    EXPECT_NE(walks.stats.nodes, pbrt.stats.nodes);
+  }
+  expect_same_nodes(build_kdtree(mesh, KdBuildOptions{}), build_kdtree(mesh, KdBuildOptions{.empty_bonus = 0.5f}));
+}
+
 // KdBuildOptions::rays: a tree built for fewer rays has fewer nodes (a split must save those rays
 // more walking than it costs to build), never a leaf of more than rays_leaf_limit references that
 // the full tree does not have, the same nodes for any thread count, and every walk exact; 0 and
-// a count past any node's price give the full tree.
+// a count past any node's price give the full tree (of the same empty bonus: a tree built for
+// walks takes kKdWalksEmptyBonus by default, kd_empty_bonus).
 TEST(KdTree, TreesForFewerRaysHaveFewerNodesAndStayExact) {
   const Positions mesh = terrain(48);
   const Positions soup = random_soup(3000, 51);
   for (const Positions* p : {&mesh, &soup}) {
     SCOPED_TRACE(p == &mesh ? "terrain" : "soup");
-    const FlatKdTree full = build_kdtree(*p, KdBuildOptions{});
+    const FlatKdTree full = build_kdtree(*p, KdBuildOptions{.empty_bonus = kKdWalksEmptyBonus});
     const std::vector<Ray> rays = make_rays(full, *p, 600 / test::sanitizer_stride(4), 52);
     KdBuildOptions unbounded;
     unbounded.rays = 1e30;

@@ -49,7 +49,9 @@ struct KdBuildOptions {
   int bins = 32;                 // candidate split planes per axis and node, 2 .. kKdMaxBins
   float traversal_cost = 1.0f;
   float intersection_cost = 80.0f;
-  float empty_bonus = 0.5f;      // SAH discount for splits that cut off empty space
+  // SAH discount for splits that cut off empty space. -1: kd_empty_bonus's (pbrt's 0.5, 0.2 for a
+  // fast tree built for a frame's walks).
+  float empty_bonus = -1.0f;
   // The empty bonus applies only when the empty child is at least this fraction of the node's
   // width. 0 = pbrt's rule. The bonus otherwise rewards cutting ever thinner empty slabs off flat
   // walls, which burns the depth limit: on the Utah toasters (32 bins) 0 gives SAH 893, a largest
@@ -126,6 +128,14 @@ int kd_leaf_size(const KdBuildOptions& options);
 // The cluster rule a build uses (KdBuildOptions::cluster_refs): options.cluster_refs when >= 0,
 // else the build mode's: fast 6 (measured: kdtree_build.cpp, kFastClusterRefs), quality 0 (none).
 int kd_cluster_refs(const KdBuildOptions& options);
+
+// The empty bonus a build uses (KdBuildOptions::empty_bonus): options.empty_bonus when >= 0, else
+// pbrt's 0.5, and kKdWalksEmptyBonus (0.2) for a fast tree built for a frame's walks (rays > 0).
+// A smaller bonus makes more nodes and a longer build for walks a few per cent shorter; the full
+// tree's build is issue 14's and a still scene's, while a walks tree is built on the frame
+// pipeline's worker beside the passes, which the shorter walks pay for (README, *The empty bonus*).
+float kd_empty_bonus(const KdBuildOptions& options);
+inline constexpr float kKdWalksEmptyBonus = 0.2f;
 
 // The cost per reference a build's rays rule uses (KdBuildOptions::build_ref_cost): the option
 // when >= 0, else kKdBuildRefCost (kdtree_build.cpp).

@@ -565,6 +565,7 @@ class Builder {
     max_leaf_prims_ = size_t(kd_leaf_size(options));
     subtree_refs_ = std::clamp(triangle_count_ / 4, kMinSubtreeRefs, kSubtreeRefs);
     cluster_refs_ = size_t(kd_cluster_refs(options));
+    empty_bonus_ = kd_empty_bonus(options);
     deep_refs_ = size_t(std::max(options.deep_refs, 0));
     build_ref_cost_ = kd_build_ref_cost(options);
     rays_leaf_limit_ = size_t(std::max(options.rays_leaf_limit, 0));
@@ -1012,7 +1013,7 @@ class Builder {
     const float pa = s.c + s.g * float(k - i);
     float cost = pb * float(below) + pa * float(above);
     if ((below == 0 && float(i) >= empty_min_bins) || (above == 0 && float(k - i) >= empty_min_bins)) {
-      cost *= 1.0f - options_.empty_bonus;
+      cost *= 1.0f - empty_bonus_;
     }
     cost = options_.traversal_cost + options_.intersection_cost * cost;
     if (cost < best_cost) {
@@ -1084,7 +1085,7 @@ class Builder {
 #if defined(__SSE2__)
     const float trav = options_.traversal_cost;
     const float isect = options_.intersection_cost;
-    const float empty_factor = 1.0f - options_.empty_bonus;
+    const float empty_factor = 1.0f - empty_bonus_;
     const float empty_min_bins = options_.empty_bonus_min_width * float(k);
     // Planes i .. i + 3 in the lanes. The references below plane j are the minima in bins < j:
     // a running prefix sum of bins j - 1. Costs of planes that are not candidates (or past
@@ -1198,7 +1199,7 @@ class Builder {
     const __m256 c = _mm256_set1_ps(s.c);
     const __m256 g = _mm256_set1_ps(s.g);
     const __m256 min_bins = _mm256_set1_ps(options_.empty_bonus_min_width * float(k));
-    const __m256 factor = _mm256_set1_ps(1.0f - options_.empty_bonus);
+    const __m256 factor = _mm256_set1_ps(1.0f - empty_bonus_);
     const __m256 vtrav = _mm256_set1_ps(options_.traversal_cost);
     const __m256 visect = _mm256_set1_ps(options_.intersection_cost);
     const __m256 lo = _mm256_set1_ps(s.lo);
@@ -1477,6 +1478,7 @@ class Builder {
   float small_split_gain_ = 0.0f;  // options_.small_split_gain, the mode's when -1
   size_t max_leaf_prims_ = 1;      // kd_leaf_size(options_)
   size_t cluster_refs_ = 0;        // kd_cluster_refs(options_)
+  float empty_bonus_ = 0.5f;       // kd_empty_bonus(options_)
   size_t deep_refs_ = 0;           // options_.deep_refs
   size_t subtree_refs_ = kSubtreeRefs;  // smaller nodes are built by one task with their subtree
   BufferPool pool_;
@@ -1497,6 +1499,11 @@ double kd_build_ref_cost(const KdBuildOptions& options) {
 int kd_cluster_refs(const KdBuildOptions& options) {
   if (options.cluster_refs >= 0) return options.cluster_refs;
   return options.build == KdBuildMode::Fast ? kFastClusterRefs : 0;
+}
+
+float kd_empty_bonus(const KdBuildOptions& options) {
+  if (options.empty_bonus >= 0.0f) return options.empty_bonus;
+  return options.build == KdBuildMode::Fast && options.rays > 0.0 ? kKdWalksEmptyBonus : 0.5f;
 }
 
 int kd_deep_levels(const KdBuildOptions& options) {
@@ -1574,8 +1581,8 @@ void build_into(FlatKdTree& tree, std::span<const glm::vec3> positions, std::spa
     throw Error(ErrorKind::BadInput, "kd-tree: max_leaf_prims must be -1 (the build mode's) or more (got " +
                                          std::to_string(options.max_leaf_prims) + ")");
   }
-  if (!(options.empty_bonus >= 0.0f && options.empty_bonus < 1.0f)) {
-    throw Error(ErrorKind::BadInput, "kd-tree: empty_bonus must be in [0, 1) (got " +
+  if (!((options.empty_bonus >= 0.0f && options.empty_bonus < 1.0f) || options.empty_bonus == -1.0f)) {
+    throw Error(ErrorKind::BadInput, "kd-tree: empty_bonus must be in [0, 1), or -1 for the build's (got " +
                                          std::to_string(options.empty_bonus) + ")");
   }
   if (options.cluster_refs < -1) {
