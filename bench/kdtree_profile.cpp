@@ -67,7 +67,8 @@ int main(int argc, char** argv) {
   // MOBIRT_KD_DEEP (deep_levels: 0 = the depth limit alone), MOBIRT_KD_DEEP_REFS (deep_refs).
   if (const char* deep = std::getenv("MOBIRT_KD_DEEP")) options.deep_levels = std::atoi(deep);
   if (const char* deep_refs = std::getenv("MOBIRT_KD_DEEP_REFS")) options.deep_refs = std::atoi(deep_refs);
-  // MOBIRT_KD_RAYS (rays: the rays the tree is built for), MOBIRT_KD_REF_COST (build_ref_cost).
+  // MOBIRT_KD_RAYS (rays: the rays the tree is built for; above 0 the walks trees' empty bonus,
+  // 0.2, unless MOBIRT_KD_EMPTY sets one: kd_empty_bonus), MOBIRT_KD_REF_COST (build_ref_cost).
   if (const char* rays = std::getenv("MOBIRT_KD_RAYS")) options.rays = std::strtod(rays, nullptr);
   if (const char* cost = std::getenv("MOBIRT_KD_REF_COST")) options.build_ref_cost = std::strtod(cost, nullptr);
   if (env_on("MOBIRT_KD_SSE2")) {

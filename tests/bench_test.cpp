@@ -273,6 +273,8 @@ TEST(Bench, NoBaselineSkipsEveryPeer) {
   EXPECT_EQ(j["settings"]["leaf_size"].get<int>(), 3);
   EXPECT_EQ(j["settings"]["cluster_refs"].get<int>(), 6);
   EXPECT_EQ(j["settings"]["empty_bonus"].get<double>(), 0.5);
+  // The per-frame walks trees' bonus (kd_empty_bonus), a float's 0.2.
+  EXPECT_NEAR(j["settings"]["walks_empty_bonus"].get<double>(), 0.2, 1e-6);
 }
 
 // mobirt's frames are pipelined unless --serial, and the table and the JSON say which; pipelined,

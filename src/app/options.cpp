@@ -110,10 +110,11 @@ const Setting kSettings[] = {
      "quality 0)",
      [](CommonOptions& o, const Value& v) { o.settings.kd.cluster_refs = v.integer(0, 1 << 20); }},
     {"--empty-bonus", "B", kFrames,
-     "SAH discount of a split that cuts off empty space: a smaller bonus\n"
-     "makes more nodes, a slower build and a few per cent shorter walks\n"
-     "(default: pbrt's 0.5, and 0.2 for an animation's per-frame tree built\n"
-     "for its walks, --tree walks, which its bounce frames gain from)",
+     "SAH discount of a split that cuts off empty space, of every tree\n"
+     "built: a smaller bonus makes more nodes, a slower build and a few per\n"
+     "cent shorter walks (default: pbrt's 0.5, and 0.2 for a fast per-frame\n"
+     "tree built for a frame's walks, --tree walks, which bounce frames gain\n"
+     "from)",
      [](CommonOptions& o, const Value& v) { o.settings.kd.empty_bonus = v.real(0.0f, 0.9f); }},
     {"--max-depth", "N", kFrames, "kd-tree depth limit, -1 = 8 + 1.3 log2(triangles) (default -1)",
      [](CommonOptions& o, const Value& v) { o.settings.kd.max_depth = v.integer(-1, 128); }},
