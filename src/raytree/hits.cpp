@@ -434,16 +434,17 @@ __attribute__((target("avx2"))) uint32_t decode_triangles_avx2(const Scene& scen
   ok = _mm256_and_ps(ok, _mm256_cmp_ps(_mm256_add_ps(u, v), one, _CMP_LE_OQ));
   ok = _mm256_and_ps(ok, _mm256_cmp_ps(t, inf, _CMP_LT_OQ));
 
-  // surface_from_hit()'s triangle branch, on the scene's positions as it reads them. Its three
-  // vec3 corners are 9 floats; the last corner is read from one float before it (rows 1 to 3),
-  // so that no load reads past the array's end.
+  // surface_from_hit()'s triangle branch. Its geometric normal is the cross product of the
+  // scene's edges, which are the tree's (flatten_primitives copies the posed positions into the
+  // triangle texels as they are): e1 and e2 above, not three more rows loaded. The corners'
+  // normals and texture coordinates (three vec3, 9 floats; three vec2, 6 floats) are read with the
+  // last corner from one float before it (rows 1 to 3), so that no load reads past an array's end.
   const V3 position = add(o, scale(t, d));
   const __m256 w = _mm256_sub_ps(_mm256_sub_ps(one, u), v);
   const TriangleMesh& mesh = scene.mesh;
   const Offsets corner0(prim_lane, 9, 0), corner1(prim_lane, 9, 3), corner2(prim_lane, 9, 5);
-  const float* corners = &mesh.positions[0].x;
-  const V3 m0 = load_rows(corners, corner0.at).xyz(0);
-  V3 ng = cross(sub(load_rows(corners, corner1.at).xyz(0), m0), sub(load_rows(corners, corner2.at).xyz(1), m0));
+  const V3 ngt = cross(e1, e2);
+  V3 ng = ngt;
   const __m256 len = _mm256_sqrt_ps(dot(ng, ng));
   ok = _mm256_and_ps(ok, _mm256_cmp_ps(len, zero, _CMP_GT_OQ));  // else the ray's direction: scalar
   ng = divide(ng, len);
@@ -478,9 +479,8 @@ __attribute__((target("avx2"))) uint32_t decode_triangles_avx2(const Scene& scen
   const uint32_t done = uint32_t(_mm256_movemask_ps(ok)) & ((1u << count) - 1u);
 
   if (shadow && !shadow->lights.empty()) {
-    // for_each_shadow_ray(): the point o + t d, the tree triangle's normal ng turned to the
+    // for_each_shadow_ray(): the point o + t d, the tree triangle's normal ng (ngt) turned to the
     // viewer and offset_origin() along it, then each light's facing test.
-    const V3 ngt = cross(e1, e2);
     const __m256 facing = _mm256_cmp_ps(dot(ngt, d), zero, _CMP_LT_OQ);
     const __m256 view_side = _mm256_blendv_ps(_mm256_set1_ps(-1.0f), one, facing);
     const __m256 tiny = _mm256_set1_ps(1e-30f);

@@ -39,13 +39,15 @@ RayBatch next_generation(const Scene& scene, const Aabb& scene_bounds, const Ray
     RayBatch out;
     out.reserve(2 * (end - begin));
     SecondaryStats local;
-    auto emit = [&](const glm::vec3& origin, const glm::vec3& direction, uint32_t pixel, const glm::vec3& w,
-                    uint32_t& counter) {
+    // A new ray leaving p on the side `side` (+1: along the geometric normal ng, -1: against
+    // it), its origin offset_origin's, made only for a ray that is not culled.
+    auto emit = [&](const glm::vec3& p, const glm::vec3& ng, float side, const glm::vec3& direction, uint32_t pixel,
+                    const glm::vec3& w, uint32_t& counter) {
       if (std::max(w.x, std::max(w.y, w.z)) < settings.min_weight) {
         ++local.culled;
         return;
       }
-      out.push(Ray{origin, direction, 0.0f, kInfinity}, pixel, w);
+      out.push(Ray{offset_origin(p, side * ng, settings.offset.mode, absolute), direction, 0.0f, kInfinity}, pixel, w);
       ++counter;
     };
     for (uint32_t i = begin; i < end; ++i) {
@@ -65,16 +67,13 @@ RayBatch next_generation(const Scene& scene, const Aabb& scene_bounds, const Ray
         const glm::vec3* v = &scene.mesh.positions[3 * size_t(h.prim)];
         p = v[0] + h.u * (v[1] - v[0]) + h.v * (v[2] - v[0]);
       }
-      const glm::vec3 above = offset_origin(p, ng, settings.offset.mode, absolute);
-      const glm::vec3 below = offset_origin(p, -ng, settings.offset.mode, absolute);
-
       const WeightSplit<float> split = split_weight(m, d, ns, ng, h.entering);
       if (split.total_internal_reflection) ++local.total_internal_reflections;
       if (split.reflect > 0.0f) {
-        emit(above, mirror_direction(d, ns, ng), rays.pixel[i], weight * split.reflect, local.reflected);
+        emit(p, ng, 1.0f, mirror_direction(d, ns, ng), rays.pixel[i], weight * split.reflect, local.reflected);
       }
       if (split.refract > 0.0f) {
-        emit(below, split.refracted, rays.pixel[i], weight * split.refract, local.refracted);
+        emit(p, ng, -1.0f, split.refracted, rays.pixel[i], weight * split.refract, local.refracted);
       }
     }
     parts[c].rays = std::move(out);
