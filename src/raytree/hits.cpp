@@ -435,8 +435,9 @@ __attribute__((target("avx2"))) uint32_t decode_triangles_avx2(const Scene& scen
   ok = _mm256_and_ps(ok, _mm256_cmp_ps(t, inf, _CMP_LT_OQ));
 
   // surface_from_hit()'s triangle branch. Its geometric normal is the cross product of the
-  // scene's edges, which are the tree's (flatten_primitives copies the posed positions into the
-  // triangle texels as they are): e1 and e2 above, not three more rows loaded. The corners'
+  // scene's edges, which are the tree's (the build's write_triangles and flatten_primitives copy
+  // the posed positions into the triangle texels as they are): e1 and e2 above, not three more
+  // rows loaded. The corners'
   // normals and texture coordinates (three vec3, 9 floats; three vec2, 6 floats) are read with the
   // last corner from one float before it (rows 1 to 3), so that no load reads past an array's end.
   const V3 position = add(o, scale(t, d));
