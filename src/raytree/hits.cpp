@@ -437,9 +437,9 @@ __attribute__((target("avx2"))) uint32_t decode_triangles_avx2(const Scene& scen
   // surface_from_hit()'s triangle branch. Its geometric normal is the cross product of the
   // scene's edges, which are the tree's (the build's write_triangles and flatten_primitives copy
   // the posed positions into the triangle texels as they are): e1 and e2 above, not three more
-  // rows loaded. The corners'
-  // normals and texture coordinates (three vec3, 9 floats; three vec2, 6 floats) are read with the
-  // last corner from one float before it (rows 1 to 3), so that no load reads past an array's end.
+  // rows loaded. The corners' normals and texture coordinates (three vec3, 9 floats; three vec2,
+  // 6 floats) are read with the last corner from one float before it (rows 1 to 3), so that no
+  // load reads past an array's end.
   const V3 position = add(o, scale(t, d));
   const __m256 w = _mm256_sub_ps(_mm256_sub_ps(one, u), v);
   const TriangleMesh& mesh = scene.mesh;

@@ -34,9 +34,10 @@ RayBatch next_generation(const Scene& scene, const Aabb& scene_bounds, const Ray
   std::vector<Part> parts(chunks);
   parallel_for_chunks(n, kChunk, 0, [&](uint32_t c, uint32_t begin, uint32_t end) {
     // Made in locals and moved into the part at the end: neighbouring parts share cache lines.
-    // Room for a mirror and a refracted ray per hit, unwritten (RayBatch::resize), each ray written
-    // at `made` and the arrays cut to the rays made at the end: push_back's four capacity checks a
-    // ray cost more than the stores (four arrays grown by doubling copied each ray about twice more).
+    // Room for a mirror and a refracted ray per hit, made at once (arrays grown by doubling copied
+    // each ray about twice more) and unwritten (RayBatch::resize): each ray is written at `made`
+    // and the arrays cut to the rays made at the end (push_back's four capacity checks a ray cost
+    // more than the stores).
     RayBatch out;
     out.resize(2 * (end - begin));
     uint32_t made = 0;
