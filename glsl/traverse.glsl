@@ -501,15 +501,13 @@ float light_buffer_occluded(int l, vec3 origin, vec3 to_light) {
 // The shadow mask of a hit: bit i set when light i is visible. Lights behind the surface as seen
 // from the ray and points outside a spot's outer cone get no shadow ray: they cannot light it.
 // Returns -1.0 when a shadow ray hit the loop cap. rays_cast: the shadow rays it cast (the compute
-// pass's hit record counts them; the fragment passes leave it to the CPU).
-float shadow_mask_counted(float prim, vec3 o, vec3 d, float t, out float rays_cast) {
+// pass's hit record counts them; the fragment passes leave it to the CPU). t0, t1, t2: the hit
+// primitive's texels of u_triangles, passed in so that a caller that read them already (the
+// raster's hits in trace_main.glsl) does not fetch them twice; shadow_mask_counted fetches them.
+float shadow_mask_of(vec4 t0, vec4 t1, vec4 t2, vec3 o, vec3 d, float t, out float rays_cast) {
   float mask = 0.0;
   rays_cast = 0.0;
   if (LIGHT_COUNT == 0) return mask;
-  float base = prim * float(MOBIRT_TEXELS_PER_TRIANGLE);
-  vec4 t0 = DATA_TEXEL(u_triangles, base);
-  vec4 t1 = DATA_TEXEL(u_triangles, base + 1.0);
-  vec4 t2 = DATA_TEXEL(u_triangles, base + 2.0);
   vec3 v0 = t0.xyz;
   vec3 e1 = t1.xyz - v0;
   vec3 e2 = t2.xyz - v0;
@@ -556,6 +554,12 @@ float shadow_mask_counted(float prim, vec3 o, vec3 d, float t, out float rays_ca
     lights_done = lights_done + 1;
   }
   return lights_done == LIGHT_COUNT ? mask : -1.0;
+}
+
+float shadow_mask_counted(float prim, vec3 o, vec3 d, float t, out float rays_cast) {
+  float base = prim * float(MOBIRT_TEXELS_PER_TRIANGLE);
+  return shadow_mask_of(DATA_TEXEL(u_triangles, base), DATA_TEXEL(u_triangles, base + 1.0),
+                        DATA_TEXEL(u_triangles, base + 2.0), o, d, t, rays_cast);
 }
 
 float shadow_mask(float prim, vec3 o, vec3 d, float t) {
