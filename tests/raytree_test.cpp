@@ -174,6 +174,116 @@ TEST(RayTree, NextGenerationKeepsTheHitsOrderAcrossChunks) {
   EXPECT_EQ(stats.culled, want_stats.culled);
 }
 
+// next_generation() makes eight hits' rays at a time where the CPU has AVX2 (split_hits_avx2 in
+// src/raytree/secondary.cpp): each ray must be what the shading maths makes of its hit one at a
+// time, bit for bit. The oracle here is those functions called per hit (split_weight(),
+// mirror_direction(), offset_origin()): 3,001 made-up hits (batches of eight and a short last
+// one) with unnormalised directions, shading normals bent off the geometric ones, points near the
+// origin and far from it, entering and leaving, on a mirror, a mirror that also refracts, glass
+// with and without Fresnel and a dense glass leaving which most rays reflect totally; every
+// eleventh ray a miss, every sixth too faint to go on; under the fixed and the scaled offsets.
+TEST(RayTree, NextGenerationIsEachHitsSplitBitForBit) {
+  Scene scene = test::base_scene("materials");
+  const auto material = [&](float reflectance, float transmittance, float ior, bool fresnel) {
+    Material m;
+    m.reflectance = reflectance;
+    m.transmittance = transmittance;
+    m.ior = ior;
+    m.fresnel = fresnel;
+    scene.materials.push_back(m);
+    return uint32_t(scene.materials.size() - 1);
+  };
+  const uint32_t kinds[] = {material(0.6f, 0.0f, 1.5f, false), material(0.2f, 0.7f, 1.5f, true),
+                            material(0.0f, 0.9f, 1.33f, false), material(0.0f, 1.0f, 2.4f, true),
+                            material(0.0f, 0.0f, 1.5f, true)};
+  const Aabb bounds{glm::vec3(-300.0f), glm::vec3(300.0f)};
+  uint64_t state = 12345;
+  const auto uniform = [&](float lo, float hi) {  // a fixed LCG: the same hits on every machine
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    return lo + (hi - lo) * float(state >> 40) / float(1ull << 24);
+  };
+  const auto unit = [&] {
+    return glm::normalize(glm::vec3(uniform(-1.0f, 1.0f), uniform(-1.0f, 1.0f), uniform(-1.0f, 1.0f)) +
+                          glm::vec3(0.0f, 0.01f, 0.0f));
+  };
+  RayBatch rays;
+  rays.width = 64;
+  std::vector<SurfaceHit> hits;
+  for (uint32_t i = 0; i < 3001; ++i) {
+    const glm::vec3 d = unit() * uniform(0.5f, 3.0f);
+    glm::vec3 ng = unit();
+    if (glm::dot(ng, d) > 0.0f) ng = -ng;  // normals face the ray
+    glm::vec3 ns = glm::normalize(ng + 0.3f * unit());
+    if (glm::dot(ns, ng) < 0.0f) ns = -ns;
+    const float far = i % 3 == 0 ? 250.0f : 2.0f;
+    const glm::vec3 p(uniform(-far, far), uniform(-far, far), uniform(-far, far));
+    rays.push(Ray{p - d, d, 0.0f, kInfinity}, i, i % 6 == 1 ? glm::vec3(0.002f) : glm::vec3(1.0f, 0.5f, 0.25f));
+    SurfaceHit h;
+    if (i % 11 != 4) {
+      h.prim = int32_t(i);
+      h.t = 1.0f;
+      h.position = p;
+      h.normal = ns;
+      h.geometric = ng;
+      h.entering = i % 4 != 0;
+      h.material = kinds[i % 5];
+    }
+    hits.push_back(h);
+  }
+  for (const OffsetMode mode : {OffsetMode::Scaled, OffsetMode::Fixed}) {
+    SCOPED_TRACE(int(mode));
+    SecondarySettings settings;
+    settings.offset.mode = mode;
+    settings.offset.epsilon = 1e-4f;
+    settings.min_weight = 0.01f;
+    const float absolute = absolute_offset(bounds, settings.offset);
+    RayBatch want;
+    SecondaryStats want_stats;
+    const auto make = [&](const glm::vec3& p, const glm::vec3& n, const glm::vec3& dir, uint32_t pixel,
+                          const glm::vec3& w, uint32_t& counter) {
+      if (std::max(w.x, std::max(w.y, w.z)) < settings.min_weight) {
+        ++want_stats.culled;
+        return;
+      }
+      want.push(Ray{offset_origin(p, n, mode, absolute), dir, 0.0f, kInfinity}, pixel, w);
+      ++counter;
+    };
+    for (uint32_t i = 0; i < rays.count(); ++i) {
+      const SurfaceHit& h = hits[i];
+      if (!h.valid()) continue;
+      const Material& m = scene.materials[h.material];
+      if (m.reflectance <= 0.0f && m.transmittance <= 0.0f) continue;
+      const glm::vec3 d = glm::normalize(glm::vec3(rays.direction[i]));
+      const WeightSplit<float> split = split_weight(m, d, h.normal, h.geometric, h.entering);
+      if (split.total_internal_reflection) ++want_stats.total_internal_reflections;
+      if (split.reflect > 0.0f) {
+        make(h.position, h.geometric, mirror_direction(d, h.normal, h.geometric), rays.pixel[i],
+             rays.weight[i] * split.reflect, want_stats.reflected);
+      }
+      if (split.refract > 0.0f) {
+        make(h.position, -h.geometric, split.refracted, rays.pixel[i], rays.weight[i] * split.refract,
+             want_stats.refracted);
+      }
+    }
+    SecondaryStats stats;
+    const RayBatch next = next_generation(scene, bounds, rays, SurfaceHits::copy_of(hits), settings, &stats);
+    ASSERT_GT(want_stats.total_internal_reflections, 50u);
+    ASSERT_GT(want_stats.refracted, 500u);
+    ASSERT_GT(want_stats.culled, 100u);
+    ASSERT_EQ(next.count(), want.count());
+    for (uint32_t k = 0; k < next.count(); ++k) {
+      ASSERT_EQ(std::memcmp(&next.origin[k], &want.origin[k], sizeof(glm::vec4)), 0) << "ray " << k;
+      ASSERT_EQ(std::memcmp(&next.direction[k], &want.direction[k], sizeof(glm::vec4)), 0) << "ray " << k;
+      ASSERT_EQ(next.pixel[k], want.pixel[k]) << "ray " << k;
+      ASSERT_EQ(std::memcmp(&next.weight[k], &want.weight[k], sizeof(glm::vec3)), 0) << "ray " << k;
+    }
+    EXPECT_EQ(stats.reflected, want_stats.reflected);
+    EXPECT_EQ(stats.refracted, want_stats.refracted);
+    EXPECT_EQ(stats.total_internal_reflections, want_stats.total_internal_reflections);
+    EXPECT_EQ(stats.culled, want_stats.culled);
+  }
+}
+
 TEST(RayTree, GlassSlabShiftsTheRayWithoutTurningIt) {
   const float thickness = 2.0f, ior = 1.5f;
   const Scene scene = glass_slab(thickness, ior);

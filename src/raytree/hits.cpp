@@ -13,9 +13,9 @@
 
 // Hit decoding has an AVX2 path for triangles, chosen at run time (the build targets baseline
 // x86-64), as the kd-tree build's sweep does.
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#include "raytree/simd8.h"
+#if defined(MOBIRT_SIMD8)
 #define MOBIRT_DECODE_AVX2 1
-#include <immintrin.h>
 #endif
 
 namespace mobirt {
@@ -306,74 +306,7 @@ SurfaceHit surface_from_hit(const Scene& scene, const Ray& ray, const Hit& h) {
 namespace {
 
 #if defined(MOBIRT_DECODE_AVX2)
-// Eight triangle hits at once: surface_hit()'s Möller-Trumbore re-test (intersect_mt<Exact> of
-// src/accel/kdtree_traverse.cpp) and surface_from_hit()'s triangle branch, operation for
-// operation in the same order, so every lane is bit for bit the scalar result (target avx2 alone,
-// no FMA: nothing is contracted; sqrt and division round correctly in both). Lanes whose test
-// fails or whose triangle is degenerate are left to the scalar path, which handles them (the
-// clamped barycentrics, the ray's own direction as normal). The slow parts are divisions and
-// square roots (7 per hit) and scattered loads of triangle data, which eight lanes share.
-struct V3 {
-  __m256 x, y, z;
-};
-
-// Four consecutive floats from base + offset[k] for each lane k, transposed: row r holds float r
-// of every lane. Loads and shuffles, not vgatherdps: AMD's gathers cost more than the arithmetic.
-struct Rows {
-  __m256 r[4];
-  __attribute__((target("avx2"))) V3 xyz(int first) const { return {r[first], r[first + 1], r[first + 2]}; }
-};
-__attribute__((target("avx2"))) inline __m256 lane_pair(const float* base, const uint32_t* offset, int k) {
-  return _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(base + offset[k])), _mm_loadu_ps(base + offset[k + 4]),
-                              1);
-}
-__attribute__((target("avx2"))) inline Rows load_rows(const float* base, const uint32_t* offset) {
-  const __m256 t0 = lane_pair(base, offset, 0), t1 = lane_pair(base, offset, 1);
-  const __m256 t2 = lane_pair(base, offset, 2), t3 = lane_pair(base, offset, 3);
-  const __m256 u0 = _mm256_unpacklo_ps(t0, t1), u1 = _mm256_unpackhi_ps(t0, t1);
-  const __m256 u2 = _mm256_unpacklo_ps(t2, t3), u3 = _mm256_unpackhi_ps(t2, t3);
-  return {{_mm256_shuffle_ps(u0, u2, 0x44), _mm256_shuffle_ps(u0, u2, 0xEE), _mm256_shuffle_ps(u1, u3, 0x44),
-           _mm256_shuffle_ps(u1, u3, 0xEE)}};
-}
-// The lanes' offsets of one field: scale x index[k] + add, in floats.
-struct Offsets {
-  uint32_t at[8];
-  Offsets(const uint32_t* index, uint32_t scale, uint32_t add) {
-    for (int k = 0; k < 8; ++k) at[k] = index[k] * scale + add;
-  }
-};
-__attribute__((target("avx2"))) inline V3 sub(const V3& a, const V3& b) {
-  return {_mm256_sub_ps(a.x, b.x), _mm256_sub_ps(a.y, b.y), _mm256_sub_ps(a.z, b.z)};
-}
-__attribute__((target("avx2"))) inline V3 add(const V3& a, const V3& b) {
-  return {_mm256_add_ps(a.x, b.x), _mm256_add_ps(a.y, b.y), _mm256_add_ps(a.z, b.z)};
-}
-__attribute__((target("avx2"))) inline V3 scale(__m256 s, const V3& a) {
-  return {_mm256_mul_ps(s, a.x), _mm256_mul_ps(s, a.y), _mm256_mul_ps(s, a.z)};
-}
-__attribute__((target("avx2"))) inline V3 divide(const V3& a, __m256 s) {
-  return {_mm256_div_ps(a.x, s), _mm256_div_ps(a.y, s), _mm256_div_ps(a.z, s)};
-}
-// glm::dot: (x + y) + z of the products.
-__attribute__((target("avx2"))) inline __m256 dot(const V3& a, const V3& b) {
-  return _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(a.x, b.x), _mm256_mul_ps(a.y, b.y)), _mm256_mul_ps(a.z, b.z));
-}
-// glm::cross, its products in glm's order.
-__attribute__((target("avx2"))) inline V3 cross(const V3& a, const V3& b) {
-  return {_mm256_sub_ps(_mm256_mul_ps(a.y, b.z), _mm256_mul_ps(b.y, a.z)),
-          _mm256_sub_ps(_mm256_mul_ps(a.z, b.x), _mm256_mul_ps(b.z, a.x)),
-          _mm256_sub_ps(_mm256_mul_ps(a.x, b.y), _mm256_mul_ps(b.x, a.y))};
-}
-__attribute__((target("avx2"))) inline __m256 negate(__m256 a) { return _mm256_xor_ps(a, _mm256_set1_ps(-0.0f)); }
-__attribute__((target("avx2"))) inline V3 negate_where(const V3& a, __m256 where) {
-  const __m256 sign = _mm256_and_ps(where, _mm256_set1_ps(-0.0f));
-  return {_mm256_xor_ps(a.x, sign), _mm256_xor_ps(a.y, sign), _mm256_xor_ps(a.z, sign)};
-}
-__attribute__((target("avx2"))) inline V3 select(__m256 where, const V3& a, const V3& b) {
-  return {_mm256_blendv_ps(b.x, a.x, where), _mm256_blendv_ps(b.y, a.y, where), _mm256_blendv_ps(b.z, a.z, where)};
-}
-
-constexpr int kLanes = 8;
+using namespace simd8;
 
 // The shadow rays the traversal pass cast for a batch's hits, counted as shadow_rays_cast() does
 // (for_each_shadow_ray's facing test for each light the mask calls hidden), where that test has a
@@ -392,11 +325,15 @@ bool vector_shadow_count(std::span<const Light> lights, const ShadowSettings& se
   return std::none_of(lights.begin(), lights.end(), [](const Light& l) { return l.type == LightType::Spot; });
 }
 
-// std::max(a, b) lane by lane: b where a < b, else a (NaN keeps a, as std::max does).
-__attribute__((target("avx2"))) inline __m256 std_max(__m256 a, __m256 b) {
-  return _mm256_blendv_ps(a, b, _mm256_cmp_ps(a, b, _CMP_LT_OQ));
-}
 
+// Eight triangle hits at once: surface_hit()'s Möller-Trumbore re-test (intersect_mt<Exact> of
+// src/accel/kdtree_traverse.cpp) and surface_from_hit()'s triangle branch, operation for
+// operation in the same order, so every lane is bit for bit the scalar result (target avx2 alone,
+// no FMA: nothing is contracted; sqrt and division round correctly in both). Lanes whose test
+// fails or whose triangle is degenerate are left to the scalar path, which handles them (the
+// clamped barycentrics, the ray's own direction as normal). The slow parts are divisions and
+// square roots (7 per hit) and scattered loads of triangle data, which eight lanes share.
+//
 // Decodes the triangle hits of rays ray[0..count) on triangles prim[0..count) (count <= 8) into
 // hits[ray[k]], the shadow mask aside. Returns the lanes done; the others need surface_hit().
 __attribute__((target("avx2"))) uint32_t decode_triangles_avx2(const Scene& scene, const FlatKdTree& tree,

@@ -146,6 +146,7 @@ class SurfaceHits {
   // The record of ray i, to be written or finished in place; set_hit(i) marks it a hit.
   SurfaceHit& record(uint32_t i) { return records_[i]; }
   SurfaceHit* records() { return records_.data(); }
+  const SurfaceHit* records() const { return records_.data(); }  // a hit's record is hits[i]'s
   void set_hit(uint32_t i) { hit_[i] = 1; }
 
   class const_iterator {

@@ -1,0 +1,86 @@
+// Eight floats to a register (AVX2) for the ray tree's per-hit CPU stages: hit decoding
+// (hits.cpp) and the next generation (secondary.cpp). Each helper is one glm operation on eight
+// lanes, its operations in glm's order, so that a lane gives the scalar code's floats bit for bit:
+// the build targets baseline x86-64 (no FMA to contract either into) and these functions are
+// target("avx2") alone; additions, multiplications, divisions and square roots round the same in
+// both. The callers choose these paths at run time (__builtin_cpu_supports("avx2")).
+#pragma once
+
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define MOBIRT_SIMD8 1
+#include <immintrin.h>
+
+#include <cstdint>
+
+namespace mobirt::simd8 {
+
+constexpr int kLanes = 8;
+
+struct V3 {
+  __m256 x, y, z;
+};
+
+// Four consecutive floats from base + offset[k] for each lane k, transposed: row r holds float r
+// of every lane. Loads and shuffles, not vgatherdps: AMD's gathers cost more than the arithmetic.
+struct Rows {
+  __m256 r[4];
+  __attribute__((target("avx2"))) V3 xyz(int first) const { return {r[first], r[first + 1], r[first + 2]}; }
+};
+__attribute__((target("avx2"))) inline __m256 lane_pair(const float* base, const uint32_t* offset, int k) {
+  return _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(base + offset[k])), _mm_loadu_ps(base + offset[k + 4]),
+                              1);
+}
+__attribute__((target("avx2"))) inline Rows load_rows(const float* base, const uint32_t* offset) {
+  const __m256 t0 = lane_pair(base, offset, 0), t1 = lane_pair(base, offset, 1);
+  const __m256 t2 = lane_pair(base, offset, 2), t3 = lane_pair(base, offset, 3);
+  const __m256 u0 = _mm256_unpacklo_ps(t0, t1), u1 = _mm256_unpackhi_ps(t0, t1);
+  const __m256 u2 = _mm256_unpacklo_ps(t2, t3), u3 = _mm256_unpackhi_ps(t2, t3);
+  return {{_mm256_shuffle_ps(u0, u2, 0x44), _mm256_shuffle_ps(u0, u2, 0xEE), _mm256_shuffle_ps(u1, u3, 0x44),
+           _mm256_shuffle_ps(u1, u3, 0xEE)}};
+}
+// The lanes' offsets of one field: scale x index[k] + add, in floats.
+struct Offsets {
+  uint32_t at[kLanes];
+  Offsets(const uint32_t* index, uint32_t scale, uint32_t add) {
+    for (int k = 0; k < kLanes; ++k) at[k] = index[k] * scale + add;
+  }
+};
+__attribute__((target("avx2"))) inline V3 sub(const V3& a, const V3& b) {
+  return {_mm256_sub_ps(a.x, b.x), _mm256_sub_ps(a.y, b.y), _mm256_sub_ps(a.z, b.z)};
+}
+__attribute__((target("avx2"))) inline V3 add(const V3& a, const V3& b) {
+  return {_mm256_add_ps(a.x, b.x), _mm256_add_ps(a.y, b.y), _mm256_add_ps(a.z, b.z)};
+}
+__attribute__((target("avx2"))) inline V3 scale(__m256 s, const V3& a) {
+  return {_mm256_mul_ps(s, a.x), _mm256_mul_ps(s, a.y), _mm256_mul_ps(s, a.z)};
+}
+__attribute__((target("avx2"))) inline V3 divide(const V3& a, __m256 s) {
+  return {_mm256_div_ps(a.x, s), _mm256_div_ps(a.y, s), _mm256_div_ps(a.z, s)};
+}
+// glm::dot: (x + y) + z of the products.
+__attribute__((target("avx2"))) inline __m256 dot(const V3& a, const V3& b) {
+  return _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(a.x, b.x), _mm256_mul_ps(a.y, b.y)), _mm256_mul_ps(a.z, b.z));
+}
+// glm::cross, its products in glm's order.
+__attribute__((target("avx2"))) inline V3 cross(const V3& a, const V3& b) {
+  return {_mm256_sub_ps(_mm256_mul_ps(a.y, b.z), _mm256_mul_ps(b.y, a.z)),
+          _mm256_sub_ps(_mm256_mul_ps(a.z, b.x), _mm256_mul_ps(b.z, a.x)),
+          _mm256_sub_ps(_mm256_mul_ps(a.x, b.y), _mm256_mul_ps(b.x, a.y))};
+}
+__attribute__((target("avx2"))) inline __m256 negate(__m256 a) { return _mm256_xor_ps(a, _mm256_set1_ps(-0.0f)); }
+__attribute__((target("avx2"))) inline V3 negate_where(const V3& a, __m256 where) {
+  const __m256 sign = _mm256_and_ps(where, _mm256_set1_ps(-0.0f));
+  return {_mm256_xor_ps(a.x, sign), _mm256_xor_ps(a.y, sign), _mm256_xor_ps(a.z, sign)};
+}
+__attribute__((target("avx2"))) inline V3 select(__m256 where, const V3& a, const V3& b) {
+  return {_mm256_blendv_ps(b.x, a.x, where), _mm256_blendv_ps(b.y, a.y, where), _mm256_blendv_ps(b.z, a.z, where)};
+}
+
+// std::max(a, b) lane by lane: b where a < b, else a (NaN keeps a, as std::max does).
+__attribute__((target("avx2"))) inline __m256 std_max(__m256 a, __m256 b) {
+  return _mm256_blendv_ps(a, b, _mm256_cmp_ps(a, b, _CMP_LT_OQ));
+}
+
+}  // namespace mobirt::simd8
+
+#endif
