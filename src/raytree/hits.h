@@ -5,6 +5,7 @@
 
 #include <glm/glm.hpp>
 
+#include <cstddef>
 #include <cstdint>
 #include <functional>
 #include <optional>
@@ -33,6 +34,14 @@ struct SurfaceHit {
   uint32_t mask = 0;          // shadow bits
   bool valid() const { return prim >= 0; }
 };
+// SurfaceHit as floats, for the eight-lane paths (raytree/simd8.h's load_rows) that read its
+// vec3s as rows of four: each with the float after it, still inside the record.
+inline constexpr uint32_t kSurfaceHitFloats = sizeof(SurfaceHit) / sizeof(float);
+inline constexpr uint32_t kSurfaceHitPosition = offsetof(SurfaceHit, position) / sizeof(float);
+inline constexpr uint32_t kSurfaceHitNormal = offsetof(SurfaceHit, normal) / sizeof(float);
+inline constexpr uint32_t kSurfaceHitGeometric = offsetof(SurfaceHit, geometric) / sizeof(float);
+static_assert(sizeof(SurfaceHit) % sizeof(float) == 0 &&
+              offsetof(SurfaceHit, geometric) + 4 * sizeof(float) <= sizeof(SurfaceHit));
 
 // Self-intersection offset of a ray that leaves a surface (shadow, mirror and refracted rays),
 // along the geometric normal (glsl/layout.h, MOBIRT_OFFSET_*; --offset and --epsilon).

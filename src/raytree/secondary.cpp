@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstddef>
 #include <utility>
 #include <vector>
 
@@ -71,12 +70,6 @@ void make_rays(const Scene& scene, const RayBatch& rays, uint32_t i, const Surfa
 #if defined(MOBIRT_SIMD8)
 using namespace simd8;
 
-// SurfaceHit's vec3 fields as rows of four floats (load_rows reads the float after each: the
-// next field, inside the record).
-constexpr uint32_t kHitFloats = sizeof(SurfaceHit) / sizeof(float);
-static_assert(sizeof(SurfaceHit) % sizeof(float) == 0);
-static_assert(offsetof(SurfaceHit, geometric) + 4 * sizeof(float) <= sizeof(SurfaceHit));
-
 __attribute__((target("avx2"))) inline __m256 load8(const float* v) { return _mm256_load_ps(v); }
 __attribute__((target("avx2"))) inline V3 normalize(const V3& v) {
   return scale(_mm256_div_ps(_mm256_set1_ps(1.0f), _mm256_sqrt_ps(dot(v, v))), v);
@@ -85,18 +78,6 @@ __attribute__((target("avx2"))) inline V3 normalize(const V3& v) {
 __attribute__((target("avx2"))) inline int culled_lanes(const V3& w, __m256 min_weight) {
   return _mm256_movemask_ps(_mm256_cmp_ps(std_max(w.x, std_max(w.y, w.z)), min_weight, _CMP_LT_OQ));
 }
-// (v.x, v.y, v.z, w) of each lane as a vec4: out[k] for lane k.
-__attribute__((target("avx2"))) inline void lanes_to_vec4(const V3& v, __m256 w, glm::vec4* out) {
-  const __m256 t0 = _mm256_unpacklo_ps(v.x, v.y), t1 = _mm256_unpackhi_ps(v.x, v.y);
-  const __m256 t2 = _mm256_unpacklo_ps(v.z, w), t3 = _mm256_unpackhi_ps(v.z, w);
-  const __m256 r[4] = {_mm256_shuffle_ps(t0, t2, 0x44), _mm256_shuffle_ps(t0, t2, 0xEE),
-                       _mm256_shuffle_ps(t1, t3, 0x44), _mm256_shuffle_ps(t1, t3, 0xEE)};
-  for (int k = 0; k < 4; ++k) {
-    _mm_storeu_ps(&out[k].x, _mm256_castps256_ps128(r[k]));
-    _mm_storeu_ps(&out[k + 4].x, _mm256_extractf128_ps(r[k], 1));
-  }
-}
-
 // make_rays() for the hits of rays ray[0..count) (count <= 8, each a hit on a material that
 // reflects or refracts), eight at a time: split_weight(), mirror_direction() and offset_origin()
 // (fixed or scaled) operation for operation in their order, so that every lane is the scalar
@@ -126,9 +107,9 @@ __attribute__((target("avx2"))) void make_rays_avx2(const Scene& scene, const Ra
   }
   const float* base = reinterpret_cast<const float*>(records);
   const Offsets direction_at(lane_ray, 4, 0);
-  const Offsets position_at(lane_ray, kHitFloats, offsetof(SurfaceHit, position) / sizeof(float));
-  const Offsets normal_at(lane_ray, kHitFloats, offsetof(SurfaceHit, normal) / sizeof(float));
-  const Offsets geometric_at(lane_ray, kHitFloats, offsetof(SurfaceHit, geometric) / sizeof(float));
+  const Offsets position_at(lane_ray, kSurfaceHitFloats, kSurfaceHitPosition);
+  const Offsets normal_at(lane_ray, kSurfaceHitFloats, kSurfaceHitNormal);
+  const Offsets geometric_at(lane_ray, kSurfaceHitFloats, kSurfaceHitGeometric);
   const V3 d = normalize(load_rows(&rays.direction[0].x, direction_at.at).xyz(0));
   const V3 p = load_rows(base, position_at.at).xyz(0);
   const V3 ns = load_rows(base, normal_at.at).xyz(0);
@@ -182,9 +163,9 @@ __attribute__((target("avx2"))) void make_rays_avx2(const Scene& scene, const Ra
     reflect = _mm256_blendv_ps(reflect, _mm256_add_ps(r, t), tir);
     refract = _mm256_blendv_ps(t, _mm256_mul_ps(t, _mm256_sub_ps(one, f)), fres);
     refract = _mm256_blendv_ps(refract, zero, tir);
-    lanes_to_vec4(sub(p, step), zero, below);
-    lanes_to_vec4(bent, inf, refracted);
-    lanes_to_vec4(scale(refract, w), zero, refracted_weight);
+    lanes_to_vec4(sub(p, step), zero, &below[0].x);
+    lanes_to_vec4(bent, inf, &refracted[0].x);
+    lanes_to_vec4(scale(refract, w), zero, &refracted_weight[0].x);
   }
 
   // mirror_direction(d, ns, ng).
@@ -193,10 +174,10 @@ __attribute__((target("avx2"))) void make_rays_avx2(const Scene& scene, const Ra
   const V3 about_ng = sub(d, scale(_mm256_mul_ps(two, dot(d, ng)), ng));
   const V3 mirror = select(_mm256_cmp_ps(dot(about_ns, ng), zero, _CMP_LE_OQ), about_ng, about_ns);
   alignas(16) glm::vec4 above[kLanes], mirrored[kLanes], mirror_weight[kLanes];
-  lanes_to_vec4(add(p, step), zero, above);
-  lanes_to_vec4(mirror, inf, mirrored);
+  lanes_to_vec4(add(p, step), zero, &above[0].x);
+  lanes_to_vec4(mirror, inf, &mirrored[0].x);
   const V3 mirror_w = scale(reflect, w);
-  lanes_to_vec4(mirror_w, zero, mirror_weight);
+  lanes_to_vec4(mirror_w, zero, &mirror_weight[0].x);
 
   const int reflects = _mm256_movemask_ps(_mm256_cmp_ps(reflect, zero, _CMP_GT_OQ));
   const int refracts = _mm256_movemask_ps(_mm256_cmp_ps(refract, zero, _CMP_GT_OQ)) & glass;

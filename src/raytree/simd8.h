@@ -81,6 +81,19 @@ __attribute__((target("avx2"))) inline __m256 std_max(__m256 a, __m256 b) {
   return _mm256_blendv_ps(a, b, _mm256_cmp_ps(a, b, _CMP_LT_OQ));
 }
 
+// (v.x, v.y, v.z, w) of each lane k as four floats at out + 4 k: eight vec4 (or texels of four
+// floats) in a row.
+__attribute__((target("avx2"))) inline void lanes_to_vec4(const V3& v, __m256 w, float* out) {
+  const __m256 t0 = _mm256_unpacklo_ps(v.x, v.y), t1 = _mm256_unpackhi_ps(v.x, v.y);
+  const __m256 t2 = _mm256_unpacklo_ps(v.z, w), t3 = _mm256_unpackhi_ps(v.z, w);
+  const __m256 r[4] = {_mm256_shuffle_ps(t0, t2, 0x44), _mm256_shuffle_ps(t0, t2, 0xEE),
+                       _mm256_shuffle_ps(t1, t3, 0x44), _mm256_shuffle_ps(t1, t3, 0xEE)};
+  for (int k = 0; k < 4; ++k) {
+    _mm_storeu_ps(out + 4 * k, _mm256_castps256_ps128(r[k]));
+    _mm_storeu_ps(out + 4 * (k + 4), _mm256_extractf128_ps(r[k], 1));
+  }
+}
+
 }  // namespace mobirt::simd8
 
 #endif
