@@ -15,9 +15,9 @@ void main() {
   origin.xyz = mp(origin.xyz);
   direction.xyz = mp(direction.xyz);
   vec3 hit;
-  // The hit primitive's texels where main() read them (the raster's triangle, when its test
-  // stands), so that the shadow rays do not fetch them again: 3 of a raster pass's 20-40 fetches a
-  // group of 8 fragments.
+  // The hit primitive's texels where main() read them (where the raster's triangle stands: its
+  // test's hit, or its plane's), so that the shadow rays do not fetch them again: 3 of a raster
+  // pass's 20-40 fetches a group of 8 fragments.
   vec4 tri0 = vec4(0.0), tri1 = vec4(0.0), tri2 = vec4(0.0);
   bool tri_read = false;
   if (PRIMARY_HITS != 0) {
@@ -71,8 +71,8 @@ void main() {
     OUTPUT(pack_trace(0.0, 0.0));
     return;
   }
-  // A hit the walk found: its texels read here (a branch: a group whose lanes all kept the
-  // raster's triangle skips the three calls).
+  // A hit the walk found: its texels read here (on Vulkan a branch, KEEP_BRANCH: a group whose
+  // lanes all kept the raster's triangle skips the three fetch calls).
   KEEP_BRANCH if (!tri_read) {
     float base = hit.x * float(MOBIRT_TEXELS_PER_TRIANGLE);
     tri0 = DATA_TEXEL(u_triangles, base);

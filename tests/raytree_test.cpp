@@ -174,11 +174,12 @@ TEST(RayTree, NextGenerationKeepsTheHitsOrderAcrossChunks) {
   EXPECT_EQ(stats.culled, want_stats.culled);
 }
 
-// next_generation() makes eight hits' rays at a time where the CPU has AVX2 (split_hits_avx2 in
+// next_generation() makes eight hits' rays at a time where the CPU has AVX2 (make_rays_avx2 in
 // src/raytree/secondary.cpp): each ray must be what the shading maths makes of its hit one at a
 // time, bit for bit. The oracle here is those functions called per hit (split_weight(),
-// mirror_direction(), offset_origin()): 3,001 made-up hits (batches of eight and a short last
-// one) with unnormalised directions, shading normals bent off the geometric ones, points near the
+// mirror_direction(), offset_origin()): 3,001 made-up hits (batches of eight, and short ones at
+// the ends of next_generation's chunks; the first 400 all on the mirror, batches without glass,
+// the rest cycling through the materials) with unnormalised directions, shading normals bent off the geometric ones, points near the
 // origin and far from it, entering and leaving, on a mirror, a mirror that also refracts, glass
 // with and without Fresnel and a dense glass leaving which most rays reflect totally; every
 // eleventh ray a miss, every sixth too faint to go on; under the fixed and the scaled offsets.
@@ -226,7 +227,7 @@ TEST(RayTree, NextGenerationIsEachHitsSplitBitForBit) {
       h.normal = ns;
       h.geometric = ng;
       h.entering = i % 4 != 0;
-      h.material = kinds[i % 5];
+      h.material = i < 400 ? kinds[0] : kinds[i % 5];
     }
     hits.push_back(h);
   }

@@ -325,7 +325,6 @@ bool vector_shadow_count(std::span<const Light> lights, const ShadowSettings& se
   return std::none_of(lights.begin(), lights.end(), [](const Light& l) { return l.type == LightType::Spot; });
 }
 
-
 // Eight triangle hits at once: surface_hit()'s Möller-Trumbore re-test (intersect_mt<Exact> of
 // src/accel/kdtree_traverse.cpp) and surface_from_hit()'s triangle branch, operation for
 // operation in the same order, so every lane is bit for bit the scalar result (target avx2 alone,

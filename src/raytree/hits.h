@@ -34,8 +34,8 @@ struct SurfaceHit {
   uint32_t mask = 0;          // shadow bits
   bool valid() const { return prim >= 0; }
 };
-// SurfaceHit as floats, for the eight-lane paths (raytree/simd8.h's load_rows) that read its
-// vec3s as rows of four: each with the float after it, still inside the record.
+// SurfaceHit as floats, for the eight-lane next generation (raytree/simd8.h's load_rows), which
+// reads its vec3s as rows of four: each with the float after it, still inside the record.
 inline constexpr uint32_t kSurfaceHitFloats = sizeof(SurfaceHit) / sizeof(float);
 inline constexpr uint32_t kSurfaceHitPosition = offsetof(SurfaceHit, position) / sizeof(float);
 inline constexpr uint32_t kSurfaceHitNormal = offsetof(SurfaceHit, normal) / sizeof(float);

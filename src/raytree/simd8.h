@@ -1,9 +1,11 @@
 // Eight floats to a register (AVX2) for the ray tree's per-hit CPU stages: hit decoding
-// (hits.cpp) and the next generation (secondary.cpp). Each helper is one glm operation on eight
-// lanes, its operations in glm's order, so that a lane gives the scalar code's floats bit for bit:
-// the build targets baseline x86-64 (no FMA to contract either into) and these functions are
-// target("avx2") alone; additions, multiplications, divisions and square roots round the same in
-// both. The callers choose these paths at run time (__builtin_cpu_supports("avx2")).
+// (hits.cpp) and the next generation (secondary.cpp). The arithmetic helpers are glm's operations
+// on eight lanes, in glm's order (std_max is std::max's; load_rows, Offsets and lanes_to_vec4 move
+// data), so that a lane gives the scalar code's floats bit for bit: these functions are
+// target("avx2") alone and their callers compile with -ffp-contract=off (CMakeLists.txt), so no
+// product is fused into a sum on either side; additions, multiplications, divisions and square
+// roots round the same in both. The callers choose these paths at run time
+// (__builtin_cpu_supports("avx2")).
 #pragma once
 
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
