@@ -4,7 +4,7 @@
 // The ray-query peer's traversal pass (src/baseline/ray_query_engine.h): the same inputs and the
 // same output texel as glsl/trace.frag, with the driver's own acceleration structure and ray/triangle
 // test instead of mobirt's kd-tree. One fragment per ray: closest hit, then one shadow ray per light,
-// cast exactly as traverse.glsl's shadow_mask() casts them (offset.glsl); writes ONE RGBA8 texel
+// cast exactly as traverse.glsl's shadow_mask_of() casts them (offset.glsl); writes ONE RGBA8 texel
 // (packing.glsl). It breaks the OpenGL ES 2.0 constraints on purpose: the scene is an acceleration
 // structure, not textures (shader_constraints.h lists what it breaks). Compiled for Vulkan 1.2
 // (SPIR-V 1.5: SPV_KHR_ray_query needs 1.4). PRECISION stays highp: the driver's test has no fp16.
@@ -36,7 +36,7 @@ bool occluded(vec3 o, vec3 d, float tmin, float tmax) {
   return rayQueryGetIntersectionTypeEXT(q, true) != gl_RayQueryCommittedIntersectionNoneEXT;
 }
 
-// traverse.glsl's shadow_mask() with its kd-tree walk replaced by occluded(): the same hit point,
+// traverse.glsl's shadow_mask_of() with its kd-tree walk replaced by occluded(): the same hit point,
 // offset origin, light tests and bits. (traverse.glsl's own copy calls its traverse() directly, so
 // it cannot be included here; keep the two in step.)
 float shadow_mask(float prim, vec3 o, vec3 d, float t) {

@@ -561,8 +561,3 @@ float shadow_mask_counted(float prim, vec3 o, vec3 d, float t, out float rays_ca
   return shadow_mask_of(DATA_TEXEL(u_triangles, base), DATA_TEXEL(u_triangles, base + 1.0),
                         DATA_TEXEL(u_triangles, base + 2.0), o, d, t, rays_cast);
 }
-
-float shadow_mask(float prim, vec3 o, vec3 d, float t) {
-  float rays_cast;
-  return shadow_mask_counted(prim, o, d, t, rays_cast);
-}

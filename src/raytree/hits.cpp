@@ -82,7 +82,7 @@ glm::vec3 offset_origin(const glm::vec3& p, const glm::vec3& n, OffsetMode mode,
 namespace {
 
 // Calls f(light index, shadow ray) for every light that can light the hit, exactly as
-// glsl/traverse.glsl's shadow_mask() casts them: lights behind the surface (as seen from the ray)
+// glsl/traverse.glsl's shadow_mask_of() casts them: lights behind the surface (as seen from the ray)
 // and points outside a spot's outer cone get no ray. Lights whose bit is set in `skip` are not
 // looked at, and when that leaves none the hit's geometry is not computed either.
 template <class F>

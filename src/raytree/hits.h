@@ -86,7 +86,7 @@ glm::vec3 point_on_triangle(const glm::vec3& v0, const glm::vec3& e1, const glm:
 // or by n / 65536 where |p| < 1/32, where ulps get too small to clear the surface.
 glm::vec3 offset_normal_ulp(const glm::vec3& p, const glm::vec3& n);
 
-// Shadow mask of a hit on the CPU, the same rays as glsl/traverse.glsl's shadow_mask().
+// Shadow mask of a hit on the CPU, the same rays as glsl/traverse.glsl's shadow_mask_of().
 uint32_t shadow_mask(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
                      const Ray& ray, float t, const ShadowSettings& settings, int stack_depth);
 

@@ -135,6 +135,7 @@ __attribute__((target("avx2"))) void make_rays_avx2(const Scene& scene, const Ra
   // split_weight(): refract_direction() with eta = n1 / n2, then Schlick where the material asks.
   __m256 reflect = r, refract = t, tir = zero;
   alignas(16) glm::vec4 below[kLanes], refracted[kLanes], refracted_weight[kLanes];
+  int refracted_culled = 0;
   if (glass != 0) {
     const __m256 n1 = load8(n1s), n2 = load8(n2s);
     const __m256 eta = _mm256_div_ps(n1, n2);
@@ -165,7 +166,9 @@ __attribute__((target("avx2"))) void make_rays_avx2(const Scene& scene, const Ra
     refract = _mm256_blendv_ps(refract, zero, tir);
     lanes_to_vec4(sub(p, step), zero, &below[0].x);
     lanes_to_vec4(bent, inf, &refracted[0].x);
-    lanes_to_vec4(scale(refract, w), zero, &refracted_weight[0].x);
+    const V3 refracted_w = scale(refract, w);
+    lanes_to_vec4(refracted_w, zero, &refracted_weight[0].x);
+    refracted_culled = culled_lanes(refracted_w, min_weight);
   }
 
   // mirror_direction(d, ns, ng).
@@ -183,7 +186,6 @@ __attribute__((target("avx2"))) void make_rays_avx2(const Scene& scene, const Ra
   const int refracts = _mm256_movemask_ps(_mm256_cmp_ps(refract, zero, _CMP_GT_OQ)) & glass;
   const int tirs = _mm256_movemask_ps(tir) & glass;
   const int mirror_culled = culled_lanes(mirror_w, min_weight);
-  const int refracted_culled = glass != 0 ? culled_lanes(scale(refract, w), min_weight) : 0;
   for (int k = 0; k < count; ++k) {
     const uint32_t pixel = rays.pixel[lane_ray[k]];
     if ((tirs >> k) & 1) ++sink.stats.total_internal_reflections;
