@@ -26,6 +26,8 @@ precision highp sampler2D;
 #define UNBOUNDED_LOOP(i, limit) for (int i = 0; i < limit; ++i)
 // traverse()'s short stack with a count of its entries (see there).
 #define STACK_COUNTED 1
+// traverse() keeps a flag of its own for a leaf to close (see there).
+#define LEAF_CLOSE_IN_NODE 0
 // GLSL ES 1.00 has no control-flow attributes (see prelude_vk.glsl). What keeps an `if` a branch
 // here is its size: KEEP_BRANCH_PAD(x) returns x through enough ALU instructions
 // (es_keep_branch_pad below).

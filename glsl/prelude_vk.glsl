@@ -28,6 +28,8 @@ layout(constant_id = MOBIRT_SPEC_LIGHT_BUFFERS) const int LIGHT_BUFFERS = 0;
 #define UNBOUNDED_LOOP(i, limit) for (;;)
 // traverse()'s short stack without a count of its entries (see there).
 #define STACK_COUNTED 0
+// traverse() marks a leaf to close with a node index of -1 (see there).
+#define LEAF_CLOSE_IN_NODE 1
 // An `if` kept a branch (GL_EXT_control_flow_attributes' dont_flatten, which Mesa's NIR honours)
 // rather than turned into selects: llvmpipe skips a branch that no lane of a SIMD group takes.
 #define KEEP_BRANCH [[dont_flatten]]
