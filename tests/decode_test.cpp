@@ -42,6 +42,14 @@ std::vector<Case> cases() {
   std::vector<Case> c;
   c.push_back({"toaster", load_scene(std::string(MOBIRT_SOURCE_DIR) + "/scenes/toaster.gltf")});
   c.push_back({"fish", load_scene(std::string(MOBIRT_SOURCE_DIR) + "/scenes/fish.gltf")});
+  // A texture transform of its own per material (KHR_texture_transform), so that the eight lanes'
+  // texture coordinates read each lane's material's matrix.
+  Scene transformed = load_scene(std::string(MOBIRT_SOURCE_DIR) + "/scenes/toaster.gltf");
+  for (size_t m = 0; m < transformed.materials.size(); ++m) {
+    transformed.materials[m].texture_transform =
+        texture_transform_matrix({0.25f - 0.1f * float(m), -0.5f}, 0.7f + 0.3f * float(m), {2.0f, 0.5f + float(m)});
+  }
+  c.push_back({"toaster-uv-transform", std::move(transformed)});
   c.push_back({"shapes", test::shapes_scene()});
   c.push_back({"box-grid", test::box_grid_scene()});  // a directional light beside a point light
   c.push_back({"soup-spot", test::random_soup_scene(2000)});  // a spot light: the scalar shadow count

@@ -325,6 +325,16 @@ bool vector_shadow_count(std::span<const Light> lights, const ShadowSettings& se
   return std::none_of(lights.begin(), lights.end(), [](const Light& l) { return l.type == LightType::Spot; });
 }
 
+// A material's texture transform as decode_triangles_avx2's lanes read it (decode_hits() makes
+// the table): m00, m10, m20, m01, m11, m21 of glm's columns m[c][r], and two floats of padding.
+constexpr uint32_t kUvTransformFloats = 8;
+// decode_triangles_avx2 stores a record's floats 0-15 as two rows of eight.
+static_assert(offsetof(SurfaceHit, prim) == 0 && offsetof(SurfaceHit, t) == 4 && offsetof(SurfaceHit, u) == 8 &&
+              offsetof(SurfaceHit, v) == 12 && offsetof(SurfaceHit, position) == 16 &&
+              offsetof(SurfaceHit, normal) == 28 && offsetof(SurfaceHit, geometric) == 40 &&
+              offsetof(SurfaceHit, entering) == 52 && sizeof(bool) == 1 && offsetof(SurfaceHit, texcoord) == 56 &&
+              offsetof(SurfaceHit, material) == 64);
+
 // Eight triangle hits at once: surface_hit()'s Möller-Trumbore re-test (intersect_mt<Exact> of
 // src/accel/kdtree_traverse.cpp) and surface_from_hit()'s triangle branch, operation for
 // operation in the same order, so every lane is bit for bit the scalar result (target avx2 alone,
@@ -338,7 +348,7 @@ bool vector_shadow_count(std::span<const Light> lights, const ShadowSettings& se
 __attribute__((target("avx2"))) uint32_t decode_triangles_avx2(const Scene& scene, const FlatKdTree& tree,
                                                                const RayBatch& rays, const uint32_t* ray,
                                                                const int32_t* prim, int count, SurfaceHit* hits,
-                                                               ShadowCount* shadow) {
+                                                               const float* uv_transforms, ShadowCount* shadow) {
   // A short batch repeats its first lane, so that every load reads a real triangle.
   uint32_t ray_lane[kLanes], prim_lane[kLanes];
   for (int k = 0; k < kLanes; ++k) {
@@ -446,40 +456,51 @@ __attribute__((target("avx2"))) uint32_t decode_triangles_avx2(const Scene& scen
     }
   }
 
-  // Each field stored straight into its row: an array of the 15 registers was built on the stack
-  // and copied into the rows with `rep movsq`, 7 % of this function's samples (perf annotate).
-  constexpr int kFields = 15;
-  alignas(32) float lane[kFields][kLanes];
-  _mm256_store_ps(lane[0], t);
-  _mm256_store_ps(lane[1], u);
-  _mm256_store_ps(lane[2], v);
-  _mm256_store_ps(lane[3], position.x);
-  _mm256_store_ps(lane[4], position.y);
-  _mm256_store_ps(lane[5], position.z);
-  _mm256_store_ps(lane[6], normal.x);
-  _mm256_store_ps(lane[7], normal.y);
-  _mm256_store_ps(lane[8], normal.z);
-  _mm256_store_ps(lane[9], geometric.x);
-  _mm256_store_ps(lane[10], geometric.y);
-  _mm256_store_ps(lane[11], geometric.z);
-  _mm256_store_ps(lane[12], entering);
-  _mm256_store_ps(lane[13], tu);
-  _mm256_store_ps(lane[14], tv);
-  for (int k = 0; k < count; ++k) {
-    if (!((done >> k) & 1u)) continue;
+  // surface_from_hit()'s texture coordinate: transform_texcoord(), glm's M * (u, v, 1) in its order,
+  // (m00 u + m10 v) + m20 1 and (m01 u + m11 v) + m21 1, with each lane's material's row of
+  // `uv_transforms` (decode_hits()).
+  uint32_t material_lane[kLanes];
+  for (int k = 0; k < kLanes; ++k) material_lane[k] = mesh.material_ids[prim_lane[k]];
+  if (textured) {
+    const Rows m0 = load_rows(uv_transforms, Offsets(material_lane, kUvTransformFloats, 0).at);
+    const Rows m1 = load_rows(uv_transforms, Offsets(material_lane, kUvTransformFloats, 4).at);
+    const __m256 su = tu, sv = tv;
+    tu = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(m0.r[0], su), _mm256_mul_ps(m0.r[1], sv)),
+                       _mm256_mul_ps(m0.r[2], one));
+    tv = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(m0.r[3], su), _mm256_mul_ps(m1.r[0], sv)),
+                       _mm256_mul_ps(m1.r[1], one));
+  }
+
+  // The records' first sixteen floats (prim to texcoord, kSurfaceHitRow*) as two rows of eight
+  // per lane, transposed in registers and stored with one instruction each: the fifteen fields
+  // stored one float at a time from an array cost 40-50 instructions a hit. `entering` as the
+  // bool's byte 1 or 0 and its padding 0.
+  const __m256 row_a[kLanes] = {_mm256_castsi256_ps(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(prim_lane))),
+                                t,
+                                u,
+                                v,
+                                position.x,
+                                position.y,
+                                position.z,
+                                normal.x};
+  const __m256 row_b[kLanes] = {normal.y,
+                                normal.z,
+                                geometric.x,
+                                geometric.y,
+                                geometric.z,
+                                _mm256_and_ps(entering, _mm256_castsi256_ps(_mm256_set1_epi32(1))),
+                                tu,
+                                tv};
+  __m256 lane_a[kLanes], lane_b[kLanes];
+  transpose8(row_a, lane_a);
+  transpose8(row_b, lane_b);
+  for (uint32_t left = done; left != 0; left &= left - 1) {
+    const int k = std::countr_zero(left);
     SurfaceHit& h = hits[ray[k]];
-    h.prim = prim[k];
-    h.t = lane[0][k];
-    h.u = lane[1][k];
-    h.v = lane[2][k];
-    h.position = glm::vec3(lane[3][k], lane[4][k], lane[5][k]);
-    h.normal = glm::vec3(lane[6][k], lane[7][k], lane[8][k]);
-    h.geometric = glm::vec3(lane[9][k], lane[10][k], lane[11][k]);
-    h.entering = std::bit_cast<uint32_t>(lane[12][k]) != 0;
-    h.material = mesh.material_ids[size_t(prim[k])];
-    h.texcoord = textured ? transform_texcoord(scene.materials[h.material].texture_transform,
-                                               glm::vec2(lane[13][k], lane[14][k]))
-                          : glm::vec2(0.0f);  // every field written: hits is not initialised
+    float* record = reinterpret_cast<float*>(&h);
+    _mm256_storeu_ps(record, lane_a[k]);
+    _mm256_storeu_ps(record + 8, lane_b[k]);
+    h.material = material_lane[k];
   }
   return done;
 }
@@ -512,6 +533,12 @@ SurfaceHits decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBat
   const bool batched = avx2 && shadows.ray_test.test == IntersectTest::MollerTrumbore;
   const bool batch_counts = vector_shadow_count(lights, shadows);
   const float absolute = absolute_offset(tree.bounds, shadows.offset);
+  std::vector<float> uv_transforms(std::max<size_t>(scene.materials.size(), 1) * kUvTransformFloats, 0.0f);
+  for (size_t m = 0; m < scene.materials.size(); ++m) {
+    const glm::mat3& t = scene.materials[m].texture_transform;
+    float* row = &uv_transforms[m * kUvTransformFloats];
+    row[0] = t[0][0], row[1] = t[1][0], row[2] = t[2][0], row[3] = t[0][1], row[4] = t[1][1], row[5] = t[2][1];
+  }
 #endif
   const uint32_t triangles = uint32_t(scene.mesh.triangle_count());
   const uint32_t all_lights = lights.empty() ? 0u : (2u << (lights.size() - 1)) - 1u;
@@ -542,7 +569,7 @@ SurfaceHits decode_hits(const Scene& scene, const FlatKdTree& tree, const RayBat
     const auto flush = [&] {
       ShadowCount count{lights, shadows.offset.mode, absolute, batch_mask};
       const uint32_t done = decode_triangles_avx2(scene, tree, rays, batch_ray, batch_prim, batch_size, hits.records(),
-                                                  batch_counts ? &count : nullptr);
+                                                  uv_transforms.data(), batch_counts ? &count : nullptr);
       chunk_shadow += count.rays;
       for (int k = 0; k < batch_size; ++k) {
         if ((done >> k) & 1u) {

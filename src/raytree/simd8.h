@@ -1,11 +1,11 @@
 // Eight floats to a register (AVX2) for the ray tree's per-hit CPU stages: hit decoding
 // (hits.cpp) and the next generation (secondary.cpp). The arithmetic helpers are glm's operations
-// on eight lanes, in glm's order (std_max is std::max's; load_rows, Offsets and lanes_to_vec4 move
-// data), so that a lane gives the scalar code's floats bit for bit: these functions are
-// target("avx2") alone and their callers compile with -ffp-contract=off (CMakeLists.txt), so no
-// product is fused into a sum on either side; additions, multiplications, divisions and square
-// roots round the same in both. The callers choose these paths at run time
-// (__builtin_cpu_supports("avx2")).
+// on eight lanes, in glm's order (std_max is std::max's; load_rows, Offsets, lanes_to_vec4 and
+// transpose8 move data), so that a lane gives the scalar code's floats bit for bit: these
+// functions are target("avx2") alone and their callers compile with -ffp-contract=off
+// (CMakeLists.txt), so no product is fused into a sum on either side; additions,
+// multiplications, divisions and square roots round the same in both. The callers choose these
+// paths at run time (__builtin_cpu_supports("avx2")).
 #pragma once
 
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
@@ -94,6 +94,28 @@ __attribute__((target("avx2"))) inline void lanes_to_vec4(const V3& v, __m256 w,
     _mm_storeu_ps(out + 4 * k, _mm256_castps256_ps128(r[k]));
     _mm_storeu_ps(out + 4 * (k + 4), _mm256_extractf128_ps(r[k], 1));
   }
+}
+
+// Eight registers of eight lanes to eight registers of one lane each: out[k] holds lane k of
+// in[0], ..., in[7], in that order (eight floats of one record, stored with one instruction).
+__attribute__((target("avx2"))) inline void transpose8(const __m256 in[8], __m256 out[8]) {
+  const __m256 t0 = _mm256_unpacklo_ps(in[0], in[1]), t1 = _mm256_unpackhi_ps(in[0], in[1]);
+  const __m256 t2 = _mm256_unpacklo_ps(in[2], in[3]), t3 = _mm256_unpackhi_ps(in[2], in[3]);
+  const __m256 t4 = _mm256_unpacklo_ps(in[4], in[5]), t5 = _mm256_unpackhi_ps(in[4], in[5]);
+  const __m256 t6 = _mm256_unpacklo_ps(in[6], in[7]), t7 = _mm256_unpackhi_ps(in[6], in[7]);
+  // s_j: lanes j and j + 4 of in[0..3] (low half) and in[4..7] (the s_{j+4}).
+  const __m256 s0 = _mm256_shuffle_ps(t0, t2, 0x44), s1 = _mm256_shuffle_ps(t0, t2, 0xEE);
+  const __m256 s2 = _mm256_shuffle_ps(t1, t3, 0x44), s3 = _mm256_shuffle_ps(t1, t3, 0xEE);
+  const __m256 s4 = _mm256_shuffle_ps(t4, t6, 0x44), s5 = _mm256_shuffle_ps(t4, t6, 0xEE);
+  const __m256 s6 = _mm256_shuffle_ps(t5, t7, 0x44), s7 = _mm256_shuffle_ps(t5, t7, 0xEE);
+  out[0] = _mm256_permute2f128_ps(s0, s4, 0x20);
+  out[1] = _mm256_permute2f128_ps(s1, s5, 0x20);
+  out[2] = _mm256_permute2f128_ps(s2, s6, 0x20);
+  out[3] = _mm256_permute2f128_ps(s3, s7, 0x20);
+  out[4] = _mm256_permute2f128_ps(s0, s4, 0x31);
+  out[5] = _mm256_permute2f128_ps(s1, s5, 0x31);
+  out[6] = _mm256_permute2f128_ps(s2, s6, 0x31);
+  out[7] = _mm256_permute2f128_ps(s3, s7, 0x31);
 }
 
 }  // namespace mobirt::simd8
