@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <cmath>
 #include <sstream>
-#include <utility>
 #include <vector>
 
 #include "backend/backend.h"
@@ -155,48 +154,6 @@ TEST_F(VulkanRender, TraversalMatchesCpuOnUtahToasters) {
 TEST_F(VulkanRender, EveryStackDepthMatchesCpu) {
   const Scene scene = test::box_grid_scene();
   for (int depth : {0, 1, 2, 8, 32}) check_scene(*backend, scene, 96, 64, depth);
-}
-
-// The shader counts steps exactly as the CPU traversal does: with a small loop cap, the GPU hands
-// back as capped exactly the rays whose closest-hit walk or one of whose shadow walks needs more
-// steps than the cap on the CPU. Odd stack depths too: the shader keeps entries two to a vec4 and
-// must drop the one past an odd depth, as the CPU's stack does (a kept one would change the walk).
-TEST_F(VulkanRender, LoopCapStopsExactlyTheRaysWhoseCpuWalkIsLonger) {
-  const Scene scene = test::random_soup_scene(3000, 7);
-  ASSERT_FALSE(scene.lights.empty());
-  for (const auto& [stack_depth, cap] : std::vector<std::pair<int, int>>{{2, 12}, {2, 40}, {1, 40}, {3, 40}}) {
-    RenderSettings settings;
-    settings.width = 96;
-    settings.height = 64;
-    settings.stack_depth = stack_depth;
-    settings.max_steps = cap;
-    settings.shadow_cells = 0;  // the shadow rays walk the tree, as the CPU's step counts assume
-    Renderer renderer(*backend, settings);
-    const FlatKdTree tree = build_kdtree(scene.mesh.positions, settings.kd);
-    const RayBatch rays = primary_rays(*scene.camera, settings.width, settings.height);
-    const TraceResult gpu = renderer.trace(scene, tree, rays);
-    size_t capped = 0, mismatched = 0;
-    for (uint32_t i = 0; i < rays.count(); ++i) {
-      const Ray ray = rays.ray(i);
-      TraversalStats stats;
-      const Hit hit = traverse(tree, ray, stack_depth, stats);
-      bool cpu_capped = stats.steps > uint64_t(cap);
-      if (!cpu_capped && hit.valid()) {
-        for (const std::optional<Ray>& shadow : shadow_rays(tree, scene.lights, hit.prim, ray, hit.t, ShadowSettings{})) {
-          TraversalStats s;
-          if (shadow) occluded(tree, *shadow, stack_depth, s);
-          cpu_capped = cpu_capped || s.steps > uint64_t(cap);
-        }
-      }
-      const bool gpu_capped = unpack_trace(gpu.packing, gpu.texels[i]).capped;
-      capped += cpu_capped;
-      mismatched += cpu_capped != gpu_capped;
-    }
-    EXPECT_GT(capped, 0u) << "cap " << cap << ", stack " << stack_depth;
-    EXPECT_LT(capped, rays.count()) << "cap " << cap << ", stack " << stack_depth;
-    EXPECT_EQ(mismatched, 0u) << "cap " << cap << ", stack " << stack_depth << ": " << capped
-                              << " rays capped on the CPU";
-  }
 }
 
 // A loop cap too small for the scene costs time, never pixels (see render_checks.h).
