@@ -179,10 +179,11 @@ TEST(RayTree, NextGenerationKeepsTheHitsOrderAcrossChunks) {
 // time, bit for bit. The oracle here is those functions called per hit (split_weight(),
 // mirror_direction(), offset_origin()): 3,001 made-up hits (batches of eight, and short ones at
 // the ends of next_generation's chunks; the first 400 all on the mirror, batches without glass,
-// the rest cycling through the materials) with unnormalised directions, shading normals bent off the geometric ones, points near the
-// origin and far from it, entering and leaving, on a mirror, a mirror that also refracts, glass
-// with and without Fresnel and a dense glass leaving which most rays reflect totally; every
-// eleventh ray a miss, every sixth too faint to go on; under the fixed and the scaled offsets.
+// the rest cycling through the materials) with unnormalised directions, shading normals bent off
+// the geometric ones, points near the origin and far from it, entering and leaving, on a mirror, a
+// mirror that also refracts, glass with and without Fresnel and a dense glass leaving which most
+// rays reflect totally; every eleventh ray a miss, every sixth too faint to go on; under the fixed
+// and the scaled offsets.
 TEST(RayTree, NextGenerationIsEachHitsSplitBitForBit) {
   Scene scene = test::base_scene("materials");
   const auto material = [&](float reflectance, float transmittance, float ior, bool fresnel) {
