@@ -407,13 +407,14 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
       }
       tmax = push ? tsplit : tmax;
     }
-    // The leaf's triangles, one test per iteration. (Only lanes that reached a leaf: llvmpipe's
-    // own loop limit may have ended the node loop early.) The entries' texels run from base to
-    // leaf_end, exact integers (below kKdIndexLimit, 2^24): no loop index, and no multiply per
-    // triangle. The leaf's steps are counted before its tests, and its tests end where the steps
-    // left to the cap do (the walk then returns capped after them, below): the tests and the
-    // result of a step-by-step count, with no count updated across the loop's three fetch calls
-    // (-1.1 % of the fish's JIT instructions at 2 bounces on Vulkan, -1.9 % on ES).
+    // The leaf's triangles, one test per iteration. (Only lanes that reached a leaf: Mesa 22.3's
+    // llvmpipe ended loops on its own, README *Loop cap*, and may have ended the node loop early;
+    // 25.0's does not.) The entries' texels run from base to leaf_end, exact integers (below
+    // kKdIndexLimit, 2^24): no loop index, and no multiply per triangle. The leaf's steps are
+    // counted before its tests, and its tests end where the steps left to the cap do (the walk
+    // then returns capped after them, below): the tests and the result of a step-by-step count,
+    // with no count updated across the loop's three fetch calls (-1.1 % of the fish's JIT
+    // instructions at 2 bounces on Vulkan, -1.9 % on ES).
     float base = leaf_first * float(MOBIRT_TEXELS_PER_TRIANGLE);
     float leaf_end = min(base + leaf_count * float(MOBIRT_TEXELS_PER_TRIANGLE),
                          base + float(MAX_STEPS - steps) * float(MOBIRT_TEXELS_PER_TRIANGLE));
@@ -444,7 +445,8 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
       if (LEAF_CLOSE_IN_NODE != 0) node = -1.0;
     }
   }
-  // The cap, or the driver's own loop limit, ended the walk before it could decide.
+  // The cap, or (Mesa 22.3's llvmpipe) the driver's own loop limit, ended the walk before it could
+  // decide.
   return vec3(best_prim, best_t, 1.0);
 }
 
@@ -533,9 +535,10 @@ float shadow_mask_of(vec4 t0, vec4 t1, vec4 t2, vec3 o, vec3 d, float t, out flo
   vec3 n = (view_side / max(length(ng), 1e-30)) * ng;
   vec3 origin = mp(offset_origin(p, n, PARAM(MOBIRT_TP_BOUNDS_LO).w));
   float bit = 1.0;
-  // lavapipe ends a shader's loops silently once they ran 65,535 iterations in all (llvmpipe's
-  // LP_MAX_TGSI_LOOP_ITERATIONS), so completion is counted rather than assumed: a light loop that
-  // was cut short reports the ray as capped, and the CPU traces it.
+  // Mesa 22.3's lavapipe ended a shader's loops silently once they ran 65,535 iterations in all
+  // (llvmpipe's LP_MAX_TGSI_LOOP_ITERATIONS; 25.0's does not: VulkanBackendTest.SpinHonoursTheCap
+  // tells which model a driver follows), so completion is counted rather than assumed: a light
+  // loop that was cut short reports the ray as capped, and the CPU traces it.
   int lights_done = 0;
   for (int l = 0; l < LIGHT_COUNT; ++l) {
     vec4 light = PARAM(MOBIRT_TP_LIGHTS + MOBIRT_TP_VEC4S_PER_LIGHT * l);
