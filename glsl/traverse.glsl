@@ -408,8 +408,8 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
       tmax = push ? tsplit : tmax;
     }
     // The leaf's triangles, one test per iteration. (Only lanes that reached a leaf: Mesa 22.3's
-    // llvmpipe ended loops on its own, README *Loop cap*, and may have ended the node loop early;
-    // 25.0's does not.) The entries' texels run from base to leaf_end, exact integers (below
+    // llvmpipe ended loops on its own and may have ended the node loop early; 25.0's does not,
+    // README *Loop cap*.) The entries' texels run from base to leaf_end, exact integers (below
     // kKdIndexLimit, 2^24): no loop index, and no multiply per triangle. The leaf's steps are
     // counted before its tests, and its tests end where the steps left to the cap do (the walk
     // then returns capped after them, below): the tests and the result of a step-by-step count,
