@@ -8,9 +8,10 @@
 # JIT code has no symbols for perf. So the render runs under gdb, stopped where it writes the image (the passes still exist), and every
 # anonymous executable mapping (the JIT code) is dumped and disassembled (objdump) into OUT/; with
 # SAMPLE=1 a second render (--repeat 200) is sampled by perf while gdb dumps its code at the end,
-# so samples and code come from the same process. OUT/summary.txt lists, for the mapping with the
-# most code (or the most samples), its functions (the fragment shader, texel-fetch functions) and
-# its loops: instructions, calls, stack spill/reload instructions, share of samples.
+# so samples and code come from the same process. OUT/summary.txt lists every sampled mapping's
+# share (the texel-fetch functions are small mappings of their own), then, for each mapping with 5 %
+# of the samples or more (without samples: the biggest), its functions and its loops: instructions,
+# calls, stack spill/reload instructions, share of samples.
 set -euo pipefail
 OUT=${1:?usage: tools/profile/jit_dump.sh OUT MOBIRT RENDER-ARGS...}
 MOBIRT=${2:?usage: tools/profile/jit_dump.sh OUT MOBIRT RENDER-ARGS...}

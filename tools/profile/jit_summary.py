@@ -1,10 +1,14 @@
 #!/usr/bin/env python3
-"""Summary of llvmpipe JIT code dumped by jit_dump.sh: functions and loops of the biggest (or the
-most sampled) code mapping, with instruction counts, calls, stack spills and perf sample shares.
+"""Summary of llvmpipe JIT code dumped by jit_dump.sh: every sampled code mapping with its share
+of the samples, then the functions and loops of each mapping that holds 5 % of them or more (or,
+without samples, of the biggest one), with instruction counts, calls, stack spills and perf sample
+shares. With samples the texel-fetch functions (small mappings of their own, called from the
+shaders) and the shader bodies are told apart: on the fish at 2 bounces the fetch functions held
+42 % of the samples (docs/performance-history.md, Session 47).
 
   tools/profile/jit_summary.py DIR      (DIR/jit_START.bin, optional DIR/ips.txt)
 
-Writes DIR/jit_START.s (objdump) for the mapping it summarises. A loop is a backward jump over
+Writes DIR/jit_START.s (objdump) for each mapping it summarises. A loop is a backward jump over
 more than 300 bytes (smaller ones are per-lane scalar loops inside a vector operation).
 """
 import collections
@@ -43,18 +47,30 @@ def main():
         maps.append((hits, size, start, f))
     if not maps:
         sys.exit("jit_summary: no jit_*.bin in " + d)
-    # The mapping with the most samples; without samples, the biggest one below 1 MiB (the
-    # shader code; bigger anonymous executable mappings are allocator arenas).
-    hits, size, start, path = max(maps, key=lambda m: (m[0], m[1] if m[1] < (1 << 20) else 0))
+    total = sum(samples.values())
+    if total:
+        print(f"sampled mappings: start, bytes, samples, % of {total}")
+        for hits, size, start, path in sorted(maps, reverse=True):
+            if hits:
+                print(f"  {start:#x} {size:9d} {hits:6d} {100.0 * hits / total:6.1f}")
+        chosen = [m for m in sorted(maps, reverse=True) if m[0] and 100.0 * m[0] / total >= 5.0]
+    else:
+        # Without samples, the biggest mapping below 1 MiB (the shader code; bigger anonymous
+        # executable mappings are allocator arenas).
+        chosen = [max(maps, key=lambda m: m[1] if m[1] < (1 << 20) else 0)]
+    for hits, size, start, path in chosen:
+        summarise(samples, total, hits, size, start, path)
+
+
+def summarise(samples, total, hits, size, start, path):
     text, insns = disassemble(path, start)
     with open(path[:-4] + ".s", "w") as f:
         f.write(text)
-    total = sum(samples.values()) or 1
 
     def share(lo, hi):
-        return 100.0 * sum(n for a, n in samples.items() if lo <= a <= hi) / total
+        return 100.0 * sum(n for a, n in samples.items() if lo <= a <= hi) / (total or 1)
 
-    print(f"mapping {start:#x}, {size} bytes, {len(insns)} instructions, {hits} of {sum(samples.values())} samples")
+    print(f"mapping {start:#x}, {size} bytes, {len(insns)} instructions, {hits} of {total} samples")
     print("functions: start, instructions, calls, samples %")
     first = 0
     for i, (a, t) in enumerate(insns):
@@ -73,7 +89,6 @@ def main():
                 body = [x for x in insns if head <= x[0] <= a]
                 print(f"  {head:#x} {a:#x} {len(body):6d} {sum(x[1].startswith('call') for x in body):4d} "
                       f"{sum('rsp' in x[1] for x in body):5d} {share(head, a):6.1f}")
-
 
 if __name__ == "__main__":
     main()
