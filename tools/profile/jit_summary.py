@@ -49,11 +49,11 @@ def main():
         sys.exit("jit_summary: no jit_*.bin in " + d)
     total = sum(samples.values())
     if total:
+        sampled = [m for m in sorted(maps, reverse=True) if m[0]]  # the most samples first
         print(f"sampled mappings: start, bytes, samples, % of {total}")
-        for hits, size, start, path in sorted(maps, reverse=True):
-            if hits:
-                print(f"  {start:#x} {size:9d} {hits:6d} {100.0 * hits / total:6.1f}")
-        chosen = [m for m in sorted(maps, reverse=True) if m[0] and 100.0 * m[0] / total >= 5.0]
+        for hits, size, start, path in sampled:
+            print(f"  {start:#x} {size:9d} {hits:6d} {100.0 * hits / total:6.1f}")
+        chosen = [m for m in sampled if 100.0 * m[0] / total >= 5.0]
     else:
         # Without samples, the biggest mapping below 1 MiB (the shader code; bigger anonymous
         # executable mappings are allocator arenas).
@@ -89,6 +89,7 @@ def summarise(samples, total, hits, size, start, path):
                 body = [x for x in insns if head <= x[0] <= a]
                 print(f"  {head:#x} {a:#x} {len(body):6d} {sum(x[1].startswith('call') for x in body):4d} "
                       f"{sum('rsp' in x[1] for x in body):5d} {share(head, a):6.1f}")
+
 
 if __name__ == "__main__":
     main()
