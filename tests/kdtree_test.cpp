@@ -941,6 +941,7 @@ TEST(KdTree, TraceLeavesTheWalkUnchanged) {
            a.dropped == b.dropped && a.restarts == b.restarts && a.capped == b.capped;
   };
   size_t walks = 0, ended_at_hit = 0, walked_on = 0, walked_far = 0;
+  uint64_t node_iterations = 0, two_level_iterations = 0;
   for (int stack : {-1, 0, 4}) {
     for (const Ray& ray : rays) {
       TraversalStats plain;
@@ -963,6 +964,14 @@ TEST(KdTree, TraceLeavesTheWalkUnchanged) {
         ASSERT_TRUE(!trace.ended_at_hit || a.valid());
         ASSERT_EQ(trace.ended_at_hit, !trace.segments.empty() && trace.segments.back().triangle_tests > 0);
         ++walks;
+        // Two levels a fetch (an estimate for simd_stats): a segment's descents pair up, so it
+        // takes at least half its iterations and never more than all of them.
+        for (const TraversalTrace::Segment& seg : trace.segments) {
+          ASSERT_LE(seg.two_level_iterations, seg.node_iterations);
+          ASSERT_GE(2 * seg.two_level_iterations, seg.node_iterations);
+          node_iterations += seg.node_iterations;
+          two_level_iterations += seg.two_level_iterations;
+        }
         ended_at_hit += trace.ended_at_hit;
         walked_on += trace.past_hit_iterations > 0;
         walked_far += trace.past_hit_iterations > 1;
@@ -979,6 +988,8 @@ TEST(KdTree, TraceLeavesTheWalkUnchanged) {
   EXPECT_GT(4 * ended_at_hit, walks);  // a third of these walks end at a hit in a leaf
   EXPECT_EQ(walked_on, ended_at_hit);  // each walk on fetches at least the node it goes on to
   EXPECT_GT(walked_far, ended_at_hit / 4);  // and many go on past a pop to another node
+  // The walks down from the root and from popped nodes are long enough to pair most steps.
+  EXPECT_LT(4 * two_level_iterations, 3 * node_iterations);
 }
 
 // rebuild_kdtree replaces whatever tree it is given (larger, smaller, with shapes or not) by the

@@ -311,6 +311,11 @@ struct TraversalTrace {
     uint32_t node_iterations = 0;
     uint32_t triangle_tests = 0;
     float tmax = 0.0f;  // a leaf's: the end of the ray's interval in it (where a walk resumed after it would start)
+    // The node-loop iterations if a node's texel also held its children's splits, so that one
+    // iteration decided at an interior node and at the interior child it chose (two levels a
+    // fetch; a leaf, a pop and a restart still take an iteration of their own): an estimate for
+    // tools/profile/simd_stats.cpp, not a layout the shader has.
+    uint32_t two_level_iterations = 0;
   };
   std::vector<Segment> segments;
   // When the walk ended at a hit in a leaf: the node-loop iterations a lane that had not yet

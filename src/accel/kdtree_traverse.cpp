@@ -333,15 +333,29 @@ class TraceRecorder {
   explicit TraceRecorder(TraversalTrace* trace) : trace_(trace) {
     if (trace_) *trace_ = TraversalTrace{};
   }
-  void node() { ++node_iterations_; }
+  // An iteration of the node loop at an interior node or a leaf.
+  void node(bool interior) {
+    ++node_iterations_;
+    if (!trace_) return;
+    // Two levels a fetch (TraversalTrace::Segment::two_level_iterations): an interior node the
+    // last iteration descended into shares that iteration unless it was itself the second level.
+    const bool second_level = interior && descended_ && !paired_;
+    if (!second_level) ++two_level_;
+    paired_ = second_level;
+    descended_ = false;
+  }
+  // The interior node just walked chose a child to visit next (no close, pop or restart).
+  void descend() { descended_ = true; }
   void leaf(uint32_t triangle_tests, float tmax) {
     if (!trace_) return;
-    trace_->segments.push_back({node_iterations_, triangle_tests, tmax});
+    trace_->segments.push_back({node_iterations_, triangle_tests, tmax, two_level_});
     node_iterations_ = 0;
+    two_level_ = 0;
+    descended_ = paired_ = false;
   }
   // The walk ends in the node loop: the iteration that closes the last leaf ends it.
   void end() {
-    if (trace_) trace_->segments.push_back({node_iterations_ + 1, 0});
+    if (trace_) trace_->segments.push_back({node_iterations_ + 1, 0, 0.0f, two_level_ + 1});
   }
   // The walk ended at a hit in the leaf just recorded; the walk on past it is measured next.
   void hit() {
@@ -358,6 +372,9 @@ class TraceRecorder {
  private:
   TraversalTrace* trace_;
   uint32_t node_iterations_ = 0;
+  uint32_t two_level_ = 0;
+  bool descended_ = false;
+  bool paired_ = false;
 };
 
 template <bool kAnyHit>
@@ -441,7 +458,7 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
   };
   for (;;) {
     const glm::vec4 n = nodes[node];
-    recorder.node();
+    recorder.node(!node_texel::is_leaf(n));
     if (!node_texel::is_leaf(n)) {
       if (!probing && stats.steps >= cap) {
         stats.capped = 1;
@@ -478,6 +495,7 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
         node = near_child;
         tmax = tsplit;
       }
+      if (!closed) recorder.descend();
       if (closed && close()) {
         if (probing) return walked_on(true);
         recorder.end();

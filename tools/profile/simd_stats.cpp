@@ -26,6 +26,9 @@
 //   leaf steps in     the node-loop iterations if a parent's texel said where a child leaf's
 //   their parents     entries are, so that a walk went from the parent's step to the triangle
 //                     loop without the leaf's own step (not built; see node_iterations() below)
+//   two levels a      the node-loop iterations if a node's texel held its children's splits too,
+//   node fetch        so that one iteration decided at a node and at the interior child it chose
+//                     (not built; TraversalTrace::Segment::two_level_iterations)
 //   entry nodes       (primary rays) the leading steps from the root that every ray of a 4x2
 //                     tile takes to one child, its interval unchanged: what a pass that started
 //                     each tile's rays below the root could skip at most; see entry_chain() below
@@ -87,13 +90,17 @@ struct LoopCounts {
 // child leaf's entries are, so that a segment that walked down to its leaf (2 iterations or more)
 // ends at the parent's step, without the leaf's own; a leaf taken from the stack or reached by a
 // restart keeps that iteration (its pop or restart needs it).
-uint32_t node_iterations(const TraversalTrace::Segment& seg, bool fold_leaf_steps) {
+// two_levels: as if a node's texel held its children's splits too
+// (TraversalTrace::Segment::two_level_iterations).
+uint32_t node_iterations(const TraversalTrace::Segment& seg, bool fold_leaf_steps, bool two_levels = false) {
+  if (two_levels) return seg.two_level_iterations;
   const bool folds = fold_leaf_steps && seg.triangle_tests > 0 && seg.node_iterations >= 2;
   return seg.node_iterations - (folds ? 1 : 0);
 }
 
 // One traverse() call run by a group in lock step (see TraversalTrace for the segments).
-LoopCounts simulate_walk(const std::vector<const TraversalTrace*>& lanes, bool fold_leaf_steps = false) {
+LoopCounts simulate_walk(const std::vector<const TraversalTrace*>& lanes, bool fold_leaf_steps = false,
+                         bool two_levels = false) {
   LoopCounts c;
   size_t outer = 1;  // a loop runs at least once, even with every lane masked off
   for (const TraversalTrace* t : lanes) outer = std::max(outer, t->segments.size());
@@ -101,7 +108,7 @@ LoopCounts simulate_walk(const std::vector<const TraversalTrace*>& lanes, bool f
     uint32_t node = 1, leaf = 1;
     for (const TraversalTrace* t : lanes) {
       if (k >= t->segments.size()) continue;
-      const uint32_t steps = node_iterations(t->segments[k], fold_leaf_steps);
+      const uint32_t steps = node_iterations(t->segments[k], fold_leaf_steps, two_levels);
       node = std::max(node, steps);
       leaf = std::max(leaf, t->segments[k].triangle_tests);
       c.lane_node += steps;
@@ -220,7 +227,7 @@ LoopCounts simulate_postponed(const std::vector<const TraversalTrace*>& lanes, b
 
 // What simulate_group() simulates: the pass as it is, postponed leaves without or with a vote
 // (simulate_postponed()), or leaf steps folded into their parents (node_iterations()).
-enum class Walk { AsIs, Postponed, PostponedVote, FoldedLeaves };
+enum class Walk { AsIs, Postponed, PostponedVote, FoldedLeaves, TwoLevels };
 
 // A group's traversal pass: the closest-hit walk, then the light loop.
 LoopCounts simulate_group(const std::vector<const RayWalks*>& lanes, size_t lights, Walk walk = Walk::AsIs) {
@@ -230,7 +237,7 @@ LoopCounts simulate_group(const std::vector<const RayWalks*>& lanes, size_t ligh
     for (const RayWalks* r : lanes) walks.push_back(&r->walks[w]);
     const bool postponed = walk == Walk::Postponed || walk == Walk::PostponedVote;
     c += postponed ? simulate_postponed(walks, walk == Walk::PostponedVote)
-                   : simulate_walk(walks, walk == Walk::FoldedLeaves);
+                   : simulate_walk(walks, walk == Walk::FoldedLeaves, walk == Walk::TwoLevels);
   }
   return c;
 }
@@ -241,6 +248,7 @@ struct PassStats {
   LoopCounts tiled, linear;  // 4x2 tiles of the ray texture; 8 consecutive rays
   LoopCounts postponed, voted;  // 4x2 tiles, postponed leaves without and with a vote
   LoopCounts folded;            // 4x2 tiles, leaf steps folded into their parents
+  LoopCounts two_levels;        // 4x2 tiles, two levels a node fetch (an estimate, not built)
   LoopCounts shadow_tiled;      // 4x2 tiles, the light loop's walks alone
   LoopCounts shadow_dense;      // the same walks packed 8 to a group, in tile order
   // The light-loop group iterations `tiled` counts for tiles without a shadow ray for that light
@@ -304,6 +312,7 @@ PassStats simulate(const FlatKdTree& tree, const Scene& scene, const RayBatch& r
       s.postponed += simulate_group(group, lights, Walk::Postponed);
       s.voted += simulate_group(group, lights, Walk::PostponedVote);
       s.folded += simulate_group(group, lights, Walk::FoldedLeaves);
+      s.two_levels += simulate_group(group, lights, Walk::TwoLevels);
       // The light loop's walks alone (a lane without a shadow ray, an idle one included, has an
       // empty walk), and each shadow walk for the packed estimate below.
       for (size_t l = 0; l < lights; ++l) {
@@ -942,6 +951,9 @@ int run(int argc, char** argv) {
     std::printf("    leaf steps in their parents: node iter. %12llu (x%.3f), lanes' node iter. x%.3f\n",
                 (unsigned long long)s.folded.node, double(s.folded.node) / double(s.tiled.node),
                 double(s.folded.lane_node) / double(std::max<uint64_t>(s.tiled.lane_node, 1)));
+    std::printf("    two levels a node fetch: node iter. %12llu (x%.3f), lanes' node iter. x%.3f\n",
+                (unsigned long long)s.two_levels.node, double(s.two_levels.node) / double(s.tiled.node),
+                double(s.two_levels.lane_node) / double(std::max<uint64_t>(s.tiled.lane_node, 1)));
     if (g > 0) {
       // Weighted 1 to 2 as above: a node iteration against a leaf iteration.
       const RopeEstimate r = estimate_ropes(tree, rays, closest);
