@@ -983,6 +983,12 @@ TEST(KdTree, TraceLeavesTheWalkUnchanged) {
       ASSERT_EQ(occluded(tree, ray, stack, shadow_traced, -1, RayTest{}, &shadow_trace), blocked);
       ASSERT_TRUE(same_stats(shadow_plain, shadow_traced));
       ASSERT_EQ(shadow_trace.ended_at_hit, blocked);
+      for (const TraversalTrace::Segment& seg : shadow_trace.segments) {
+        ASSERT_LE(seg.two_level_iterations, seg.node_iterations);
+        ASSERT_GE(2 * seg.two_level_iterations, seg.node_iterations);
+        node_iterations += seg.node_iterations;
+        two_level_iterations += seg.two_level_iterations;
+      }
     }
   }
   EXPECT_GT(4 * ended_at_hit, walks);  // a third of these walks end at a hit in a leaf

@@ -345,7 +345,9 @@ class TraceRecorder {
     descended_ = false;
   }
   // The interior node just walked chose a child to visit next (no close, pop or restart).
-  void descend() { descended_ = true; }
+  void descend() {
+    if (trace_) descended_ = true;
+  }
   void leaf(uint32_t triangle_tests, float tmax) {
     if (!trace_) return;
     trace_->segments.push_back({node_iterations_, triangle_tests, tmax, two_level_});

@@ -226,7 +226,8 @@ LoopCounts simulate_postponed(const std::vector<const TraversalTrace*>& lanes, b
 }
 
 // What simulate_group() simulates: the pass as it is, postponed leaves without or with a vote
-// (simulate_postponed()), or leaf steps folded into their parents (node_iterations()).
+// (simulate_postponed()), leaf steps folded into their parents, or two levels a node fetch
+// (node_iterations()).
 enum class Walk { AsIs, Postponed, PostponedVote, FoldedLeaves, TwoLevels };
 
 // A group's traversal pass: the closest-hit walk, then the light loop.
@@ -526,9 +527,10 @@ int32_t locate(const FlatKdTree& tree, int32_t node, const glm::vec3& p, const g
 // >= 0: that leaf, found elsewhere; -1: walked down from the root). The trace as TraversalTrace's
 // segments: node-loop iterations (nodes fetched on the way down from a rope, plus exit_cost per
 // leaf left: its box and ropes read and the exit face chosen) up to a leaf with primitives, then
-// its triangle tests. A leaf's triangles are tested over the whole ray, the hit kept as the pass
-// keeps it, and a hit at or before the leaf's exit ends the walk. Stops after kMaxRopeSteps
-// leaves (a guard for the tool; the walk moves forward by a leaf each time).
+// its triangle tests (the segments' two_level_iterations stay 0: only the pass's own walks are
+// counted for two levels a fetch). A leaf's triangles are tested over the whole ray, the hit kept
+// as the pass keeps it, and a hit at or before the leaf's exit ends the walk. Stops after
+// kMaxRopeSteps leaves (a guard for the tool; the walk moves forward by a leaf each time).
 constexpr uint32_t kMaxRopeSteps = 1u << 20;
 
 Hit rope_walk(const FlatKdTree& tree, const Ropes& ropes, const Ray& ray, int32_t start_leaf, uint32_t exit_cost,
