@@ -942,6 +942,16 @@ TEST(KdTree, TraceLeavesTheWalkUnchanged) {
   };
   size_t walks = 0, ended_at_hit = 0, walked_on = 0, walked_far = 0;
   uint64_t node_iterations = 0, two_level_iterations = 0;
+  // Two levels a fetch (an estimate for simd_stats): a segment's descents pair up, so it takes at
+  // least half its iterations and never more than all of them.
+  auto count_two_levels = [&](const TraversalTrace& t) {
+    for (const TraversalTrace::Segment& seg : t.segments) {
+      ASSERT_LE(seg.two_level_iterations, seg.node_iterations);
+      ASSERT_GE(2 * seg.two_level_iterations, seg.node_iterations);
+      node_iterations += seg.node_iterations;
+      two_level_iterations += seg.two_level_iterations;
+    }
+  };
   for (int stack : {-1, 0, 4}) {
     for (const Ray& ray : rays) {
       TraversalStats plain;
@@ -964,14 +974,7 @@ TEST(KdTree, TraceLeavesTheWalkUnchanged) {
         ASSERT_TRUE(!trace.ended_at_hit || a.valid());
         ASSERT_EQ(trace.ended_at_hit, !trace.segments.empty() && trace.segments.back().triangle_tests > 0);
         ++walks;
-        // Two levels a fetch (an estimate for simd_stats): a segment's descents pair up, so it
-        // takes at least half its iterations and never more than all of them.
-        for (const TraversalTrace::Segment& seg : trace.segments) {
-          ASSERT_LE(seg.two_level_iterations, seg.node_iterations);
-          ASSERT_GE(2 * seg.two_level_iterations, seg.node_iterations);
-          node_iterations += seg.node_iterations;
-          two_level_iterations += seg.two_level_iterations;
-        }
+        count_two_levels(trace);
         ended_at_hit += trace.ended_at_hit;
         walked_on += trace.past_hit_iterations > 0;
         walked_far += trace.past_hit_iterations > 1;
@@ -983,12 +986,7 @@ TEST(KdTree, TraceLeavesTheWalkUnchanged) {
       ASSERT_EQ(occluded(tree, ray, stack, shadow_traced, -1, RayTest{}, &shadow_trace), blocked);
       ASSERT_TRUE(same_stats(shadow_plain, shadow_traced));
       ASSERT_EQ(shadow_trace.ended_at_hit, blocked);
-      for (const TraversalTrace::Segment& seg : shadow_trace.segments) {
-        ASSERT_LE(seg.two_level_iterations, seg.node_iterations);
-        ASSERT_GE(2 * seg.two_level_iterations, seg.node_iterations);
-        node_iterations += seg.node_iterations;
-        two_level_iterations += seg.two_level_iterations;
-      }
+      count_two_levels(shadow_trace);
     }
   }
   EXPECT_GT(4 * ended_at_hit, walks);  // a third of these walks end at a hit in a leaf

@@ -460,8 +460,9 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
   };
   for (;;) {
     const glm::vec4 n = nodes[node];
-    recorder.node(!node_texel::is_leaf(n));
-    if (!node_texel::is_leaf(n)) {
+    const bool interior = !node_texel::is_leaf(n);
+    recorder.node(interior);
+    if (interior) {
       if (!probing && stats.steps >= cap) {
         stats.capped = 1;
         return Hit{};

@@ -86,21 +86,25 @@ struct LoopCounts {
   }
 };
 
-// The node-loop iterations of a segment. fold_leaf_steps: as if a parent's texel said where a
-// child leaf's entries are, so that a segment that walked down to its leaf (2 iterations or more)
-// ends at the parent's step, without the leaf's own; a leaf taken from the stack or reached by a
-// restart keeps that iteration (its pop or restart needs it).
-// two_levels: as if a node's texel held its children's splits too
-// (TraversalTrace::Segment::two_level_iterations).
-uint32_t node_iterations(const TraversalTrace::Segment& seg, bool fold_leaf_steps, bool two_levels = false) {
-  if (two_levels) return seg.two_level_iterations;
-  const bool folds = fold_leaf_steps && seg.triangle_tests > 0 && seg.node_iterations >= 2;
+// What simulate_group() simulates: the pass as it is, postponed leaves without or with a vote
+// (simulate_postponed()), leaf steps folded into their parents, or two levels a node fetch
+// (node_iterations()).
+enum class Walk { AsIs, Postponed, PostponedVote, FoldedLeaves, TwoLevels };
+
+// The node-loop iterations of a segment. FoldedLeaves: as if a parent's texel said where a child
+// leaf's entries are, so that a segment that walked down to its leaf (2 iterations or more) ends
+// at the parent's step, without the leaf's own; a leaf taken from the stack or reached by a restart
+// keeps that iteration (its pop or restart needs it). TwoLevels: as if a node's texel held its
+// children's splits too (TraversalTrace::Segment::two_level_iterations).
+uint32_t node_iterations(const TraversalTrace::Segment& seg, Walk walk) {
+  if (walk == Walk::TwoLevels) return seg.two_level_iterations;
+  const bool folds = walk == Walk::FoldedLeaves && seg.triangle_tests > 0 && seg.node_iterations >= 2;
   return seg.node_iterations - (folds ? 1 : 0);
 }
 
-// One traverse() call run by a group in lock step (see TraversalTrace for the segments).
-LoopCounts simulate_walk(const std::vector<const TraversalTrace*>& lanes, bool fold_leaf_steps = false,
-                         bool two_levels = false) {
+// One traverse() call run by a group in lock step (see TraversalTrace for the segments); walk: AsIs,
+// FoldedLeaves or TwoLevels (the postponed walks are simulate_postponed()'s).
+LoopCounts simulate_walk(const std::vector<const TraversalTrace*>& lanes, Walk walk = Walk::AsIs) {
   LoopCounts c;
   size_t outer = 1;  // a loop runs at least once, even with every lane masked off
   for (const TraversalTrace* t : lanes) outer = std::max(outer, t->segments.size());
@@ -108,7 +112,7 @@ LoopCounts simulate_walk(const std::vector<const TraversalTrace*>& lanes, bool f
     uint32_t node = 1, leaf = 1;
     for (const TraversalTrace* t : lanes) {
       if (k >= t->segments.size()) continue;
-      const uint32_t steps = node_iterations(t->segments[k], fold_leaf_steps, two_levels);
+      const uint32_t steps = node_iterations(t->segments[k], walk);
       node = std::max(node, steps);
       leaf = std::max(leaf, t->segments[k].triangle_tests);
       c.lane_node += steps;
@@ -225,11 +229,6 @@ LoopCounts simulate_postponed(const std::vector<const TraversalTrace*>& lanes, b
   return c;
 }
 
-// What simulate_group() simulates: the pass as it is, postponed leaves without or with a vote
-// (simulate_postponed()), leaf steps folded into their parents, or two levels a node fetch
-// (node_iterations()).
-enum class Walk { AsIs, Postponed, PostponedVote, FoldedLeaves, TwoLevels };
-
 // A group's traversal pass: the closest-hit walk, then the light loop.
 LoopCounts simulate_group(const std::vector<const RayWalks*>& lanes, size_t lights, Walk walk = Walk::AsIs) {
   LoopCounts c;
@@ -238,7 +237,7 @@ LoopCounts simulate_group(const std::vector<const RayWalks*>& lanes, size_t ligh
     for (const RayWalks* r : lanes) walks.push_back(&r->walks[w]);
     const bool postponed = walk == Walk::Postponed || walk == Walk::PostponedVote;
     c += postponed ? simulate_postponed(walks, walk == Walk::PostponedVote)
-                   : simulate_walk(walks, walk == Walk::FoldedLeaves, walk == Walk::TwoLevels);
+                   : simulate_walk(walks, walk);
   }
   return c;
 }
