@@ -592,37 +592,62 @@ TEST_F(Stability, NonFiniteVerticesAreAClearError) {
   }
 }
 
-// validate_scene runs on every posed frame and passes unit normals without computing their length
-// (|n|^2 within 1e-5 of 1): each kind of normal must still get what the full check gives it.
+// validate_posed (GltfRig::evaluate's check of every posed frame) passes unit normals in one pass
+// without branches, and validate_scene without computing their length (|n|^2 within 1e-5 of 1):
+// each kind of normal must still get what the full check gives it, from both.
 TEST(ValidateScene, NormalsOfEveryKindAsTheFullCheckTreatsThem) {
-  Scene s = test::base_scene("normals");
-  test::add_triangle(s, {0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 0);  // geometric normal +z
-  const glm::vec3 unit = glm::normalize(glm::vec3(0.3f, -0.4f, 0.8f));
-  const glm::vec3 near_unit = glm::vec3(0.0f, 0.0f, 1.0f + 4e-6f);  // within 1e-5: kept as it is
-  const glm::vec3 long_normal(0.0f, 2.0f, 0.0f);                     // normalised
-  // Just outside 1e-5 (|n|^2 = 1 + 4e-5, outside the fast path's window too): normalised.
-  s.mesh.normals[0] = unit;
-  s.mesh.normals[1] = near_unit;
-  s.mesh.normals[2] = long_normal;
-  validate_scene(s);
-  EXPECT_EQ(s.mesh.normals[0], unit);
-  EXPECT_EQ(s.mesh.normals[1], near_unit);
-  EXPECT_EQ(s.mesh.normals[2], glm::vec3(0.0f, 1.0f, 0.0f));
-  s.mesh.normals[0] = glm::vec3(0.0f, 0.0f, 1.0f + 2e-5f);
-  validate_scene(s);
-  EXPECT_EQ(s.mesh.normals[0], glm::vec3(0.0f, 0.0f, 1.0f));
-  s.mesh.normals[1] = glm::vec3(0.0f);  // no direction: the triangle's geometric normal
-  validate_scene(s);
-  EXPECT_EQ(s.mesh.normals[1], glm::vec3(0.0f, 0.0f, 1.0f));
-  for (float bad : {NAN, INFINITY}) {
-    Scene b = s;
-    b.mesh.normals[2].y = bad;
-    test::expect_bad_input([&] { validate_scene(b); }, {"normals", "triangle 0", "vertex 2", "non-finite normal"});
+  for (auto validate : {&validate_scene, &validate_posed}) {
+    SCOPED_TRACE(validate == &validate_scene ? "validate_scene" : "validate_posed");
+    Scene s = test::base_scene("normals");
+    test::add_triangle(s, {0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 0);  // geometric normal +z
+    const glm::vec3 unit = glm::normalize(glm::vec3(0.3f, -0.4f, 0.8f));
+    const glm::vec3 near_unit = glm::vec3(0.0f, 0.0f, 1.0f + 4e-6f);  // within 1e-5: kept as it is
+    const glm::vec3 long_normal(0.0f, 2.0f, 0.0f);                     // normalised
+    // Just outside 1e-5 (|n|^2 = 1 + 4e-5, outside the fast path's window too): normalised.
+    s.mesh.normals[0] = unit;
+    s.mesh.normals[1] = near_unit;
+    s.mesh.normals[2] = long_normal;
+    validate(s);
+    EXPECT_EQ(s.mesh.normals[0], unit);
+    EXPECT_EQ(s.mesh.normals[1], near_unit);
+    EXPECT_EQ(s.mesh.normals[2], glm::vec3(0.0f, 1.0f, 0.0f));
+    s.mesh.normals[0] = glm::vec3(0.0f, 0.0f, 1.0f + 2e-5f);
+    validate(s);
+    EXPECT_EQ(s.mesh.normals[0], glm::vec3(0.0f, 0.0f, 1.0f));
+    s.mesh.normals[1] = glm::vec3(0.0f);  // no direction: the triangle's geometric normal
+    validate(s);
+    EXPECT_EQ(s.mesh.normals[1], glm::vec3(0.0f, 0.0f, 1.0f));
+    for (float bad : {NAN, INFINITY}) {
+      Scene b = s;
+      b.mesh.normals[2].y = bad;
+      test::expect_bad_input([&] { validate(b); }, {"normals", "triangle 0", "vertex 2", "non-finite normal"});
+      b = s;
+      b.mesh.positions[1].x = -bad;
+      test::expect_bad_input([&] { validate(b); }, {"normals", "triangle 0", "vertex 1", "non-finite position"});
+    }
+    // Degenerate triangles counted alike, by either pass of validate_posed: with unit normals
+    // (its pass without branches) and with one to fix (the loop).
+    test::add_triangle(s, {0, 0, 0}, {1, 1, 1}, {2, 2, 2}, 0);
+    s.mesh.normals[3] = s.mesh.normals[4] = s.mesh.normals[5] = unit;
+    s.degenerate_triangles = 0;
+    validate(s);
+    EXPECT_EQ(s.degenerate_triangles, 1u);
+    s.mesh.normals[4] = long_normal;
+    s.degenerate_triangles = 0;
+    validate(s);
+    EXPECT_EQ(s.degenerate_triangles, 1u);
+    EXPECT_EQ(s.mesh.normals[4], glm::vec3(0.0f, 1.0f, 0.0f));
+    // A unit normal does not skip validate_scene's check of the texture coordinates; posing leaves
+    // them as the loader's validate_scene passed them, and validate_posed does not read them.
+    Scene t = s;
+    t.mesh.texcoords.assign(6, glm::vec2(0.5f));
+    t.mesh.texcoords[0].x = NAN;
+    if (validate == &validate_scene) {
+      test::expect_bad_input([&] { validate(t); }, {"normals", "triangle 0", "vertex 0", "texture coordinates"});
+    } else {
+      EXPECT_NO_THROW(validate(t));
+    }
   }
-  Scene t = s;  // a unit normal does not skip the texture coordinates' check
-  t.mesh.texcoords.assign(3, glm::vec2(0.5f));
-  t.mesh.texcoords[0].x = NAN;
-  test::expect_bad_input([&] { validate_scene(t); }, {"normals", "triangle 0", "vertex 0", "texture coordinates"});
 }
 
 }  // namespace

@@ -852,6 +852,7 @@ std::shared_ptr<GltfRig> GltfReader::read(const LoadOptions& options, bool anima
     }
   }
   rig_->evaluate(0.0, scene_);
+  validate_scene(scene_);  // the texture coordinates and material ids too, which posing leaves as they are
   scene = std::move(scene_);
   return std::move(rig_);
 }

@@ -238,7 +238,9 @@ void GltfRig::evaluate(double t, Scene& out) const {
     c.znear = camera->znear;
     out.camera = c;
   }
-  validate_scene(out);
+  // The loader validates the first pose in full (gltf_loader.cpp); a later one changes only what
+  // validate_posed() checks.
+  validate_posed(out);
 }
 
 }  // namespace mobirt::gltf

@@ -16,6 +16,106 @@ bool finite3(const glm::vec3& v) {
   return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
 }
 
+// The mesh's arrays in step: 3 corners a triangle (texture coordinates that or none). A loader's
+// or the posing's bug otherwise.
+void check_arrays(const Scene& scene) {
+  const TriangleMesh& mesh = scene.mesh;
+  const size_t tris = mesh.triangle_count();
+  if (mesh.positions.size() != 3 * tris || mesh.normals.size() != 3 * tris ||
+      (!mesh.texcoords.empty() && mesh.texcoords.size() != 3 * tris)) {
+    throw Error(ErrorKind::Internal,
+                scene.source + ": inconsistent mesh arrays (" + std::to_string(tris) +
+                    " triangles, " + std::to_string(mesh.positions.size()) + " positions, " +
+                    std::to_string(mesh.normals.size()) + " normals, " +
+                    std::to_string(mesh.texcoords.size()) + " texture coordinates)");
+  }
+}
+
+// Every corner's position finite, its normal unit length (renormalised, or the geometric normal
+// for a zero one) and, with `texcoords`, its texture coordinates finite; the degenerate triangles
+// counted. What posing changes is all of it but the texture coordinates.
+void check_corners(Scene& scene, bool texcoords) {
+  TriangleMesh& mesh = scene.mesh;
+  const size_t tris = mesh.triangle_count();
+  const bool uvs = texcoords && !mesh.texcoords.empty();
+  // Without texture coordinates to check (a posed frame's, or a mesh without them) one pass
+  // without branches comes first: every position finite and every normal of unit length, the
+  // degenerate triangles counted as below. Where it finds nothing to fix or report, that is the
+  // whole check (posing makes unit normals); otherwise the loop below finds the corner, fixes it
+  // or names it.
+  if (!uvs) {
+    size_t degenerate = 0;
+    bool clean = true;
+    const glm::vec3* p = mesh.positions.data();
+    const glm::vec3* n = mesh.normals.data();
+    for (size_t t = 0; t < tris; ++t, p += 3, n += 3) {
+      const glm::vec3 cross = glm::cross(p[1] - p[0], p[2] - p[0]);
+      degenerate += !(glm::dot(cross, cross) > 0.0f);
+      // x - x is 0 for a finite x and NaN for a NaN or an infinity (a max would drop a NaN).
+      const glm::vec3 zero = (p[0] - p[0]) + (p[1] - p[1]) + (p[2] - p[2]);
+      clean &= (zero.x == 0.0f) & (zero.y == 0.0f) & (zero.z == 0.0f);
+      for (int k = 0; k < 3; ++k) {
+        const float length2 = glm::dot(n[k], n[k]);
+        clean &= (length2 >= 1.0f - 1e-5f) & (length2 <= 1.0f + 1e-5f);
+      }
+    }
+    if (clean) {
+      scene.degenerate_triangles = degenerate;
+      return;
+    }
+  }
+  const auto check_texcoord = [&](size_t t, size_t k) {
+    const glm::vec2& uv = mesh.texcoords[3 * t + k];
+    if (!std::isfinite(uv.x) || !std::isfinite(uv.y)) {
+      throw input_error(scene.source, "triangle " + std::to_string(t) + ": vertex " + std::to_string(k) +
+                                          " has non-finite texture coordinates (NaN or infinity)");
+    }
+  };
+  size_t degenerate = 0;
+  for (size_t t = 0; t < tris; ++t) {
+    for (size_t k = 0; k < 3; ++k) {
+      const size_t i = 3 * t + k;
+      if (!finite3(mesh.positions[i])) {
+        throw input_error(scene.source, "triangle " + std::to_string(t) + ": vertex " +
+                                            std::to_string(k) +
+                                            " has a non-finite position (NaN or infinity)");
+      }
+    }
+    const glm::vec3& a = mesh.positions[3 * t];
+    const glm::vec3& b = mesh.positions[3 * t + 1];
+    const glm::vec3& c = mesh.positions[3 * t + 2];
+    const glm::vec3 cross = glm::cross(b - a, c - a);
+    const bool has_area = glm::dot(cross, cross) > 0.0f;
+    if (!has_area) ++degenerate;
+    for (size_t k = 0; k < 3; ++k) {
+      const size_t i = 3 * t + k;
+      glm::vec3& n = mesh.normals[i];
+      // A unit normal (what loaders and posing make) needs neither check below: |n|^2 within
+      // 1e-5 of 1 puts |n| within 5.1e-6 of 1 and every component finite (a NaN or an infinity
+      // fails the comparison). This runs on every posed frame, where the square root of every
+      // corner's length was most of validation's cost (perf: 1.4 % of a toaster frame's CPU).
+      const float length2 = glm::dot(n, n);  // what glm::length takes the root of
+      if (length2 >= 1.0f - 1e-5f && length2 <= 1.0f + 1e-5f) {
+        if (uvs) check_texcoord(t, k);
+        continue;
+      }
+      if (!finite3(n)) {
+        throw input_error(scene.source, "triangle " + std::to_string(t) + ": vertex " +
+                                            std::to_string(k) +
+                                            " has a non-finite normal (NaN or infinity)");
+      }
+      const float len = glm::length(n);
+      if (!(len > 0.0f) || !std::isfinite(len)) {
+        n = geometric_normal(a, b, c);
+      } else if (std::abs(len - 1.0f) > 1e-5f) {
+        n /= len;
+      }
+      if (uvs) check_texcoord(t, k);
+    }
+  }
+  scene.degenerate_triangles = degenerate;
+}
+
 }  // namespace
 
 std::string library_message(const std::string& text) {
@@ -57,14 +157,7 @@ glm::vec3 geometric_normal(const glm::vec3& a, const glm::vec3& b, const glm::ve
 void validate_scene(Scene& scene) {
   TriangleMesh& mesh = scene.mesh;
   const size_t tris = mesh.triangle_count();
-  if (mesh.positions.size() != 3 * tris || mesh.normals.size() != 3 * tris ||
-      (!mesh.texcoords.empty() && mesh.texcoords.size() != 3 * tris)) {
-    throw Error(ErrorKind::Internal,
-                scene.source + ": inconsistent mesh arrays (" + std::to_string(tris) +
-                    " triangles, " + std::to_string(mesh.positions.size()) + " positions, " +
-                    std::to_string(mesh.normals.size()) + " normals, " +
-                    std::to_string(mesh.texcoords.size()) + " texture coordinates)");
-  }
+  check_arrays(scene);
   if (tris == 0 && scene.shapes.empty()) {
     throw input_error(scene.source,
                       "no triangles: the file has no triangle mesh in its scene (points and "
@@ -102,56 +195,12 @@ void validate_scene(Scene& scene) {
     }
   }
 
-  const auto check_texcoord = [&](size_t t, size_t k) {
-    const glm::vec2& uv = mesh.texcoords[3 * t + k];
-    if (!std::isfinite(uv.x) || !std::isfinite(uv.y)) {
-      throw input_error(scene.source, "triangle " + std::to_string(t) + ": vertex " + std::to_string(k) +
-                                          " has non-finite texture coordinates (NaN or infinity)");
-    }
-  };
-  size_t degenerate = 0;
-  for (size_t t = 0; t < tris; ++t) {
-    for (size_t k = 0; k < 3; ++k) {
-      const size_t i = 3 * t + k;
-      if (!finite3(mesh.positions[i])) {
-        throw input_error(scene.source, "triangle " + std::to_string(t) + ": vertex " +
-                                            std::to_string(k) +
-                                            " has a non-finite position (NaN or infinity)");
-      }
-    }
-    const glm::vec3& a = mesh.positions[3 * t];
-    const glm::vec3& b = mesh.positions[3 * t + 1];
-    const glm::vec3& c = mesh.positions[3 * t + 2];
-    const glm::vec3 cross = glm::cross(b - a, c - a);
-    const bool has_area = glm::dot(cross, cross) > 0.0f;
-    if (!has_area) ++degenerate;
-    for (size_t k = 0; k < 3; ++k) {
-      const size_t i = 3 * t + k;
-      glm::vec3& n = mesh.normals[i];
-      // A unit normal (what loaders and posing make) needs neither check below: |n|^2 within
-      // 1e-5 of 1 puts |n| within 5.1e-6 of 1 and every component finite (a NaN or an infinity
-      // fails the comparison). This runs on every posed frame, where the square root of every
-      // corner's length was most of validation's cost (perf: 1.4 % of a toaster frame's CPU).
-      const float length2 = glm::dot(n, n);  // what glm::length takes the root of
-      if (length2 >= 1.0f - 1e-5f && length2 <= 1.0f + 1e-5f) {
-        if (!mesh.texcoords.empty()) check_texcoord(t, k);
-        continue;
-      }
-      if (!finite3(n)) {
-        throw input_error(scene.source, "triangle " + std::to_string(t) + ": vertex " +
-                                            std::to_string(k) +
-                                            " has a non-finite normal (NaN or infinity)");
-      }
-      const float len = glm::length(n);
-      if (!(len > 0.0f) || !std::isfinite(len)) {
-        n = geometric_normal(a, b, c);
-      } else if (std::abs(len - 1.0f) > 1e-5f) {
-        n /= len;
-      }
-      if (!mesh.texcoords.empty()) check_texcoord(t, k);
-    }
-  }
-  scene.degenerate_triangles = degenerate;
+  check_corners(scene, true);
+}
+
+void validate_posed(Scene& scene) {
+  check_arrays(scene);
+  check_corners(scene, false);
 }
 
 }  // namespace mobirt

@@ -18,6 +18,12 @@ namespace mobirt {
 // Degenerate (zero-area) triangles are kept and counted in scene.degenerate_triangles.
 void validate_scene(Scene& scene);
 
+// validate_scene()'s checks of what posing changes (the arrays' sizes, positions, normals, the
+// degenerate count), for a scene posed from a validated one: its material ids, materials, shapes and
+// texture coordinates are the validated scene's, which posing leaves as they are. Run on every
+// animated frame.
+void validate_posed(Scene& scene);
+
 // Prints "mobirt: warning: FILE: MESSAGE" on stderr.
 void scene_warning(const std::string& file, const std::string& message);
 
