@@ -12,6 +12,7 @@
 
 #include "core/error.h"
 #include "gltf_builder.h"
+#include "scene/animation.h"
 #include "scene/loader.h"
 #include "test_support.h"
 
@@ -540,6 +541,20 @@ TEST(GltfErrors, NonFinitePositionNamesTriangle) {
   g.scene({g.node({{"mesh", g.mesh({{"attributes", {{"POSITION", pos}}}})}})});
   const std::string path = g.write_gltf(test::temp_dir() / "nan.gltf");
   expect_bad_input([&] { load_scene(path); }, {"nan.gltf", "triangle 1", "non-finite position"});
+}
+
+// Posing re-validates only what it changes (validate_posed): the loader's validate_scene after the
+// first pose is what refuses a non-finite texture coordinate, for a still scene and an animated one.
+TEST(GltfErrors, NonFiniteTexcoordNamesTriangle) {
+  Gltf g;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const int pos = g.vec3s({{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 0}, {1, 0, 0}, {0, 1, 0}});
+  const int uv = g.vec2s({{0, 0}, {1, 0}, {0, 1}, {0, 0}, {1, nan}, {0, 1}});
+  g.scene({g.node({{"mesh", g.mesh({{"attributes", {{"POSITION", pos}, {"TEXCOORD_0", uv}}}})}})});
+  const std::string path = g.write_gltf(test::temp_dir() / "nan_uv.gltf");
+  const std::vector<std::string> parts = {"nan_uv.gltf", "triangle 1", "vertex 1", "non-finite texture coordinates"};
+  expect_bad_input([&] { load_scene(path); }, parts);
+  expect_bad_input([&] { load_animated_scene(path); }, parts);
 }
 
 TEST(GltfErrors, NoTriangles) {

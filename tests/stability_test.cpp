@@ -621,9 +621,15 @@ TEST(ValidateScene, NormalsOfEveryKindAsTheFullCheckTreatsThem) {
       Scene b = s;
       b.mesh.normals[2].y = bad;
       test::expect_bad_input([&] { validate(b); }, {"normals", "triangle 0", "vertex 2", "non-finite normal"});
-      b = s;
-      b.mesh.positions[1].x = -bad;
-      test::expect_bad_input([&] { validate(b); }, {"normals", "triangle 0", "vertex 1", "non-finite position"});
+      // Every corner and component, so that the pass without branches must read them all.
+      for (int corner = 0; corner < 3; ++corner) {
+        for (int c = 0; c < 3; ++c) {
+          b = s;
+          b.mesh.positions[size_t(corner)][c] = -bad;
+          test::expect_bad_input([&] { validate(b); }, {"normals", "triangle 0", "vertex " + std::to_string(corner),
+                                                        "non-finite position"});
+        }
+      }
     }
     // Degenerate triangles counted alike, by either pass of validate_posed: with unit normals
     // (its pass without branches) and with one to fix (the loop).

@@ -19,9 +19,9 @@ namespace mobirt {
 void validate_scene(Scene& scene);
 
 // validate_scene()'s checks of what posing changes (the arrays' sizes, positions, normals, the
-// degenerate count), for a scene posed from a validated one: its material ids, materials, shapes and
-// texture coordinates are the validated scene's, which posing leaves as they are. Run on every
-// animated frame.
+// degenerate count): its material ids, materials, shapes and texture coordinates are the loaded
+// scene's, which posing leaves as they are. Run by GltfRig::evaluate on every posed frame; the
+// glTF loader follows the first pose with validate_scene.
 void validate_posed(Scene& scene);
 
 // Prints "mobirt: warning: FILE: MESSAGE" on stderr.
