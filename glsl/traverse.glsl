@@ -260,8 +260,10 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
   // Vulkan keeps no count of the entries: an entry's node is never the root (a far child follows
   // its parent), so the stack is empty exactly when s0.x is 0, the zeros a pop shifts in. One
   // value fewer live across the node fetch's call: -2.6 % of the passes' JIT instructions. The ES
-  // path, whose fetches are inlined, counts them (STACK_COUNTED): without the count it ran 2.4 %
-  // more (toaster, 200x120, depth 2, tools/profile/jit_instructions.sh).
+  // path counts them (STACK_COUNTED): measured there, without the count it ran 2.4 % more
+  // (toaster, 200x120, depth 2, tools/profile/jit_instructions.sh; +3.7 % once the push was a
+  // branch). Its fetches are calls too on Mesa 25.0.7 (tools/profile/jit_dump.sh), so the reason
+  // lies elsewhere in what llvmpipe makes of the ES loop.
 #if STACK_COUNTED
   int size = 0;
 #endif
@@ -278,8 +280,7 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
   // The leaf just walked must be closed (done, pop or restart) before the next node. Vulkan
   // (LEAF_CLOSE_IN_NODE) says so with a node of -1, so that no flag of its own is live across the
   // node fetch's call: -0.9 % of the fish's JIT instructions (2 bounces), -0.15 % of the
-  // toaster's. ES, whose fetches are inlined, keeps the flag: there the node's selects cost more
-  // (+0.5 %).
+  // toaster's. ES keeps the flag: measured there, the node's selects cost more (+0.5 %).
   bool leaf_done = false;
 
   // Loops nested the way llvmpipe runs them cheaply (Aila and Laine's while-while). llvmpipe runs
