@@ -16,6 +16,22 @@ bool finite3(const glm::vec3& v) {
   return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
 }
 
+// Whether the triangle (a, b, c) has an area: check_corners' two passes count degenerate triangles
+// with this one test.
+bool has_area(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c) {
+  const glm::vec3 cross = glm::cross(b - a, c - a);
+  return glm::dot(cross, cross) > 0.0f;
+}
+
+// Whether normal n is of unit length as validation takes it: |n|^2 within 1e-5 of 1 puts |n|
+// within 5.1e-6 of 1 and every component finite (a NaN or an infinity fails the comparison), so
+// such a normal needs neither a square root nor a finiteness check. Both passes of check_corners
+// test it.
+bool unit_length(const glm::vec3& n) {
+  const float length2 = glm::dot(n, n);  // what glm::length takes the root of
+  return (length2 >= 1.0f - 1e-5f) & (length2 <= 1.0f + 1e-5f);
+}
+
 // The mesh's arrays in step: 3 corners a triangle (texture coordinates that or none). A loader's
 // or the posing's bug otherwise.
 void check_arrays(const Scene& scene) {
@@ -31,6 +47,23 @@ void check_arrays(const Scene& scene) {
   }
 }
 
+// One pass without branches over a mesh: whether every position is finite and every normal of
+// unit length (unit_length), the degenerate triangles counted into `degenerate` as check_corners'
+// loop counts them.
+bool corners_clean(const TriangleMesh& mesh, size_t& degenerate) {
+  bool clean = true;
+  const glm::vec3* p = mesh.positions.data();
+  const glm::vec3* n = mesh.normals.data();
+  for (size_t t = 0, tris = mesh.triangle_count(); t < tris; ++t, p += 3, n += 3) {
+    degenerate += !has_area(p[0], p[1], p[2]);
+    // x - x is 0 for a finite x and NaN for a NaN or an infinity (a max would drop a NaN).
+    const glm::vec3 zero = (p[0] - p[0]) + (p[1] - p[1]) + (p[2] - p[2]);
+    clean &= (zero.x == 0.0f) & (zero.y == 0.0f) & (zero.z == 0.0f);
+    for (int k = 0; k < 3; ++k) clean &= unit_length(n[k]);
+  }
+  return clean;
+}
+
 // Every corner's position finite, its normal unit length (renormalised, or the geometric normal
 // for a zero one) and, with `texcoords`, its texture coordinates finite; the degenerate triangles
 // counted. What posing changes is all of it but the texture coordinates.
@@ -38,31 +71,12 @@ void check_corners(Scene& scene, bool texcoords) {
   TriangleMesh& mesh = scene.mesh;
   const size_t tris = mesh.triangle_count();
   const bool uvs = texcoords && !mesh.texcoords.empty();
-  // Without texture coordinates to check (a posed frame's, or a mesh without them) one pass
-  // without branches comes first: every position finite and every normal of unit length, the
-  // degenerate triangles counted as below. Where it finds nothing to fix or report, that is the
-  // whole check (posing makes unit normals); otherwise the loop below finds the corner, fixes it
-  // or names it.
-  if (!uvs) {
-    size_t degenerate = 0;
-    bool clean = true;
-    const glm::vec3* p = mesh.positions.data();
-    const glm::vec3* n = mesh.normals.data();
-    for (size_t t = 0; t < tris; ++t, p += 3, n += 3) {
-      const glm::vec3 cross = glm::cross(p[1] - p[0], p[2] - p[0]);
-      degenerate += !(glm::dot(cross, cross) > 0.0f);
-      // x - x is 0 for a finite x and NaN for a NaN or an infinity (a max would drop a NaN).
-      const glm::vec3 zero = (p[0] - p[0]) + (p[1] - p[1]) + (p[2] - p[2]);
-      clean &= (zero.x == 0.0f) & (zero.y == 0.0f) & (zero.z == 0.0f);
-      for (int k = 0; k < 3; ++k) {
-        const float length2 = glm::dot(n[k], n[k]);
-        clean &= (length2 >= 1.0f - 1e-5f) & (length2 <= 1.0f + 1e-5f);
-      }
-    }
-    if (clean) {
-      scene.degenerate_triangles = degenerate;
-      return;
-    }
+  // Without texture coordinates to check (a posed frame's, or a mesh without them) the pass
+  // without branches comes first; where it finds nothing to fix or report, that is the whole check
+  // (posing makes unit normals). Otherwise the loop below finds the corner, fixes it or names it.
+  if (size_t clean_degenerate = 0; !uvs && corners_clean(mesh, clean_degenerate)) {
+    scene.degenerate_triangles = clean_degenerate;
+    return;
   }
   const auto check_texcoord = [&](size_t t, size_t k) {
     const glm::vec2& uv = mesh.texcoords[3 * t + k];
@@ -84,19 +98,15 @@ void check_corners(Scene& scene, bool texcoords) {
     const glm::vec3& a = mesh.positions[3 * t];
     const glm::vec3& b = mesh.positions[3 * t + 1];
     const glm::vec3& c = mesh.positions[3 * t + 2];
-    const glm::vec3 cross = glm::cross(b - a, c - a);
-    const bool has_area = glm::dot(cross, cross) > 0.0f;
-    if (!has_area) ++degenerate;
+    if (!has_area(a, b, c)) ++degenerate;
     for (size_t k = 0; k < 3; ++k) {
       const size_t i = 3 * t + k;
       glm::vec3& n = mesh.normals[i];
-      // A unit normal (what loaders and posing make) needs neither check below: |n|^2 within
-      // 1e-5 of 1 puts |n| within 5.1e-6 of 1 and every component finite (a NaN or an infinity
-      // fails the comparison). The square root of every corner's length was most of validation's
-      // cost when this loop ran on every posed frame (perf: 1.4 % of a toaster frame's CPU); a
-      // posed frame now reaches it only where the pass above found something.
-      const float length2 = glm::dot(n, n);  // what glm::length takes the root of
-      if (length2 >= 1.0f - 1e-5f && length2 <= 1.0f + 1e-5f) {
+      // A unit normal (what loaders and posing make) needs neither check below. The square root
+      // of every corner's length was most of validation's cost when this loop ran on every posed
+      // frame (perf: 1.4 % of a toaster frame's CPU); a posed frame now reaches it only where the
+      // pass above found something.
+      if (unit_length(n)) {
         if (uvs) check_texcoord(t, k);
         continue;
       }
