@@ -133,6 +133,10 @@ layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer Mo
 #else
 #define DATA_TEXEL(tex, index) texelFetch(tex, data_coord(index), 0)
 #endif
+// prelude_es.glsl's fetch with the row scale read before a loop; buffers and texelFetch need none.
+#define DATA_ROWS(s) 0.0
+#define DATA_TEXEL_ROWS(s, rows, index) DATA_TEXEL(s, index)
+
 #ifndef MOBIRT_COMPUTE  // a compute shader reads its ray and writes its result itself
 #if defined(MOBIRT_DATA_TEXEL_BUFFERS) || defined(MOBIRT_DATA_STORAGE_BUFFERS) || defined(MOBIRT_DATA_DEVICE_ADDRESSES)
 // Per-ray data (rays, the shading pass's inputs) in buffers like the scene data, in the pass's

@@ -6,9 +6,10 @@
 // integer bit operations, no `%`; the walk's loops are UNBOUNDED_LOOP, which ES bounds by the cap
 // MAX_STEPS (its loops need constant bounds) and GLSL 450 does not (the cap is checked inside).
 //
-// Needs from the prelude: DATA_TEXEL, PARAM, STACK_DEPTH, MAX_STEPS, LIGHT_COUNT, INTERSECT,
-// PRECISION, OFFSET_MODE, PRECISE, add_float_bits, UNBOUNDED_LOOP, STACK_COUNTED,
-// LEAF_CLOSE_IN_NODE, KEEP_BRANCH, KEEP_BRANCH_PAD and precision.glsl (mp, mp_cross, mp_dot).
+// Needs from the prelude: DATA_TEXEL, DATA_ROWS, DATA_TEXEL_ROWS, PARAM, STACK_DEPTH, MAX_STEPS,
+// LIGHT_COUNT, INTERSECT, PRECISION, OFFSET_MODE, PRECISE, add_float_bits, UNBOUNDED_LOOP,
+// STACK_COUNTED, LEAF_CLOSE_IN_NODE, KEEP_BRANCH, KEEP_BRANCH_PAD and precision.glsl (mp, mp_cross,
+// mp_dot).
 #include "offset.glsl"
 #include "light_buffer.glsl"
 
@@ -243,6 +244,9 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
   vec3 inv_s = vec3(d.x == 0.0 ? -inv_d.x * inv_d.x : inv_d.x, d.y == 0.0 ? -inv_d.y * inv_d.y : inv_d.y,
                     d.z == 0.0 ? -inv_d.z * inv_d.z : inv_d.z);
   if (!(box.x <= box.y)) return vec3(-1.0, ray_tmax, 0.0);
+  // The data textures' row scale (ES; nothing on Vulkan), read once rather than at every fetch.
+  float node_rows = DATA_ROWS(u_nodes);
+  float entry_rows = DATA_ROWS(u_leaf_prims);
   float scene_tmax = box.y;
   float tmin = box.x;
   float tmax = box.y;
@@ -340,7 +344,7 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
           node = 0.0;
         }
       }
-      vec4 n = DATA_TEXEL(u_nodes, node);
+      vec4 n = DATA_TEXEL_ROWS(u_nodes, node_rows, node);
       bool leaf = n.b == MOBIRT_NODE_LEAF;
       if (leaf && n.g > 0.0) {
         leaf_first = n.r;
@@ -423,9 +427,9 @@ vec3 traverse(vec3 o, vec3 d, float ray_tmin, float ray_tmax, bool any_hit) {
     UNBOUNDED_LOOP(k, MAX_STEPS) {
       if (base >= leaf_end) break;
       // The leaf entry: a copy of the primitive's texels, its index in the third one's w.
-      vec4 t0 = DATA_TEXEL(u_leaf_prims, base);
-      vec4 t1 = DATA_TEXEL(u_leaf_prims, base + 1.0);
-      vec4 t2 = DATA_TEXEL(u_leaf_prims, base + 2.0);
+      vec4 t0 = DATA_TEXEL_ROWS(u_leaf_prims, entry_rows, base);
+      vec4 t1 = DATA_TEXEL_ROWS(u_leaf_prims, entry_rows, base + 1.0);
+      vec4 t2 = DATA_TEXEL_ROWS(u_leaf_prims, entry_rows, base + 2.0);
       base = base + float(MOBIRT_TEXELS_PER_TRIANGLE);
       float prim = t2[MOBIRT_LEAF_PRIM_INDEX];
       float t = intersect_primitive(t0, t1, t2, o, d, ray_tmin, ray_tmax);
@@ -488,6 +492,7 @@ float light_buffer_occluded(int l, vec3 origin, vec3 to_light) {
   float end = base + cell.g * float(MOBIRT_TEXELS_PER_TRIANGLE);
   // Past the segment's end (a little beyond, for the rounding of its length) no triangle meets it.
   float reach = length(to_light) * (1.0 + 1e-4);
+  float entry_rows = DATA_ROWS(u_leaf_prims);  // read once (traverse())
   int steps = 0;
   // An entry's first texel holds its near and its part (layout.h): a ray that stops there or skips
   // the triangle reads nothing else. Light buffers hold triangles only (no analytic primitives:
@@ -496,13 +501,13 @@ float light_buffer_occluded(int l, vec3 origin, vec3 to_light) {
     if (base >= end) break;
     if (steps >= MAX_STEPS) return -1.0;
     steps = steps + 1;
-    vec4 t0 = DATA_TEXEL(u_leaf_prims, base);
+    vec4 t0 = DATA_TEXEL_ROWS(u_leaf_prims, entry_rows, base);
     if (t0.x > reach) break;
     float entry = base;
     base = base + float(MOBIRT_TEXELS_PER_TRIANGLE);
     KEEP_BRANCH if (light_buffer_part_contains(t0.y, sx, sy)) {
-      vec4 t1 = DATA_TEXEL(u_leaf_prims, entry + 1.0);
-      vec4 t2 = DATA_TEXEL(u_leaf_prims, entry + 2.0);
+      vec4 t1 = DATA_TEXEL_ROWS(u_leaf_prims, entry_rows, entry + 1.0);
+      vec4 t2 = DATA_TEXEL_ROWS(u_leaf_prims, entry_rows, entry + 2.0);
       vec3 v0 = vec3(t0.zw, t1.x);
       if (intersect_triangle_texels(v0, t1.yzw, t2.xyz, origin, to_light, 0.0, 1.0).x >= 0.0) return 1.0;
     }
