@@ -116,7 +116,7 @@ TEST(Cli, HelpAndInfo) {
 // --help comes from the option table: every command lists the shared render settings it takes,
 // with their values, beside its own options.
 TEST(Cli, HelpListsTheSharedSettings) {
-  const std::vector<std::string> frame_settings = {"--stack N",        "--max-steps N", "--bins N",
+  const std::vector<std::string> frame_settings = {"--stack N",        "--max-steps N", "--cpu-walks N", "--bins N",
                                                    "--leaf-size N",    "--cluster-refs N", "--empty-bonus B",
                                                    "--max-depth N", "--offset MODE", "--epsilon E",
                                                    "--intersect TEST", "--precision P", "--colour 8|16",

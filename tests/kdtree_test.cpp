@@ -20,6 +20,7 @@
 #include "accel/kdtree.h"
 #include "accel/kdtree_clip.h"
 #include "core/camera.h"
+#include "test_scenes.h"
 #include "test_support.h"
 #include "core/error.h"
 #include "layout.h"
@@ -1518,6 +1519,53 @@ TEST(KdTree, ShortStacksDropAndRestartButStayExact) {
   EXPECT_GT(short1.pops, 0u);
   // kd-restart pays for the missing stack with node visits.
   EXPECT_GT(restart.nodes_visited, full.nodes_visited);
+}
+
+// traverse_fast and occluded_fast (the small generations walked on the CPU, RenderSettings::
+// cpu_walks) return the full-stack walk's hit bit for bit under every ray test and precision, on
+// every generated scene and on a tree with analytic shapes.
+TEST(KdTree, FastWalkIsTheFullStackWalkBitForBit) {
+  const auto same = [](const Hit& a, const Hit& b) {
+    return a.prim == b.prim && (!a.valid() || (a.t == b.t && a.u == b.u && a.v == b.v));
+  };
+  std::vector<std::pair<std::string, FlatKdTree>> trees;
+  std::vector<std::vector<Ray>> rays;
+  unsigned seed = 700;
+  for (const NamedScene& scene : all_scenes()) {
+    trees.emplace_back(scene.name, build_kdtree(scene.positions));
+    rays.push_back(make_rays(trees.back().second, scene.positions, 2000 / test::sanitizer_stride(4), seed++));
+  }
+  const Scene shapes = test::shapes_scene();
+  trees.emplace_back("shapes", build_kdtree(shapes.mesh.positions, shapes.shapes));
+  rays.push_back(make_rays(trees.back().second, shapes.mesh.positions, 500, seed++));
+  int compared = 0, hits = 0, blocked = 0;
+  for (size_t k = 0; k < trees.size(); ++k) {
+    SCOPED_TRACE(trees[k].first);
+    const FlatKdTree& tree = trees[k].second;
+    for (const IntersectTest it : {IntersectTest::MollerTrumbore, IntersectTest::Watertight}) {
+      for (const Precision pr : {Precision::High, Precision::Medium}) {
+        const RayTest test{it, pr};
+        int failures = 0;
+        for (const Ray& ray : rays[k]) {
+          const Hit full = traverse(tree, ray, -1, test);
+          const Hit fast = traverse_fast(tree, ray, test);
+          // A shadow segment ending before, at or past the hit.
+          Ray segment = ray;
+          if (full.valid()) segment.tmax = ray.tmin + (full.t - ray.tmin) * (compared % 3 == 0 ? 0.5f : 1.5f);
+          const bool occ = occluded(tree, segment, -1, test);
+          ++compared;
+          hits += full.valid() ? 1 : 0;
+          blocked += occ ? 1 : 0;
+          if ((!same(full, fast) || occluded_fast(tree, segment, test) != occ) && ++failures <= 3) {
+            ADD_FAILURE() << describe(ray) << ": full stack prim " << full.prim << " t " << full.t << ", fast prim "
+                          << fast.prim << " t " << fast.t;
+          }
+        }
+      }
+    }
+  }
+  EXPECT_GT(hits, compared / 4);
+  EXPECT_GT(blocked, compared / 8);
 }
 
 TEST(KdTree, TiesGoToTheLowerPrimitiveIndex) {

@@ -345,6 +345,11 @@ bool occluded(const FlatKdTree& tree, const Ray& ray, int stack_depth = -1, cons
 bool occluded(const FlatKdTree& tree, const Ray& ray, int stack_depth, TraversalStats& stats,
               int64_t max_steps = -1, const RayTest& test = {}, TraversalTrace* trace = nullptr);
 
+// traverse() and occluded() with a full stack, the same hits, at the CPU's pace: no counters, no
+// cap, no trace and no index checks (trees made by build_kdtree only).
+Hit traverse_fast(const FlatKdTree& tree, const Ray& ray, const RayTest& test = {});
+bool occluded_fast(const FlatKdTree& tree, const Ray& ray, const RayTest& test = {});
+
 // Closest hit by testing every triangle: the oracle for the kd-tree tests.
 Hit brute_force(const FlatKdTree& tree, const Ray& ray, const RayTest& test = {});
 

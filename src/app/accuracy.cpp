@@ -194,6 +194,7 @@ int cmd_accuracy(const std::vector<std::string>& args) {
                    {"min_weight", settings.secondary.min_weight},
                    {"stack", settings.stack_depth},
                    {"max_steps", settings.max_steps},
+                   {"cpu_walks", settings.cpu_walks},
                    {"epsilon", settings.shadow_rays.offset.epsilon},
                    {"offset", offset_name(settings.shadow_rays.offset.mode)},
                    {"intersect", intersect_name(settings.shadow_rays.ray_test.test)},

@@ -349,6 +349,7 @@ nlohmann::json run_cell(std::vector<GpuColumn>& columns, GpuPeers& peers, const 
         // tree, or none where the frame built no kd-tree: the cell's kd_tree_built).
         samples.add("walks", double(ft.sum.walks));
         samples.add("mirrored", double(ft.sum.mirrored));
+        samples.add("cpu_walked", double(ft.sum.cpu_walked));
         samples.add("tree_rays", tree_rays);
       }
       // What the frame had, not what was planned: a light whose buffer does not pay, or a capped
@@ -742,7 +743,8 @@ void print_tables(const nlohmann::json& result) {
   }
 
   std::printf("\nRatios mobirt / Embree, the same frames: fps; traversal alone (Mrays/s on the same rays: GPU\n"
-              "traversal passes vs rtcIntersect1 + rtcOccluded1); build alone (kd-tree build ms / Embree BVH\n"
+              "traversal passes, and the CPU walks of generations of at most --cpu-walks rays, vs rtcIntersect1 +\n"
+              "rtcOccluded1); build alone (kd-tree build ms / Embree BVH\n"
               "build ms, >1 = slower; the serial twin's build where it ran: the pipelined worker's wall clock\n"
               "spreads over the idle time of its frame); cpu (CPU time per frame, all threads, >1 = more);\n"
               "%s%sSAH cost of the kd-tree built\n",
@@ -972,6 +974,7 @@ int cmd_bench(const std::vector<std::string>& args) {
                         {"warmup", o.warmup},
                         {"stack", o.settings.stack_depth},
                         {"max_steps", o.settings.max_steps},
+                        {"cpu_walks", o.settings.cpu_walks},
                         {"compute_data", compute_data_name(o.compute_data)},
                         {"kd_rebuilt_every_frame", true},
                         {"primary", primary_hits_name(o.settings.primary)},

@@ -87,6 +87,12 @@ const Setting kSettings[] = {
      "loop cap of one traversal in the shader; rays that reach it are traced\n"
      "on the CPU instead, so the cap costs time, never pixels (default 2048)",
      [](CommonOptions& o, const Value& v) { o.settings.max_steps = v.integer(1, 1 << 24); }},
+    {"--cpu-walks", "N", kFrames,
+     "a secondary generation of at most N rays is walked on the CPU (the\n"
+     "same hits and shadow masks) instead of a traversal pass, whose fixed\n"
+     "cost and 8-wide lanes a few incoherent rays do not pay for; 0 = always\n"
+     "a pass (default 8192)",
+     [](CommonOptions& o, const Value& v) { o.settings.cpu_walks = v.integer(0, 1 << 24); }},
     {"--bins", "N", kFrames, "SAH bins per axis of the kd-tree build (default 32)",
      [](CommonOptions& o, const Value& v) { o.settings.kd.bins = v.integer(2, 1024); }},
     {"--build", "MODE", kFrames,

@@ -184,9 +184,10 @@ void print_timings(const FrameTimings& t, bool built_ahead, double period_ms) {
     std::printf("generation   rays   shadow   traversal ms  Mrays/s   shading ms\n");
     for (size_t g = 0; g < t.generations.size(); ++g) {
       const GenerationTimings& x = t.generations[g];
-      std::printf("%10zu %6u %8llu %14.2f %8.2f %12.2f\n", g, x.rays,
+      std::printf("%10zu %6u %8llu %14.2f %8.2f %12.2f%s\n", g, x.rays,
                   static_cast<unsigned long long>(x.shadow_rays), x.trace_ms,
-                  mrays(double(x.rays + x.shadow_rays), x.trace_ms), x.shade_ms);
+                  mrays(double(x.rays + x.shadow_rays), x.trace_ms), x.shade_ms,
+                  x.cpu_walked > 0 ? "   walked on the CPU (--cpu-walks)" : "");
     }
   }
 }
@@ -198,6 +199,7 @@ nlohmann::json timings_json(const FrameTimings& t) {
                           {"shadow_rays", g.shadow_rays},
                           {"hits", g.hits},
                           {"capped", g.capped},
+                          {"cpu_walked", g.cpu_walked},
                           {"upload_ms", g.upload_ms},
                           {"trace_ms", g.trace_ms},
                           {"trace_mrays", g.trace_ms > 0 ? double(g.rays + g.shadow_rays) / (g.trace_ms * 1e3) : 0.0},
@@ -391,6 +393,7 @@ int cmd_render(const std::vector<std::string>& args) {
                        {"primary", primaries_rasterized(scene, settings) ? "raster" : "trace"},
                        {"stack", settings.stack_depth},
                        {"max_steps", settings.max_steps},
+                       {"cpu_walks", settings.cpu_walks},
                        {"device", backend->device_info().device},
                        {"backend", common.backend_name},
                        {"frames", measured.size()},

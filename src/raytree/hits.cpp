@@ -162,6 +162,17 @@ uint32_t shadow_mask_with(const FlatKdTree& tree, std::span<const Light> lights,
   return mask;
 }
 
+uint32_t shadow_mask_by_light(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim, const Ray& ray,
+                              float t, const ShadowSettings& settings,
+                              const std::function<bool(size_t, const Ray&)>& occluded) {
+  uint32_t mask = 0;
+  if (prim < 0) return mask;
+  for_each_shadow_ray(tree, lights, prim, ray, t, settings, [&](size_t l, const Ray& shadow) {
+    if (!occluded(l, shadow)) mask |= 1u << l;
+  });
+  return mask;
+}
+
 std::vector<std::optional<Ray>> shadow_rays(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim,
                                             const Ray& ray, float t, const ShadowSettings& settings) {
   std::vector<std::optional<Ray>> rays(lights.size());

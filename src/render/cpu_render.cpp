@@ -22,9 +22,9 @@ glm::vec3 shade_phong(const Scene& scene, const SurfaceHit& hit, const glm::vec3
 
 void KdTreeEngine::build(const Scene& scene) { rebuild_kdtree(tree_, scene.mesh.positions, scene.shapes, options_); }
 
-Hit KdTreeEngine::closest(const Ray& ray) const { return traverse(tree_, ray, -1, test_); }
+Hit KdTreeEngine::closest(const Ray& ray) const { return traverse_fast(tree_, ray, test_); }
 
-bool KdTreeEngine::occluded(const Ray& ray) const { return mobirt::occluded(tree_, ray, -1, test_); }
+bool KdTreeEngine::occluded(const Ray& ray) const { return occluded_fast(tree_, ray, test_); }
 
 SurfaceHit KdTreeEngine::surface(const Scene& scene, const Ray& ray, const Hit& hit) const {
   return surface_hit(scene, tree_, ray, hit.prim, test_.test);

@@ -34,6 +34,7 @@ struct GenerationTimings {
   // and shadow light without a light buffer (an upper bound: a miss casts none). What the next
   // frames' trees are built for (KdBuildOptions::rays, FramePipeline).
   uint64_t walks = 0;
+  uint32_t cpu_walked = 0;      // closest-hit rays walked on the CPU instead of a pass (--cpu-walks)
   uint32_t mirrored = 0;        // mirror rays handed to a raster pass of the mirrored scene (--mirrors;
                                 // one it drew nothing for is a miss); its CPU work counts as upload
   double upload_ms = 0;         // textures uploaded for the passes (generation 0: the tree too)

@@ -642,6 +642,9 @@ class Renderer::Engine final : public ShadedByRenderer {
     if (generation == 1 && r_.data_->tree_walkable && r_.trace_mirrored(scene, camera, r_.data_->tree, rays, g, traced)) {
       return traced;
     }
+    if (r_.data_->tree_walkable && rays.count() <= uint32_t(std::max(r_.settings_.cpu_walks, 0))) {
+      return r_.trace_on_cpu(scene, rays, g);
+    }
     return trace(scene, rays, g);
   }
 
@@ -1117,6 +1120,48 @@ TraceResult Renderer::trace_uploaded(const Scene& scene, const FlatKdTree& tree,
   const size_t buffered = light_buffers ? std::min(shadow_count, size_t(light_buffers_used())) : 0;
   result.walks = uint64_t(rays.count()) * ((primary_hits == 0 ? 1 : 0) + (shadow_count - buffered));
   return result;
+}
+
+TracedGeneration Renderer::trace_on_cpu(const Scene& scene, const RayBatch& rays, GenerationTimings& g) {
+  const Data& d = *data_;
+  const FlatKdTree& tree = d.tree;
+  const std::span<const Light> lights = shadow_lights(scene);
+  const ShadowSettings& shadows = settings_.shadow_rays;
+  const uint32_t n = rays.count();
+  TracedGeneration traced;
+  traced.form = TracedGeneration::Form::Hits;
+  traced.hits.resize(n);
+  traced.masks.assign(n, 0u);
+  // A light's shadow rays as the pass casts them: through its light buffer where the pass reads
+  // one (light_buffer_heads), else a walk.
+  const auto buffered = [&](size_t l) {
+    return d.light_buffers && l < d.light_buffer_heads.size() && d.light_buffer_heads[l].z > 0.5f;
+  };
+  std::atomic<uint64_t> shadow_rays{0};
+  const auto start = Clock::now();
+  parallel_for_chunks(n, 32, 0, [&](uint32_t, uint32_t begin, uint32_t end) {
+    uint64_t cast = 0;
+    for (uint32_t i = begin; i < end; ++i) {
+      const Ray ray = rays.ray(i);
+      const Hit h = traverse_fast(tree, ray, shadows.ray_test);
+      traced.hits[i] = h;
+      if (!h.valid() || lights.empty()) continue;
+      traced.masks[i] = shadow_mask_by_light(tree, lights, h.prim, ray, h.t, shadows, [&](size_t l, const Ray& s) {
+        ++cast;
+        return buffered(l) ? light_buffer_occluded(d.prebuilt_light_buffers[l], tree, s.origin)
+                           : occluded_fast(tree, s, shadows.ray_test);
+      });
+    }
+    shadow_rays.fetch_add(cast, std::memory_order_relaxed);
+  });
+  g.trace_ms += elapsed_ms(start);
+  g.cpu_walked += n;
+  traced.shadow_rays = shadow_rays.load();
+  // The walks the pass would have counted (trace_uploaded), so that the next frame's tree is the same.
+  size_t lights_buffered = 0;
+  for (size_t l = 0; l < lights.size(); ++l) lights_buffered += buffered(l) ? 1 : 0;
+  g.walks += uint64_t(n) * (1 + (lights.size() - lights_buffered));
+  return traced;
 }
 
 const std::vector<uint8_t>& Renderer::faces_away_from(const Scene& scene, glm::vec3 eye, const glm::vec3* rays_from,

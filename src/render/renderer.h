@@ -92,6 +92,9 @@ const char* shading_passes_name(ShadingPasses passes);
 enum class WorkerPriority { Idle, Normal };
 const char* worker_priority_name(WorkerPriority priority);
 
+// --cpu-walks's default (RenderSettings::cpu_walks; README, *Small generations on the CPU*).
+inline constexpr int kAutoCpuWalks = 8192;
+
 struct RenderSettings {
   int width = 400;
   int height = 240;
@@ -102,6 +105,11 @@ struct RenderSettings {
   // *Shader profiling*); 8 is no better than 6.
   int stack_depth = 6;
   int max_steps = 2048;     // loop cap of one traversal in the shader (see README: "Loop cap")
+  // --cpu-walks N: a secondary generation of at most N rays (not drawn by the mirror raster) is
+  // walked on the CPU (traverse_fast, its shadow rays through the same light buffers or walks as
+  // the pass's) instead of a traversal pass: a few incoherent rays fill few of a pass's 8 lanes and
+  // do not pay for its fixed cost. The same hits and masks, so the same image; 0 = always a pass.
+  int cpu_walks = kAutoCpuWalks;
   // Passes specialised to the scene (light and texture counts, packing) or general ones sized for
   // the most a pass supports; both give the same image (tests/specialisation_test.cpp).
   bool specialize = true;
@@ -273,6 +281,8 @@ class Renderer {
   void shade_pending(const Scene& scene);
   // The lights the traversal pass casts shadow rays to: the scene's, or none without shadows.
   std::span<const Light> shadow_lights(const Scene& scene) const;
+  // A secondary generation walked on the CPU (RenderSettings::cpu_walks): hits and shadow masks.
+  TracedGeneration trace_on_cpu(const Scene& scene, const RayBatch& rays, GenerationTimings& g);
   // The light count a pass is built for: the scene's, or the packing's maximum when general.
   int pass_lights(int scene_lights) const;
   // primary_hits: the pass specialised to PRIMARY_HITS (each ray's rasterized index + 1 in its

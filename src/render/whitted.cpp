@@ -22,6 +22,7 @@ GenerationTimings& GenerationTimings::operator+=(const GenerationTimings& g) {
   shadow_rays += g.shadow_rays;
   walks += g.walks;
   mirrored += g.mirrored;
+  cpu_walked += g.cpu_walked;
   upload_ms += g.upload_ms;
   trace_ms += g.trace_ms;
   trace_readback_ms += g.trace_readback_ms;

@@ -43,6 +43,9 @@
 //   second pass       at a leaf and walked on from that leaf's end by a second pass over the
 //                     stopped rays packed 8 to a group: both passes' iterations against the one
 //                     pass's; see estimate_continued() below
+//   CPU walks         the generation's closest hits walked on the CPU on one thread, with
+//                     traverse() (full stack) and with traverse_fast() (what --cpu-walks uses for
+//                     small generations): time a ray, and the hits that differ (none expected)
 //
 // Usage: mobirt_simd_stats SCENE [--mtl F] [--camera SPEC] [--light SPEC]... [--size WxH]
 //        [--stack N] [--bins N] [--leaf-size N] [--isect-cost C] [--depth N]
@@ -914,6 +917,22 @@ int run(int argc, char** argv) {
     ClosestWalks closest;                     // the secondary generations', for the rope estimate
     const PassStats s = simulate(tree, scene, rays, stack, hits, g == 0 ? &walk_stats : nullptr,
                                  g > 0 ? &closest : nullptr);
+    {  // The CPU's walks of the generation's closest hits on one thread (--cpu-walks walks small
+       // generations with traverse_fast): traverse()'s full stack against traverse_fast, the same hits.
+      const uint32_t count = rays.count();
+      std::vector<Hit> a(count), b(count);
+      const auto t0 = std::chrono::steady_clock::now();
+      for (uint32_t i = 0; i < count; ++i) a[i] = traverse(tree, rays.ray(i), -1, RayTest{});
+      const auto t1 = std::chrono::steady_clock::now();
+      for (uint32_t i = 0; i < count; ++i) b[i] = traverse_fast(tree, rays.ray(i), RayTest{});
+      const auto t2 = std::chrono::steady_clock::now();
+      uint32_t differ = 0;
+      for (uint32_t i = 0; i < count; ++i) differ += (a[i].prim != b[i].prim || (a[i].valid() && a[i].t != b[i].t)) ? 1 : 0;
+      const double ms_a = std::chrono::duration<double, std::milli>(t1 - t0).count();
+      const double ms_b = std::chrono::duration<double, std::milli>(t2 - t1).count();
+      std::printf("    CPU walks, one thread: traverse %.2f ms (%.0f ns a ray), traverse_fast %.2f ms (%.0f ns a ray), hits that differ %u\n",
+                  ms_a, 1e6 * ms_a / std::max(count, 1u), ms_b, 1e6 * ms_b / std::max(count, 1u), differ);
+    }
     const double n = double(s.rays + s.shadow_rays);
     const uint64_t interior = s.steps.nodes_visited - s.steps.leaves_visited;
     const uint64_t empty = s.steps.steps - interior - s.steps.triangles_tested;
