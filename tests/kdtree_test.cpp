@@ -1522,8 +1522,9 @@ TEST(KdTree, ShortStacksDropAndRestartButStayExact) {
 }
 
 // traverse_fast and occluded_fast (the small generations walked on the CPU, RenderSettings::
-// cpu_walks) return the full-stack walk's hit bit for bit under every ray test and precision, on
-// every generated scene and on a tree with analytic shapes.
+// cpu_walks) return the full-stack walk's hit bit for bit under both ray tests, on every generated
+// scene and on a tree with analytic shapes (mediump hands the walk to traverse's own, which this
+// checks too).
 TEST(KdTree, FastWalkIsTheFullStackWalkBitForBit) {
   const auto same = [](const Hit& a, const Hit& b) {
     return a.prim == b.prim && (!a.valid() || (a.t == b.t && a.u == b.u && a.v == b.v));

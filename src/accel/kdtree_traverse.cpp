@@ -572,13 +572,13 @@ Hit traverse_impl(const FlatKdTree& tree, const Ray& input, int stack_depth, Tra
 
 [[noreturn, gnu::cold, gnu::noinline]] void throw_corrupt_walk(int64_t bound) {
   throw Error(ErrorKind::Internal, "kd-tree corrupt: a CPU walk took more than " + std::to_string(bound) +
-                                       " steps or a stack deeper than the tree (a cycle in the tree)");
+                                       " steps or a stack of more than 128 entries (a cycle in the tree)");
 }
 
 // The walk of traverse_impl with a full stack and nothing else: no counters, no cap, no trace,
 // no index checks (a tree made by build_kdtree), so that it runs at the CPU's pace. With a full
 // stack it never restarts, and a leaf's interval, its tests and its close are the same as
-// traverse_impl's, so it returns the same hit (tests/kdtree_test.cpp: bit for bit). Per ray 1.5-1.9x
+// traverse_impl's, so it returns the same hit (tests/kdtree_test.cpp: bit for bit). Per ray 1.3-1.9x
 // faster than traverse() with a full stack (tools/profile/simd_stats.cpp, *CPU walks*).
 template <bool kAnyHit>
 Hit traverse_fast_impl(const FlatKdTree& tree, const Ray& ray, const RayTest& test) {

@@ -136,7 +136,7 @@ double LightBuffer::mean_list() const {
 }
 
 bool light_buffer_occluded(const LightBuffer& lb, const FlatKdTree& tree, glm::vec3 origin, uint32_t* tests,
-                           uint32_t* entries) {
+                           uint32_t* entries, const RayTest* test) {
   const Ray ray{origin, lb.light - origin, 0.0f, 1.0f};
   const CellPosition p = cell_position(lb, -ray.direction);
   if (tests) *tests = 0;
@@ -151,7 +151,7 @@ bool light_buffer_occluded(const LightBuffer& lb, const FlatKdTree& tree, glm::v
     if (!light_buffer_sub_contains(lb.sub[k], p.sx, p.sy)) continue;
     if (tests) ++*tests;
     Hit h;
-    if (intersect_triangle(tree, int32_t(lb.prims[k]), ray, h)) return true;
+    if (intersect_triangle(tree, int32_t(lb.prims[k]), ray, h, test ? *test : RayTest{})) return true;
   }
   return false;
 }

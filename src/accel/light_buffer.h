@@ -97,8 +97,10 @@ uint32_t light_buffer_cell(const LightBuffer& lb, glm::vec3 d, uint32_t* sx = nu
 // many triangles it tested; entries: how many entries of the list it read, skipped ones included
 // (either may be null).
 struct FlatKdTree;
+// `test`: the ray/triangle test (the pass's INTERSECT; single precision only).
+struct RayTest;
 bool light_buffer_occluded(const LightBuffer& lb, const FlatKdTree& tree, glm::vec3 origin, uint32_t* tests = nullptr,
-                           uint32_t* entries = nullptr);
+                           uint32_t* entries = nullptr, const RayTest* test = nullptr);
 
 // The nearest distance from `p` to the triangle a, b, c (Ericson, Real-Time Collision Detection,
 // 5.1.5), in double.

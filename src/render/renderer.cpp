@@ -642,7 +642,10 @@ class Renderer::Engine final : public ShadedByRenderer {
     if (generation == 1 && r_.data_->tree_walkable && r_.trace_mirrored(scene, camera, r_.data_->tree, rays, g, traced)) {
       return traced;
     }
-    if (r_.data_->tree_walkable && rays.count() <= uint32_t(std::max(r_.settings_.cpu_walks, 0))) {
+    // Under highp only: the pass's mediump hits are decoded in fp32 from their index (decode_hits),
+    // which the hits the CPU walk hands back are not.
+    if (r_.data_->tree_walkable && rays.count() <= uint32_t(std::max(r_.settings_.cpu_walks, 0)) &&
+        r_.settings_.shadow_rays.ray_test.precision == Precision::High) {
       return r_.trace_on_cpu(scene, rays, g);
     }
     return trace(scene, rays, g);
@@ -1148,7 +1151,8 @@ TracedGeneration Renderer::trace_on_cpu(const Scene& scene, const RayBatch& rays
       if (!h.valid() || lights.empty()) continue;
       traced.masks[i] = shadow_mask_by_light(tree, lights, h.prim, ray, h.t, shadows, [&](size_t l, const Ray& s) {
         ++cast;
-        return buffered(l) ? light_buffer_occluded(d.prebuilt_light_buffers[l], tree, s.origin)
+        return buffered(l) ? light_buffer_occluded(d.prebuilt_light_buffers[l], tree, s.origin, nullptr, nullptr,
+                                                   &shadows.ray_test)
                            : occluded_fast(tree, s, shadows.ray_test);
       });
     }
