@@ -611,16 +611,15 @@ Hit traverse_fast_impl(const FlatKdTree& tree, const Ray& ray, const RayTest& te
     if (++iterations > bound) [[unlikely]] throw_corrupt_walk(bound);
     const glm::vec4 n = nodes[node];
     bool closed;
-    if (n[MOBIRT_NODE_AXIS] != float(MOBIRT_NODE_LEAF)) {
-      const int a = int(n[MOBIRT_NODE_AXIS]);
-      const float s = n[MOBIRT_NODE_SPLIT];
+    if (!node_texel::is_leaf(n)) {
+      const int a = int(node_texel::axis(n));
+      const float s = node_texel::split(n);
       const float tsplit = (s - o[a]) * inv[a];
       const bool below_first = o[a] < s || (o[a] == s && d[a] <= 0.0f);
       const int32_t below = node + 1;
-      const int32_t above = int32_t(n[MOBIRT_NODE_ABOVE_CHILD]);
-      const float flags = n[MOBIRT_NODE_EMPTY_FLAGS];
-      const bool below_empty = flags == MOBIRT_NODE_BELOW_EMPTY || flags == MOBIRT_NODE_BELOW_EMPTY + MOBIRT_NODE_ABOVE_EMPTY;
-      const bool above_empty = flags >= MOBIRT_NODE_ABOVE_EMPTY;
+      const int32_t above = int32_t(node_texel::above_child(n));
+      const bool below_empty = node_texel::below_empty(n);
+      const bool above_empty = node_texel::above_empty(n);
       const int32_t near_child = below_first ? below : above;
       const int32_t far_child = below_first ? above : below;
       const bool near_empty = below_first ? below_empty : above_empty;
@@ -637,8 +636,8 @@ Hit traverse_fast_impl(const FlatKdTree& tree, const Ray& ray, const RayTest& te
       }
       if (!closed) continue;
     } else {
-      const int count = int(n[MOBIRT_LEAF_COUNT]);
-      const size_t first = size_t(n[MOBIRT_LEAF_FIRST]);
+      const int count = int(node_texel::leaf_count(n));
+      const size_t first = size_t(node_texel::leaf_first(n));
       for (int i = 0; i < count; ++i) {
         const glm::vec4* texels = entries + (first + size_t(i)) * MOBIRT_TEXELS_PER_TRIANGLE;
         const int32_t prim = int32_t(leaf_prim_texel::prim(texels));

@@ -92,7 +92,8 @@ uint32_t shadow_mask(const FlatKdTree& tree, std::span<const Light> lights, int3
 
 // The same shadow rays answered by another occlusion test (a CPU ray engine such as the Embree
 // baseline). Only tree.triangles and tree.bounds are read, so a tree without nodes will do.
-// The shadow mask with each light's occlusion test given: occluded(l, shadow ray) for light l.
+// shadow_mask_by_light: the test may differ by light, occluded(l, shadow ray) for light l (the
+// renderer's CPU walks: light buffers for some lights, walks for others).
 uint32_t shadow_mask_by_light(const FlatKdTree& tree, std::span<const Light> lights, int32_t prim, const Ray& ray,
                               float t, const ShadowSettings& settings,
                               const std::function<bool(size_t, const Ray&)>& occluded);

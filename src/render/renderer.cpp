@@ -1117,12 +1117,16 @@ TraceResult Renderer::trace_uploaded(const Scene& scene, const FlatKdTree& tree,
   result.texels.resize(rays.count());
   result.timing = backend_.run_pass(pass, textures, uniforms, rays.width, rays.count(), result.texels);
   result.timing.upload_ms += std::exchange(data_->written_ms, 0.0);
-  // The pass's walks of the tree: its closest hits unless they are drawn hits (an edge miss walks:
+  result.walks = pass_walks(scene, rays.count(), primary_hits == 0);
+  return result;
+}
+
+uint64_t Renderer::pass_walks(const Scene& scene, uint32_t rays, bool closest_hits) const {
+  // A pass's walks of the tree: its closest hits unless they are drawn hits (an edge miss walks:
   // rare), and its shadow rays for each light without a buffer.
   const size_t shadow_count = shadow_lights(scene).size();
-  const size_t buffered = light_buffers ? std::min(shadow_count, size_t(light_buffers_used())) : 0;
-  result.walks = uint64_t(rays.count()) * ((primary_hits == 0 ? 1 : 0) + (shadow_count - buffered));
-  return result;
+  const size_t buffered = data_->light_buffers ? std::min(shadow_count, size_t(light_buffers_used())) : 0;
+  return uint64_t(rays) * ((closest_hits ? 1 : 0) + (shadow_count - buffered));
 }
 
 TracedGeneration Renderer::trace_on_cpu(const Scene& scene, const RayBatch& rays, GenerationTimings& g) {
@@ -1161,10 +1165,8 @@ TracedGeneration Renderer::trace_on_cpu(const Scene& scene, const RayBatch& rays
   g.trace_ms += elapsed_ms(start);
   g.cpu_walked += n;
   traced.shadow_rays = shadow_rays.load();
-  // The walks the pass would have counted (trace_uploaded), so that the next frame's tree is the same.
-  size_t lights_buffered = 0;
-  for (size_t l = 0; l < lights.size(); ++l) lights_buffered += buffered(l) ? 1 : 0;
-  g.walks += uint64_t(n) * (1 + (lights.size() - lights_buffered));
+  // The walks the pass would have counted, so that the next frame's tree is the same.
+  g.walks += pass_walks(scene, n, true);
   return traced;
 }
 

@@ -281,6 +281,9 @@ class Renderer {
   void shade_pending(const Scene& scene);
   // The lights the traversal pass casts shadow rays to: the scene's, or none without shadows.
   std::span<const Light> shadow_lights(const Scene& scene) const;
+  // The walks of the kd-tree a traversal pass over `rays` rays counts (GenerationTimings::walks):
+  // the closest hits where it walks them, and the shadow rays of each light without a buffer.
+  uint64_t pass_walks(const Scene& scene, uint32_t rays, bool closest_hits) const;
   // A secondary generation walked on the CPU (RenderSettings::cpu_walks): hits and shadow masks.
   TracedGeneration trace_on_cpu(const Scene& scene, const RayBatch& rays, GenerationTimings& g);
   // The light count a pass is built for: the scene's, or the packing's maximum when general.
